@@ -1,0 +1,200 @@
+//! `sdem demo`: the paper's preparatory experiment, then a short stop-and-go run, with the errors
+//! against truth.
+
+use crate::output::{pose_line, print_json};
+use anyhow::{Context, Result};
+use sdem::experiment::{paper_experiment, stop_and_go_run, ExperimentConfig, RunStop, Trial};
+use sdem::geometry::{PoseRecord, Vec3};
+use serde::Serialize;
+use std::path::PathBuf;
+
+/// Arguments of `sdem demo`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Folder for the outputs (report.json, poses, map.ply).
+    #[arg(long, default_value = "sdem-demo")]
+    out: PathBuf,
+    /// Seed of the scenes, the path and the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Stops of the stop-and-go run (at least 2).
+    #[arg(long, default_value_t = 8)]
+    stops: usize,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct CaseReport {
+    case: String,
+    truth: PoseRecord,
+    estimate: PoseRecord,
+    error_m: f64,
+    error_deg: f64,
+    cost: f64,
+    overlap: usize,
+    candidates_evaluated: usize,
+    time_ms: f64,
+}
+
+impl From<&Trial> for CaseReport {
+    fn from(t: &Trial) -> Self {
+        Self {
+            case: t.case.clone(),
+            truth: PoseRecord::from(&t.truth),
+            estimate: PoseRecord::from(&t.estimate),
+            error_m: t.error_m,
+            error_deg: t.error_rad.to_degrees(),
+            cost: t.localization.cost,
+            overlap: t.localization.overlap,
+            candidates_evaluated: t.localization.candidates_evaluated,
+            time_ms: t.time_ms,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct StopReport {
+    index: usize,
+    truth: PoseRecord,
+    estimate: PoseRecord,
+    position_error_m: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    step: Option<CaseReport>,
+}
+
+#[derive(Serialize)]
+struct RunReport {
+    stops: Vec<StopReport>,
+    max_step_error_m: f64,
+    final_position_error_m: f64,
+    path_length_m: f64,
+}
+
+#[derive(Serialize)]
+struct Report {
+    paper_experiment: Vec<CaseReport>,
+    run: RunReport,
+    out: PathBuf,
+}
+
+fn run_report(stops: &[RunStop]) -> RunReport {
+    let reports: Vec<StopReport> = stops
+        .iter()
+        .enumerate()
+        .map(|(index, s)| StopReport {
+            index,
+            truth: PoseRecord::from(&s.truth),
+            estimate: PoseRecord::from(&s.estimate),
+            position_error_m: s.position_error_m,
+            step: s.step.as_ref().map(CaseReport::from),
+        })
+        .collect();
+    let max_step_error_m = stops
+        .iter()
+        .filter_map(|s| s.step.as_ref().map(|t| t.error_m))
+        .fold(0.0, f64::max);
+    let path_length_m = stops
+        .windows(2)
+        .map(|w| (w[1].truth.translation.vector - w[0].truth.translation.vector).norm())
+        .sum();
+    RunReport {
+        stops: reports,
+        max_step_error_m,
+        final_position_error_m: stops.last().map_or(0.0, |s| s.position_error_m),
+        path_length_m,
+    }
+}
+
+/// Writes the run's outputs: estimated and true poses (KITTI + TUM) and the merged map.
+fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    let estimates: Vec<_> = stops.iter().map(|s| s.estimate).collect();
+    let truths: Vec<_> = stops.iter().map(|s| s.truth).collect();
+    sdem::io::write_poses(&out.join("poses.txt"), &estimates)?;
+    sdem::io::write_poses(&out.join("poses_truth.txt"), &truths)?;
+    let map: Vec<Vec3> = stops
+        .iter()
+        .flat_map(|s| {
+            s.points
+                .iter()
+                .map(move |p| s.estimate * nalgebra::Point3::from(*p))
+        })
+        .map(|p| p.coords)
+        .collect();
+    sdem::io::write_points_ply(&out.join("map.ply"), &map)?;
+    let text = serde_json::to_string_pretty(report)?;
+    sdem::io::write_atomic(&out.join("report.json"), |w| w.write_all(text.as_bytes()))?;
+    Ok(())
+}
+
+/// Runs `sdem demo`.
+pub fn run(args: Args) -> Result<()> {
+    let config = ExperimentConfig {
+        seed: args.seed,
+        stops: args.stops.max(2),
+        ..Default::default()
+    };
+    if !args.json {
+        println!("sdem demo — Nagatani et al. (IROS 2003), Sec. V, on a simulated sensor\n");
+        println!(
+            "1. The paper's preparatory experiment: an indoor room, scans 1° x 1°, 5 mm noise,"
+        );
+        println!("   window x -50..50, y -30..60, z -10..10 cm at 1 cm.");
+    }
+    let paper = paper_experiment(&config).context("the paper's experiment")?;
+    if !args.json {
+        for t in &paper {
+            println!("   {}", t.case);
+            println!("     truth     {}", pose_line(&t.truth));
+            println!("     estimate  {}", pose_line(&t.estimate));
+            println!(
+                "     error     {:.2} cm  ({} candidates, {:.0} ms)",
+                t.error_m * 100.0,
+                t.localization.candidates_evaluated,
+                t.time_ms
+            );
+        }
+        println!(
+            "\n2. Stop-and-go through the ditch into the void ({} stops, seed {})",
+            config.stops, config.seed
+        );
+        println!("   stop   step error   position error   overlap   time");
+    }
+    let stops = stop_and_go_run(&config).context("the stop-and-go run")?;
+    if !args.json {
+        for (i, s) in stops.iter().enumerate() {
+            match &s.step {
+                Some(t) => println!(
+                    "   {i:4}   {:7.2} cm   {:11.2} cm   {:7}   {:4.0} ms",
+                    t.error_m * 100.0,
+                    s.position_error_m * 100.0,
+                    t.localization.overlap,
+                    t.time_ms
+                ),
+                None => println!("   {i:4}   (origin)"),
+            }
+        }
+    }
+    let report = Report {
+        paper_experiment: paper.iter().map(CaseReport::from).collect(),
+        run: run_report(&stops),
+        out: args.out.clone(),
+    };
+    write_outputs(&args.out, &stops, &report)?;
+    if args.json {
+        return print_json(&report);
+    }
+    println!(
+        "\n   path {:.2} m, largest step error {:.2} cm, final position error {:.2} cm",
+        report.run.path_length_m,
+        report.run.max_step_error_m * 100.0,
+        report.run.final_position_error_m * 100.0
+    );
+    println!(
+        "   wrote {}/report.json, poses.txt (+ .tum), poses_truth.txt, map.ply",
+        args.out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,217 @@
+//! Poses, attitudes and spherical coordinates.
+//!
+//! Conventions (DESIGN.md): metres and radians, right-handed frames with x forward, y left, z up.
+//! A pose is always named after the two frames it relates, `a_from_b`, so that
+//! `point_in_a = a_from_b * point_in_b`. Attitude is roll, pitch, yaw with
+//! `R = Rz(yaw) · Ry(pitch) · Rx(roll)`.
+
+use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// A 3D vector in metres, in whatever frame its name says.
+pub type Vec3 = Vector3<f64>;
+
+/// A rigid transform `a_from_b`.
+pub type Pose = Isometry3<f64>;
+
+/// The attitude of a body relative to the gravity-aligned world axes, in radians.
+///
+/// `R = Rz(yaw) · Ry(pitch) · Rx(roll)`: roll about x, then pitch about y, then yaw about z, all
+/// about the fixed world axes.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Attitude {
+    /// Rotation about x, radians.
+    pub roll: f64,
+    /// Rotation about y, radians.
+    pub pitch: f64,
+    /// Rotation about z (compass heading, counter-clockwise from +x), radians.
+    pub yaw: f64,
+}
+
+impl Attitude {
+    /// An attitude from angles in radians.
+    pub fn new(roll: f64, pitch: f64, yaw: f64) -> Self {
+        Self { roll, pitch, yaw }
+    }
+
+    /// An attitude from angles in degrees.
+    ///
+    /// # Example
+    /// ```
+    /// let a = sdem::geometry::Attitude::from_degrees(0.0, 8.0, 90.0);
+    /// assert!((a.pitch.to_degrees() - 8.0).abs() < 1e-12);
+    /// ```
+    pub fn from_degrees(roll_deg: f64, pitch_deg: f64, yaw_deg: f64) -> Self {
+        Self::new(
+            roll_deg.to_radians(),
+            pitch_deg.to_radians(),
+            yaw_deg.to_radians(),
+        )
+    }
+
+    /// The angles in degrees, as `[roll, pitch, yaw]`.
+    pub fn to_degrees(&self) -> [f64; 3] {
+        [
+            self.roll.to_degrees(),
+            self.pitch.to_degrees(),
+            self.yaw.to_degrees(),
+        ]
+    }
+
+    /// The rotation `world_from_body` (without translation).
+    pub fn rotation(&self) -> Rotation3<f64> {
+        // nalgebra's from_euler_angles(r, p, y) is Rz(y) * Ry(p) * Rx(r).
+        Rotation3::from_euler_angles(self.roll, self.pitch, self.yaw)
+    }
+
+    /// The attitude of a rotation `world_from_body`.
+    pub fn from_rotation(rotation: &Rotation3<f64>) -> Self {
+        let (roll, pitch, yaw) = rotation.euler_angles();
+        Self { roll, pitch, yaw }
+    }
+
+    /// The attitude of a unit quaternion `world_from_body`.
+    pub fn from_quaternion(q: &UnitQuaternion<f64>) -> Self {
+        Self::from_rotation(&q.to_rotation_matrix())
+    }
+
+    /// True when all three angles are finite numbers.
+    pub fn is_finite(&self) -> bool {
+        self.roll.is_finite() && self.pitch.is_finite() && self.yaw.is_finite()
+    }
+}
+
+/// A pose from a translation and an attitude.
+pub fn pose_from_parts(translation: Vec3, attitude: Attitude) -> Pose {
+    Isometry3::from_parts(
+        Translation3::from(translation),
+        UnitQuaternion::from_rotation_matrix(&attitude.rotation()),
+    )
+}
+
+/// The attitude (roll, pitch, yaw) of a pose's rotation.
+pub fn attitude_of(pose: &Pose) -> Attitude {
+    Attitude::from_quaternion(&pose.rotation)
+}
+
+/// A pose as people and JSON read it: metres and degrees.
+///
+/// This is the `{"x","y","z","roll_deg","pitch_deg","yaw_deg"}` object of DESIGN.md.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PoseRecord {
+    /// Translation x, metres.
+    pub x: f64,
+    /// Translation y, metres.
+    pub y: f64,
+    /// Translation z, metres.
+    pub z: f64,
+    /// Roll, degrees.
+    pub roll_deg: f64,
+    /// Pitch, degrees.
+    pub pitch_deg: f64,
+    /// Yaw, degrees.
+    pub yaw_deg: f64,
+}
+
+impl From<&Pose> for PoseRecord {
+    fn from(pose: &Pose) -> Self {
+        let t = pose.translation.vector;
+        let [roll_deg, pitch_deg, yaw_deg] = attitude_of(pose).to_degrees();
+        Self {
+            x: t.x,
+            y: t.y,
+            z: t.z,
+            roll_deg,
+            pitch_deg,
+            yaw_deg,
+        }
+    }
+}
+
+impl From<&PoseRecord> for Pose {
+    fn from(r: &PoseRecord) -> Self {
+        pose_from_parts(
+            Vec3::new(r.x, r.y, r.z),
+            Attitude::from_degrees(r.roll_deg, r.pitch_deg, r.yaw_deg),
+        )
+    }
+}
+
+/// The translation error (metres) and rotation error (radians) of `estimate` against `truth`.
+pub fn pose_error(truth: &Pose, estimate: &Pose) -> (f64, f64) {
+    let delta = truth.inverse() * estimate;
+    (delta.translation.vector.norm(), delta.rotation.angle())
+}
+
+/// The unit direction of an azimuth (counter-clockwise from +x) and an elevation (up from the
+/// horizontal plane), both radians.
+pub fn direction(azimuth: f64, elevation: f64) -> Vec3 {
+    let (se, ce) = elevation.sin_cos();
+    let (sa, ca) = azimuth.sin_cos();
+    Vec3::new(ce * ca, ce * sa, se)
+}
+
+/// Azimuth in [-π, π), elevation in [-π/2, π/2] and range of a point; `None` at the origin.
+pub fn spherical(point: &Vec3) -> Option<(f64, f64, f64)> {
+    let range = point.norm();
+    if range <= 0.0 || !range.is_finite() {
+        return None;
+    }
+    let mut azimuth = point.y.atan2(point.x);
+    if azimuth >= std::f64::consts::PI {
+        azimuth -= 2.0 * std::f64::consts::PI;
+    }
+    let elevation = (point.z / range).clamp(-1.0, 1.0).asin();
+    Some((azimuth, elevation, range))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    #[test]
+    fn attitude_is_zyx() {
+        let a = Attitude::from_degrees(10.0, -20.0, 30.0);
+        let expected = Rotation3::from_axis_angle(&Vector3::z_axis(), a.yaw)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), a.pitch)
+            * Rotation3::from_axis_angle(&Vector3::x_axis(), a.roll);
+        assert_relative_eq!(a.rotation(), expected, epsilon = 1e-12);
+        let back = Attitude::from_rotation(&a.rotation());
+        assert_relative_eq!(back.roll, a.roll, epsilon = 1e-12);
+        assert_relative_eq!(back.pitch, a.pitch, epsilon = 1e-12);
+        assert_relative_eq!(back.yaw, a.yaw, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn positive_pitch_points_x_down() {
+        // Rotating +x about +y by a positive angle moves it towards -z (right-hand rule).
+        let r = Attitude::from_degrees(0.0, 10.0, 0.0).rotation();
+        assert!((r * Vec3::x()).z < 0.0);
+    }
+
+    #[test]
+    fn spherical_round_trip() {
+        for &(az, el) in &[(0.3, 0.2), (-3.0, -1.2), (2.0, 1.5), (-0.1, 0.0)] {
+            let p = direction(az, el) * 2.5;
+            let (a, e, r) = spherical(&p).unwrap();
+            assert_relative_eq!(a, az, epsilon = 1e-12);
+            assert_relative_eq!(e, el, epsilon = 1e-12);
+            assert_relative_eq!(r, 2.5, epsilon = 1e-12);
+        }
+        assert!(spherical(&Vec3::zeros()).is_none());
+    }
+
+    #[test]
+    fn pose_record_round_trip() {
+        let pose = pose_from_parts(
+            Vec3::new(0.22, 0.36, 0.05),
+            Attitude::from_degrees(1.0, 8.0, -30.0),
+        );
+        let record = PoseRecord::from(&pose);
+        let back = Pose::from(&record);
+        let (dt, dr) = pose_error(&pose, &back);
+        assert!(dt < 1e-12 && dr < 1e-9);
+        assert_relative_eq!(record.pitch_deg, 8.0, epsilon = 1e-9);
+    }
+}

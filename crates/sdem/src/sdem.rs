@@ -1,0 +1,450 @@
+//! The Sphere-DEM (S-DEM) of Nagatani et al. (2003), Sec. III-B: a grid over the directions around
+//! the sensor (azimuth × elevation), each cell holding the range of the nearest return in it.
+//!
+//! Unlike a DEM over the floor, an S-DEM holds floor, walls and ceiling at once. The grid is
+//! *levelled*: points are rotated by the gyro/compass attitude before binning, so azimuth is
+//! counted counter-clockwise from the world's +x (compass) axis and elevation up from the
+//! horizontal plane, whatever the robot's tilt. Cells with no return are *unknown*, never zero.
+
+use crate::error::{Error, Result};
+use crate::geometry::Vec3;
+use nalgebra::Rotation3;
+use serde::{Deserialize, Serialize};
+
+/// The angular grid of an S-DEM: resolution and extent, in degrees.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SdemConfig {
+    /// Cell size in azimuth and elevation, degrees (paper: 1°, the sensor's step).
+    pub resolution_deg: f64,
+    /// Lowest azimuth covered, degrees, in [-180, 180).
+    pub azimuth_min_deg: f64,
+    /// Highest azimuth covered, degrees, in (-180, 180].
+    pub azimuth_max_deg: f64,
+    /// Lowest elevation covered, degrees, in [-90, 90).
+    pub elevation_min_deg: f64,
+    /// Highest elevation covered, degrees, in (-90, 90].
+    pub elevation_max_deg: f64,
+    /// Returns closer than this are ignored, metres.
+    pub min_range_m: f64,
+}
+
+impl Default for SdemConfig {
+    fn default() -> Self {
+        Self {
+            resolution_deg: 1.0,
+            azimuth_min_deg: -180.0,
+            azimuth_max_deg: 180.0,
+            elevation_min_deg: -90.0,
+            elevation_max_deg: 90.0,
+            min_range_m: 0.05,
+        }
+    }
+}
+
+impl SdemConfig {
+    /// Checks that the grid is well formed (positive resolution, non-empty extent inside the
+    /// sphere).
+    pub fn validate(&self) -> Result<()> {
+        let all_finite = [
+            self.resolution_deg,
+            self.azimuth_min_deg,
+            self.azimuth_max_deg,
+            self.elevation_min_deg,
+            self.elevation_max_deg,
+            self.min_range_m,
+        ]
+        .iter()
+        .all(|v| v.is_finite());
+        if !all_finite || self.resolution_deg <= 0.0 || self.resolution_deg > 45.0 {
+            return Err(Error::Invalid(format!(
+                "S-DEM resolution {}° must be a finite angle in (0, 45]",
+                self.resolution_deg
+            )));
+        }
+        if !(-180.0 <= self.azimuth_min_deg
+            && self.azimuth_min_deg < self.azimuth_max_deg
+            && self.azimuth_max_deg <= 180.0)
+        {
+            return Err(Error::Invalid(format!(
+                "S-DEM azimuth extent {}..{}° must satisfy -180 <= min < max <= 180",
+                self.azimuth_min_deg, self.azimuth_max_deg
+            )));
+        }
+        if !(-90.0 <= self.elevation_min_deg
+            && self.elevation_min_deg < self.elevation_max_deg
+            && self.elevation_max_deg <= 90.0)
+        {
+            return Err(Error::Invalid(format!(
+                "S-DEM elevation extent {}..{}° must satisfy -90 <= min < max <= 90",
+                self.elevation_min_deg, self.elevation_max_deg
+            )));
+        }
+        if self.min_range_m < 0.0 {
+            return Err(Error::Invalid("S-DEM min_range_m must be >= 0".into()));
+        }
+        Ok(())
+    }
+}
+
+/// The geometry of the grid: where each direction falls. Cells are stored row by row, one row per
+/// elevation band: `cell = elevation_index * azimuth_cells + azimuth_index`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridSpec {
+    azimuth_min: f32,
+    elevation_min: f32,
+    inv_resolution: f32,
+    resolution: f32,
+    azimuth_cells: u32,
+    elevation_cells: u32,
+    full_circle: bool,
+}
+
+impl GridSpec {
+    /// The grid of a (validated) configuration.
+    pub fn new(config: &SdemConfig) -> Result<Self> {
+        config.validate()?;
+        let res = config.resolution_deg;
+        let az_span = config.azimuth_max_deg - config.azimuth_min_deg;
+        let el_span = config.elevation_max_deg - config.elevation_min_deg;
+        let azimuth_cells = (az_span / res - 1e-9).ceil().max(1.0) as u32;
+        let elevation_cells = (el_span / res - 1e-9).ceil().max(1.0) as u32;
+        Ok(Self {
+            azimuth_min: config.azimuth_min_deg.to_radians() as f32,
+            elevation_min: config.elevation_min_deg.to_radians() as f32,
+            inv_resolution: (1.0 / res.to_radians()) as f32,
+            resolution: res.to_radians() as f32,
+            azimuth_cells,
+            elevation_cells,
+            full_circle: (az_span - 360.0).abs() < 1e-9,
+        })
+    }
+
+    /// Number of cells in azimuth.
+    pub fn azimuth_cells(&self) -> usize {
+        self.azimuth_cells as usize
+    }
+
+    /// Number of cells in elevation.
+    pub fn elevation_cells(&self) -> usize {
+        self.elevation_cells as usize
+    }
+
+    /// Total number of cells.
+    pub fn len(&self) -> usize {
+        self.azimuth_cells() * self.elevation_cells()
+    }
+
+    /// True for a grid without cells (never, for a validated configuration).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Cell size, radians.
+    pub fn resolution(&self) -> f64 {
+        self.resolution as f64
+    }
+
+    /// The cell and range of a point (in the levelled frame centred on the grid's origin), or
+    /// `None` when the point is at the origin or outside the grid's extent.
+    ///
+    /// This one function decides binning for building, re-projection and correlation alike, so a
+    /// virtual S-DEM at the reference's own origin reproduces the reference bit for bit.
+    #[inline]
+    pub fn cell_of(&self, p: [f32; 3]) -> Option<(u32, f32)> {
+        let horizontal_sq = p[0] * p[0] + p[1] * p[1];
+        let range_sq = horizontal_sq + p[2] * p[2];
+        if range_sq <= 0.0 || !range_sq.is_finite() {
+            return None;
+        }
+        let range = range_sq.sqrt();
+        let azimuth = p[1].atan2(p[0]);
+        let elevation = p[2].atan2(horizontal_sq.sqrt());
+        let fa = ((azimuth - self.azimuth_min) * self.inv_resolution).floor();
+        let fe = ((elevation - self.elevation_min) * self.inv_resolution).floor();
+        let mut ia = fa as i64;
+        let ie = fe as i64;
+        if self.full_circle {
+            ia = ia.rem_euclid(self.azimuth_cells as i64);
+        } else if ia < 0 || ia >= self.azimuth_cells as i64 {
+            return None;
+        }
+        // Elevation +90° exactly falls one past the last band: keep it in the last band.
+        let ie = if ie == self.elevation_cells as i64 && elevation <= std::f32::consts::FRAC_PI_2 {
+            ie - 1
+        } else {
+            ie
+        };
+        if ie < 0 || ie >= self.elevation_cells as i64 {
+            return None;
+        }
+        Some((ie as u32 * self.azimuth_cells + ia as u32, range))
+    }
+
+    /// Azimuth and elevation (radians) of a cell's centre.
+    pub fn cell_center(&self, cell: usize) -> (f64, f64) {
+        let ia = cell % self.azimuth_cells();
+        let ie = cell / self.azimuth_cells();
+        let az = self.azimuth_min as f64 + (ia as f64 + 0.5) * self.resolution as f64;
+        let el = self.elevation_min as f64 + (ie as f64 + 0.5) * self.resolution as f64;
+        (az, el)
+    }
+}
+
+/// A Sphere-DEM: the nearest range in each direction cell around the sensor, in the levelled
+/// frame (world axes, origin at the sensor).
+///
+/// Besides the range grid it keeps the exact levelled point behind each known cell (its
+/// *boundary point*, paper Sec. III-C), which virtual S-DEMs re-project.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sdem {
+    spec: GridSpec,
+    config: SdemConfig,
+    /// Range per cell, metres; NaN for unknown.
+    ranges: Vec<f32>,
+    /// Boundary point of each known cell, levelled frame, metres.
+    points: Vec<[f32; 3]>,
+    /// The cell of each boundary point, ascending.
+    cells: Vec<u32>,
+}
+
+impl Sdem {
+    /// Builds an S-DEM from points in the sensor frame and the sensor's attitude
+    /// (`level_from_sensor`, the gyro/compass rotation), keeping the nearest return per cell.
+    ///
+    /// # Arguments
+    /// * `points_in_sensor` — the scan, sensor frame, metres. Non-finite points are skipped.
+    /// * `level_from_sensor` — rotation from the sensor frame to the levelled frame.
+    /// * `config` — grid resolution and extent.
+    ///
+    /// # Example
+    /// ```
+    /// use sdem::geometry::{Attitude, Vec3};
+    /// use sdem::sdem::{Sdem, SdemConfig};
+    /// let points = vec![Vec3::new(2.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0)];
+    /// let level_from_sensor = Attitude::from_degrees(0.0, 0.0, 90.0).rotation();
+    /// let s = Sdem::from_points(&points, &level_from_sensor, &SdemConfig::default()).unwrap();
+    /// assert_eq!(s.known_cells(), 1); // both points fall into the same cell: the nearest stays
+    /// let (az, _el) = s.grid().cell_center(s.cells()[0] as usize);
+    /// assert!((az.to_degrees() - 90.5).abs() < 1e-3); // levelled: the compass turned it to +y
+    /// ```
+    pub fn from_points(
+        points_in_sensor: &[Vec3],
+        level_from_sensor: &Rotation3<f64>,
+        config: &SdemConfig,
+    ) -> Result<Self> {
+        let spec = GridSpec::new(config)?;
+        let levelled: Vec<[f32; 3]> = points_in_sensor
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .map(|p| {
+                let q = level_from_sensor * p;
+                [q.x as f32, q.y as f32, q.z as f32]
+            })
+            .collect();
+        Ok(Self::from_levelled(spec, config.clone(), &levelled))
+    }
+
+    /// Builds an S-DEM on `spec` from points already in the levelled frame, nearest per cell.
+    fn from_levelled(spec: GridSpec, config: SdemConfig, points: &[[f32; 3]]) -> Self {
+        let mut ranges = vec![f32::NAN; spec.len()];
+        let mut best: Vec<u32> = vec![u32::MAX; spec.len()];
+        let min_range = config.min_range_m as f32;
+        for (i, p) in points.iter().enumerate() {
+            if let Some((cell, r)) = spec.cell_of(*p) {
+                let c = cell as usize;
+                if r >= min_range && !(ranges[c] <= r) {
+                    ranges[c] = r;
+                    best[c] = i as u32;
+                }
+            }
+        }
+        let mut kept_points = Vec::new();
+        let mut cells = Vec::new();
+        for (cell, &i) in best.iter().enumerate() {
+            if i != u32::MAX {
+                kept_points.push(points[i as usize]);
+                cells.push(cell as u32);
+            }
+        }
+        Self {
+            spec,
+            config,
+            ranges,
+            points: kept_points,
+            cells,
+        }
+    }
+
+    /// The *virtual S-DEM* (paper Sec. III-C, Fig. 4): this S-DEM's boundary points seen from
+    /// another origin, `origin` in this S-DEM's levelled frame, keeping the nearest per cell
+    /// (a z-buffer, so nearer surfaces occlude farther ones).
+    pub fn virtual_at(&self, origin: &Vec3) -> Sdem {
+        let o = [origin.x as f32, origin.y as f32, origin.z as f32];
+        let moved: Vec<[f32; 3]> = self
+            .points
+            .iter()
+            .map(|p| [p[0] - o[0], p[1] - o[1], p[2] - o[2]])
+            .collect();
+        Self::from_levelled(self.spec, self.config.clone(), &moved)
+    }
+
+    /// The grid geometry.
+    pub fn grid(&self) -> &GridSpec {
+        &self.spec
+    }
+
+    /// The configuration it was built with.
+    pub fn config(&self) -> &SdemConfig {
+        &self.config
+    }
+
+    /// Range of every cell, metres, NaN where unknown.
+    pub fn ranges(&self) -> &[f32] {
+        &self.ranges
+    }
+
+    /// The range of one cell, or `None` where it is unknown (or out of the grid).
+    pub fn range(&self, cell: usize) -> Option<f32> {
+        self.ranges.get(cell).copied().filter(|r| !r.is_nan())
+    }
+
+    /// The boundary points (levelled frame), one per known cell, in cell order.
+    pub fn points(&self) -> &[[f32; 3]] {
+        &self.points
+    }
+
+    /// The known cells, ascending; `cells()[i]` holds `points()[i]`.
+    pub fn cells(&self) -> &[u32] {
+        &self.cells
+    }
+
+    /// Number of known cells.
+    pub fn known_cells(&self) -> usize {
+        self.cells.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{direction, Attitude};
+
+    fn sphere_points(radius: f64, step_deg: f64) -> Vec<Vec3> {
+        let mut pts = Vec::new();
+        let mut el = -89.5;
+        while el < 90.0 {
+            let mut az = -179.5;
+            while az < 180.0 {
+                pts.push(direction(f64::to_radians(az), f64::to_radians(el)) * radius);
+                az += step_deg;
+            }
+            el += step_deg;
+        }
+        pts
+    }
+
+    #[test]
+    fn nearest_return_wins_and_unknown_is_nan() {
+        let pts = vec![Vec3::new(3.0, 0.01, 0.01), Vec3::new(1.5, 0.005, 0.005)];
+        let s = Sdem::from_points(&pts, &Rotation3::identity(), &SdemConfig::default()).unwrap();
+        assert_eq!(s.known_cells(), 1);
+        let c = s.cells()[0] as usize;
+        assert!((s.range(c).unwrap() as f64 - pts[1].norm()).abs() < 1e-6);
+        let unknown = s.ranges().iter().filter(|r| r.is_nan()).count();
+        assert_eq!(unknown, s.grid().len() - 1);
+        assert!(s.ranges().iter().all(|r| r.is_nan() || *r > 0.0));
+    }
+
+    #[test]
+    fn grid_covers_the_whole_sphere() {
+        let s = Sdem::from_points(
+            &sphere_points(2.0, 1.0),
+            &Rotation3::identity(),
+            &SdemConfig::default(),
+        )
+        .unwrap();
+        assert_eq!(s.grid().len(), 360 * 180);
+        assert_eq!(s.known_cells(), 360 * 180);
+    }
+
+    #[test]
+    fn levelling_uses_the_attitude() {
+        // A point straight ahead of a sensor pitched 10° nose-down lies 10° below the horizon.
+        let pts = vec![Vec3::new(2.0, 0.0, 0.0)];
+        let pitch_down = Attitude::from_degrees(0.0, 10.0, 0.0).rotation();
+        let s = Sdem::from_points(&pts, &pitch_down, &SdemConfig::default()).unwrap();
+        let (_, el) = s.grid().cell_center(s.cells()[0] as usize);
+        assert!(
+            (el.to_degrees() + 9.5).abs() < 1e-4,
+            "elevation {}",
+            el.to_degrees()
+        );
+    }
+
+    #[test]
+    fn virtual_sdem_at_own_origin_is_identical() {
+        let pts: Vec<Vec3> = sphere_points(2.0, 0.7)
+            .into_iter()
+            .enumerate()
+            .map(|(i, p)| p * (1.0 + 0.3 * ((i as f64) * 0.37).sin()))
+            .collect();
+        let s = Sdem::from_points(
+            &pts,
+            &Attitude::from_degrees(3.0, -2.0, 40.0).rotation(),
+            &SdemConfig::default(),
+        )
+        .unwrap();
+        let v = s.virtual_at(&Vec3::zeros());
+        assert_eq!(v.cells(), s.cells());
+        assert_eq!(v.points(), s.points());
+        let same = s
+            .ranges()
+            .iter()
+            .zip(v.ranges())
+            .all(|(a, b)| a.to_bits() == b.to_bits());
+        assert!(same);
+    }
+
+    #[test]
+    fn virtual_sdem_occludes() {
+        // A near point and a far point along the same ray from the new origin: the near one wins.
+        let pts = vec![Vec3::new(1.0, 1.0, 0.0), Vec3::new(1.0, 2.0, 0.0)];
+        let s = Sdem::from_points(&pts, &Rotation3::identity(), &SdemConfig::default()).unwrap();
+        let v = s.virtual_at(&Vec3::new(1.0, 0.0, 0.0));
+        assert_eq!(v.known_cells(), 1);
+        assert!((v.range(v.cells()[0] as usize).unwrap() - 1.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn partial_extent_and_bad_configs() {
+        let cfg = SdemConfig {
+            azimuth_min_deg: -90.0,
+            azimuth_max_deg: 90.0,
+            elevation_min_deg: -45.0,
+            elevation_max_deg: 45.0,
+            resolution_deg: 2.0,
+            ..Default::default()
+        };
+        let s = Sdem::from_points(&sphere_points(1.0, 1.0), &Rotation3::identity(), &cfg).unwrap();
+        assert_eq!(s.grid().len(), 90 * 45);
+        assert_eq!(s.known_cells(), 90 * 45);
+        for bad in [
+            SdemConfig {
+                resolution_deg: 0.0,
+                ..Default::default()
+            },
+            SdemConfig {
+                azimuth_min_deg: 10.0,
+                azimuth_max_deg: -10.0,
+                ..Default::default()
+            },
+            SdemConfig {
+                elevation_max_deg: f64::NAN,
+                ..Default::default()
+            },
+        ] {
+            assert!(GridSpec::new(&bad).is_err());
+        }
+    }
+}
