@@ -17,6 +17,7 @@ pub mod experiment;
 pub mod geometry;
 pub mod io;
 pub mod localize;
+pub mod refine;
 pub mod sdem;
 pub mod sensor;
 pub mod sim;

@@ -11,6 +11,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Pose, Vec3};
+use crate::refine::{refine, RefineConfig, Refinement, SurfaceNormals};
 use crate::sdem::Sdem;
 use nalgebra::{Isometry3, SMatrix, SVector, Translation3, UnitQuaternion};
 use rayon::prelude::*;
@@ -256,8 +257,11 @@ pub struct LocalizeConfig {
     pub mode: SearchMode,
     /// The cost.
     pub cost: CostConfig,
-    /// Refine the grid optimum to sub-grid accuracy with a quadratic fit of its neighbourhood.
+    /// Refine the grid optimum to sub-grid accuracy: robust 6-DoF point-to-plane refinement
+    /// ([`crate::refine`]), falling back to a quadratic fit of the grid costs around the optimum.
     pub refine: bool,
+    /// Settings of the 6-DoF refinement.
+    pub refinement: RefineConfig,
     /// Coarse-to-fine: spacing of the coarsest level, metres (rounded down to step · 2^k).
     pub coarse_step_m: f64,
     /// Coarse-to-fine: candidates kept at each level.
@@ -272,6 +276,7 @@ impl Default for LocalizeConfig {
             mode: SearchMode::CoarseToFine,
             cost: CostConfig::default(),
             refine: true,
+            refinement: RefineConfig::default(),
             coarse_step_m: 0.08,
             keep: 8,
         }
@@ -298,8 +303,24 @@ pub struct Localization {
     pub candidates_evaluated: usize,
     /// True when the grid optimum lies on the window's boundary (the true minimum may be outside).
     pub on_window_edge: bool,
-    /// True when the sub-grid refinement moved the estimate.
-    pub refined: bool,
+    /// How the estimate was refined below the grid.
+    pub refined: RefineOutcome,
+    /// The 6-DoF refinement's result, when it succeeded.
+    pub refinement: Option<Refinement>,
+}
+
+/// Which refinement produced the final estimate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RefineOutcome {
+    /// Refinement was not asked for: the grid optimum.
+    None,
+    /// The robust 6-DoF point-to-plane refinement.
+    SixDof,
+    /// The 6-DoF refinement failed; a quadratic fit of the grid costs gave the translation.
+    Quadratic,
+    /// Both refinements failed; the grid optimum.
+    Failed,
 }
 
 /// The regular grid of candidates over a window.
@@ -507,18 +528,33 @@ pub fn localize(
     let grid_index = grid.index(flat);
     let grid_offset = grid.offset(grid_index);
     let overlap = evaluator.memo[&flat].map_or(0, |c| c.overlap);
-    let (offset, refined) = if config.refine {
-        match refine_quadratic(&mut evaluator, grid_index)? {
-            Some(o) => (o, true),
-            None => (grid_offset, false),
-        }
+    let mut rotation_correction = UnitQuaternion::identity();
+    let mut refinement = None;
+    let (offset, refined) = if !config.refine {
+        (grid_offset, RefineOutcome::None)
     } else {
-        (grid_offset, false)
+        let normals = SurfaceNormals::new(reference, config.refinement.normal_radius_cells);
+        let initial =
+            Isometry3::from_parts(Translation3::from(grid_offset), UnitQuaternion::identity());
+        match refine(reference, &normals, query, &initial, &config.refinement) {
+            Ok(r) => {
+                rotation_correction = r.transform.rotation;
+                let t = r.transform.translation.vector;
+                refinement = Some(r);
+                (t, RefineOutcome::SixDof)
+            }
+            Err(_) => match refine_quadratic(&mut evaluator, grid_index)? {
+                Some(o) => (o, RefineOutcome::Quadratic),
+                None => (grid_offset, RefineOutcome::Failed),
+            },
+        }
     };
+    // reference_level_from_query_level = (correction, offset); the levelled frames are the sensor
+    // frames rotated by their attitude readings.
     let world_from_reference = rotation_only(reference_attitude);
     let world_from_query = Isometry3::from_parts(
         Translation3::from(offset),
-        rotation_only(query_attitude).rotation,
+        rotation_correction * rotation_only(query_attitude).rotation,
     );
     Ok(Localization {
         reference_from_query: world_from_reference.inverse() * world_from_query,
@@ -530,6 +566,7 @@ pub fn localize(
         candidates_evaluated: evaluator.evaluated,
         on_window_edge: grid.on_edge(grid_index),
         refined,
+        refinement,
     })
 }
 

@@ -1,0 +1,312 @@
+//! Continuous 6-DoF refinement of a grid optimum to sub-grid accuracy.
+//!
+//! The grid search finds the basin; this finds the bottom. Each point of the query S-DEM is
+//! carried into the reference's levelled frame by the current estimate and looked up in the
+//! reference S-DEM in the same direction (the S-DEM *is* the projective association), and the
+//! point-to-plane distance to the reference surface there is minimized by robust Gauss-Newton over
+//! translation and a small rotation (the gyro's roll and pitch and the compass's yaw are
+//! measurements, not truth). The Gauss-Newton Hessian gives the information matrix of the result.
+
+use crate::error::{Error, Result};
+use crate::geometry::Vec3;
+use crate::sdem::Sdem;
+use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector6};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Settings of the refinement.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RefineConfig {
+    /// Gauss-Newton iterations at most.
+    pub max_iterations: usize,
+    /// Scale of the robust (Geman-McClure) kernel, metres: residuals much larger count little.
+    pub kernel_scale_m: f64,
+    /// Pairs farther apart than this are not associated, metres.
+    pub max_correspondence_m: f64,
+    /// Estimate the rotation too (else translation only).
+    pub estimate_rotation: bool,
+    /// A rotation correction larger than this is rejected as implausible, degrees.
+    pub max_rotation_deg: f64,
+    /// A translation correction larger than this is rejected (left the basin), metres.
+    pub max_translation_m: f64,
+    /// Neighbourhood radius, in cells, for the reference surface normals.
+    pub normal_radius_cells: usize,
+    /// Fewer associated points than this fails the refinement.
+    pub min_inliers: usize,
+}
+
+impl Default for RefineConfig {
+    fn default() -> Self {
+        Self {
+            max_iterations: 30,
+            kernel_scale_m: 0.02,
+            max_correspondence_m: 0.10,
+            estimate_rotation: true,
+            max_rotation_deg: 5.0,
+            max_translation_m: 0.05,
+            normal_radius_cells: 2,
+            min_inliers: 200,
+        }
+    }
+}
+
+/// The result of a refinement.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Refinement {
+    /// `reference_level_from_query_level`: carries query-levelled points into the reference's
+    /// levelled frame.
+    pub transform: Isometry3<f64>,
+    /// Gauss-Newton iterations run.
+    pub iterations: usize,
+    /// True when the last update was below the convergence threshold.
+    pub converged: bool,
+    /// Points associated in the last iteration.
+    pub inliers: usize,
+    /// Robust RMS point-to-plane residual, metres.
+    pub rms_m: f64,
+    /// Information matrix of `[x, y, z, rx, ry, rz]` (metres, radians; rotation about the
+    /// reference levelled frame's axes), `JᵀWJ / σ²`.
+    pub information: Matrix6<f64>,
+}
+
+/// Surface normals of an S-DEM's boundary points, from a plane fit over neighbouring cells.
+#[derive(Debug, Clone)]
+pub struct SurfaceNormals {
+    /// Per grid cell, the index into `Sdem::points()`, or `u32::MAX` when unknown.
+    point_of_cell: Vec<u32>,
+    /// Per boundary point, its unit normal facing the sensor, or NaN where none fits.
+    normals: Vec<[f32; 3]>,
+}
+
+impl SurfaceNormals {
+    /// Fits a plane to each boundary point and its neighbours within `radius_cells` cells whose
+    /// points lie close to it (so edges and occlusion boundaries do not blur the normal).
+    pub fn new(sdem: &Sdem, radius_cells: usize) -> Self {
+        let grid = sdem.grid();
+        let (n_az, n_el) = (grid.azimuth_cells() as i64, grid.elevation_cells() as i64);
+        let full_circle = (grid.resolution() * n_az as f64 - std::f64::consts::TAU).abs() < 1e-6;
+        let mut point_of_cell = vec![u32::MAX; grid.len()];
+        for (i, &c) in sdem.cells().iter().enumerate() {
+            point_of_cell[c as usize] = i as u32;
+        }
+        let k = radius_cells.max(1) as i64;
+        let points = sdem.points();
+        let normals = sdem
+            .cells()
+            .par_iter()
+            .zip(points.par_iter())
+            .map(|(&cell, p)| {
+                let (ia, ie) = (cell as i64 % n_az, cell as i64 / n_az);
+                let centre = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                // Neighbours must lie within the patch the cells span at this range, plus noise.
+                let reach = 2.5 * k as f64 * grid.resolution() * centre.norm() + 0.02;
+                let mut sum = Vec3::zeros();
+                let mut outer = Matrix3::zeros();
+                let mut count = 0usize;
+                for de in -k..=k {
+                    let e = ie + de;
+                    if e < 0 || e >= n_el {
+                        continue;
+                    }
+                    for da in -k..=k {
+                        let mut a = ia + da;
+                        if full_circle {
+                            a = a.rem_euclid(n_az);
+                        } else if a < 0 || a >= n_az {
+                            continue;
+                        }
+                        let j = point_of_cell[(e * n_az + a) as usize];
+                        if j == u32::MAX {
+                            continue;
+                        }
+                        let q = points[j as usize];
+                        let q = Vec3::new(q[0] as f64, q[1] as f64, q[2] as f64);
+                        if (q - centre).norm() <= reach {
+                            sum += q;
+                            outer += q * q.transpose();
+                            count += 1;
+                        }
+                    }
+                }
+                if count < 6 {
+                    return [f32::NAN; 3];
+                }
+                let mean = sum / count as f64;
+                let cov = outer / count as f64 - mean * mean.transpose();
+                let eigen = cov.symmetric_eigen();
+                let mut order = [0usize, 1, 2];
+                order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
+                let (l0, l1) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
+                // Not a surface patch (a line, a corner, a blob): no normal.
+                if l1 <= 0.0 || l0 > 0.25 * l1 {
+                    return [f32::NAN; 3];
+                }
+                let mut n: Vec3 = eigen.eigenvectors.column(order[0]).into_owned();
+                if n.dot(&centre) > 0.0 {
+                    n = -n;
+                }
+                [n.x as f32, n.y as f32, n.z as f32]
+            })
+            .collect();
+        Self {
+            point_of_cell,
+            normals,
+        }
+    }
+
+    /// Number of boundary points with a normal.
+    pub fn count(&self) -> usize {
+        self.normals.iter().filter(|n| !n[0].is_nan()).count()
+    }
+}
+
+/// Geman-McClure weight of residual `r` at scale `s`.
+#[inline]
+fn robust_weight(r: f64, s: f64) -> f64 {
+    let u = r / s;
+    let d = 1.0 + u * u;
+    1.0 / (d * d)
+}
+
+/// Refines `initial` (`reference_level_from_query_level`) by robust point-to-plane Gauss-Newton
+/// with projective association through the reference S-DEM.
+///
+/// # Errors
+/// [`Error::Localize`] when too few points associate, the problem is degenerate, or the
+/// correction leaves the plausible range (then the grid optimum should be kept).
+pub fn refine(
+    reference: &Sdem,
+    normals: &SurfaceNormals,
+    query: &Sdem,
+    initial: &Isometry3<f64>,
+    config: &RefineConfig,
+) -> Result<Refinement> {
+    if reference.grid() != query.grid() {
+        return Err(Error::Invalid(
+            "refinement needs both S-DEMs on one grid".into(),
+        ));
+    }
+    let grid = *reference.grid();
+    let ref_points = reference.points();
+    let mut rotation = initial.rotation.to_rotation_matrix();
+    let mut translation = initial.translation.vector;
+    let max_corr_sq = config.max_correspondence_m * config.max_correspondence_m;
+    let mut last = None;
+    let mut converged = false;
+    let mut iterations = 0;
+    for iteration in 0..config.max_iterations.max(1) {
+        iterations = iteration + 1;
+        // Anneal the kernel from wide to the configured scale over the first iterations.
+        let scale = config.kernel_scale_m * (1.0 + 3.0 * (-(iteration as f64) / 3.0).exp());
+        let r32 = rotation.matrix().cast::<f32>();
+        let t32 = translation.cast::<f32>();
+        let (h, g, chi2, wsum, inliers) = query
+            .points()
+            .par_iter()
+            .fold(
+                || {
+                    (
+                        Matrix6::<f64>::zeros(),
+                        Vector6::<f64>::zeros(),
+                        0.0,
+                        0.0,
+                        0usize,
+                    )
+                },
+                |mut acc, q| {
+                    let qv = nalgebra::Vector3::new(q[0], q[1], q[2]);
+                    let y = r32 * qv;
+                    let x = y + t32;
+                    let Some((cell, _)) = grid.cell_of([x.x, x.y, x.z]) else {
+                        return acc;
+                    };
+                    let j = normals.point_of_cell[cell as usize];
+                    if j == u32::MAX {
+                        return acc;
+                    }
+                    let n = normals.normals[j as usize];
+                    if n[0].is_nan() {
+                        return acc;
+                    }
+                    let p = ref_points[j as usize];
+                    let d = [x.x - p[0], x.y - p[1], x.z - p[2]];
+                    if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > max_corr_sq {
+                        return acc;
+                    }
+                    let n = Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
+                    let r = n.x * d[0] as f64 + n.y * d[1] as f64 + n.z * d[2] as f64;
+                    let w = robust_weight(r, scale);
+                    let y = Vec3::new(y.x as f64, y.y as f64, y.z as f64);
+                    let jr = y.cross(&n);
+                    let jac = Vector6::new(n.x, n.y, n.z, jr.x, jr.y, jr.z);
+                    acc.0 += w * jac * jac.transpose();
+                    acc.1 += w * r * jac;
+                    acc.2 += w * r * r;
+                    acc.3 += w;
+                    acc.4 += 1;
+                    acc
+                },
+            )
+            .reduce(
+                || (Matrix6::zeros(), Vector6::zeros(), 0.0, 0.0, 0usize),
+                |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3, a.4 + b.4),
+            );
+        if inliers < config.min_inliers {
+            return Err(Error::Localize(format!(
+                "refinement associated {inliers} points, fewer than {}",
+                config.min_inliers
+            )));
+        }
+        let sigma_sq = (chi2 / wsum.max(1e-12)).max(1e-12);
+        last = Some((h, sigma_sq, inliers));
+        let delta = if config.estimate_rotation {
+            h.cholesky().map(|c| -c.solve(&g))
+        } else {
+            let h3 = h.fixed_view::<3, 3>(0, 0).into_owned();
+            let g3 = g.fixed_rows::<3>(0).into_owned();
+            h3.cholesky().map(|c| {
+                let d = -c.solve(&g3);
+                Vector6::new(d.x, d.y, d.z, 0.0, 0.0, 0.0)
+            })
+        };
+        let Some(delta) = delta else {
+            return Err(Error::Localize(
+                "refinement is degenerate: the surfaces constrain fewer than all axes".into(),
+            ));
+        };
+        let omega = Vec3::new(delta[3], delta[4], delta[5]);
+        let step_rotation = Rotation3::new(omega);
+        rotation = step_rotation * rotation;
+        translation += Vec3::new(delta[0], delta[1], delta[2]);
+        if delta.fixed_rows::<3>(0).norm() < 1e-6 && omega.norm() < 1e-6 {
+            converged = true;
+            break;
+        }
+    }
+    let (h, sigma_sq, inliers) = last.expect("at least one iteration ran");
+    let rotation_change = (rotation * initial.rotation.to_rotation_matrix().transpose()).angle();
+    let translation_change = (translation - initial.translation.vector).norm();
+    if rotation_change.to_degrees() > config.max_rotation_deg
+        || translation_change > config.max_translation_m
+    {
+        return Err(Error::Localize(format!(
+            "refinement moved {:.1} cm and {:.2}°, beyond the plausible {:.1} cm and {:.1}°",
+            translation_change * 100.0,
+            rotation_change.to_degrees(),
+            config.max_translation_m * 100.0,
+            config.max_rotation_deg
+        )));
+    }
+    Ok(Refinement {
+        transform: Isometry3::from_parts(
+            Translation3::from(translation),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        ),
+        iterations,
+        converged,
+        inliers,
+        rms_m: sigma_sq.sqrt(),
+        information: h / sigma_sq,
+    })
+}
