@@ -1,0 +1,64 @@
+//! Speed of one virtual-S-DEM evaluation and of whole searches, on the paper's experiment
+//! (Sec. V): a scan at the origin of the simulated room, a second after moving (22, 36, 5) cm.
+//! Fixed seeds, so every run measures the same problem.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+use sdem::localize::{localize, CostConfig, Correlator, LocalizeConfig, SearchMode, SearchWindow};
+use sdem::sdem::{Sdem, SdemConfig};
+use sdem::sensor::SensorConfig;
+use sdem::sim;
+use std::hint::black_box;
+
+fn paper_pair() -> (Sdem, Attitude, Sdem, Attitude) {
+    let scene = sim::paper_room();
+    let sensor = SensorConfig::default();
+    let grid = SdemConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut sdem_at = |pose: &Pose| {
+        let sweep = sim::scan(&scene, &sensor, pose, 0.0, &mut rng);
+        let attitude = sweep.mean_attitude();
+        let s = Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), &grid)
+            .expect("valid grid");
+        (s, attitude)
+    };
+    let (reference, ra) = sdem_at(&Pose::identity());
+    let (query, qa) = sdem_at(&pose_from_parts(
+        Vec3::new(0.22, 0.36, 0.05),
+        Attitude::default(),
+    ));
+    (reference, ra, query, qa)
+}
+
+fn benches(c: &mut Criterion) {
+    let (reference, ra, query, qa) = paper_pair();
+    let cost = CostConfig::default();
+    let mut correlator = Correlator::new(&reference, &query, &cost).expect("same grid");
+    let origin = Vec3::new(0.22, 0.36, 0.05);
+    c.bench_function("virtual_sdem_evaluation", |b| {
+        b.iter(|| black_box(correlator.evaluate(black_box(&origin))))
+    });
+    let mut group = c.benchmark_group("search");
+    group.sample_size(10);
+    group.bench_function("coarse_to_fine_paper_window_1cm", |b| {
+        let config = LocalizeConfig::default();
+        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+    });
+    // The exhaustive search over the paper's whole window takes minutes; measure it on a
+    // 21 x 21 x 21 cube (9,261 candidates) and scale by candidates in the README.
+    group.bench_function("exhaustive_21cube_1cm", |b| {
+        let config = LocalizeConfig {
+            window: SearchWindow::around(&origin, [0.1, 0.1, 0.1]),
+            mode: SearchMode::Exhaustive,
+            refine: false,
+            ..Default::default()
+        };
+        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+    });
+    group.finish();
+}
+
+criterion_group!(localize_benches, benches);
+criterion_main!(localize_benches);
