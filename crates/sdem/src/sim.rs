@@ -301,6 +301,17 @@ impl Solid {
         }
     }
 
+    /// Moves the solid vertically so that its lowest point lies 40 % of its half height below
+    /// `base`.
+    fn rest_on(&mut self, base: f64) {
+        let (lo, hi) = self.z_range();
+        let dz = base + 0.6 * 0.5 * (hi - lo) - 0.5 * (lo + hi);
+        match self {
+            Solid::Box(b) => b.center.z += dz,
+            Solid::Ellipsoid(e) => e.center.z += dz,
+        }
+    }
+
     /// Radius of a sphere around [`Self::center`] that holds the solid.
     fn bounding_radius(&self) -> f64 {
         match self {
@@ -386,6 +397,14 @@ impl Scene {
     /// The solid obstacles.
     pub fn solids(&self) -> &[Solid] {
         &self.solids
+    }
+
+    /// For a [`collapsed_building`]: the indices `(i, j)` of the two stops of
+    /// [`collapsed_building_stops`] that stand at the same place with the same heading, where
+    /// the loop in the void starts and where it comes back (`j = i + 20`). `None` for scenes
+    /// without a route.
+    pub fn loop_closure_stops(&self) -> Option<(usize, usize)> {
+        self.route.as_ref().map(|r| (r.anchors[0], r.anchors[1]))
     }
 
     /// The axis-aligned bounds `(min, max)` of the air, or `None` for an empty scene.
@@ -630,17 +649,22 @@ const MIN_STEM_M: f64 = 1.6;
 const STEP_JITTER_M: f64 = 0.015;
 /// Radius of the tube around the route kept clear of obstacles in the room and the void, metres.
 const TUBE_RADIUS_M: f64 = 0.27;
-/// The same in the ditch, where the robot (0.4 m wide) squeezes past broken concrete, metres.
+/// The same in the ditch above the robot's tracks, where its sensor squeezes past broken
+/// concrete, metres.
 const TUBE_RADIUS_DITCH_M: f64 = 0.22;
+/// Below this height above the floor (the tracks), the tube keeps [`TUBE_RADIUS_M`] everywhere.
+const TRACK_ZONE_TOP_M: f64 = 0.15;
 /// Rubble no higher than this above the floor may lie on the route (the robot drives on it).
 const LOW_RUBBLE_TOP_M: f64 = 0.03;
 /// Height of the kept-clear tube above the floor where the lift is low (ditch), metres.
 const TUBE_TOP_LOW_M: f64 = 0.30;
 /// Height of the kept-clear tube above the floor elsewhere, metres.
 const TUBE_TOP_HIGH_M: f64 = 0.50;
-/// Void extent along its axis and across it (from the ditch's centre line), metres.
+/// The void's extent along its axis (the ditch's second leg), from the ditch's end, metres.
 const VOID_LENGTH_M: f64 = 5.0;
+/// The void's extent to the right of the ditch's centre line, metres.
 const VOID_RIGHT_M: f64 = 1.5;
+/// The void's extent to the left of the ditch's centre line (the loop turns left), metres.
 const VOID_LEFT_M: f64 = 2.9;
 /// Largest half width of a ditch piece, metres.
 const DITCH_MAX_HALF_WIDTH_M: f64 = 0.45;
@@ -723,7 +747,8 @@ struct Frame2 {
 }
 
 impl Frame2 {
-    fn to_world(&self, x: f64, y: f64) -> [f64; 2] {
+    /// The plan position of the point at `x` ahead and `y` left of the frame's origin.
+    fn point(&self, x: f64, y: f64) -> [f64; 2] {
         let (s, c) = self.yaw.sin_cos();
         [
             self.origin[0] + c * x - s * y,
@@ -750,44 +775,11 @@ impl Plan {
         let length = rng.random_range(3.0..3.5);
         let share = rng.random_range(0.4..0.6);
         let (leg1, leg2) = (share * length, (1.0 - share) * length);
-        let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
-        let bend = sign * rng.random_range(15f64..35.0).to_radians();
+        let bend = random_sign(rng) * rng.random_range(15f64..35.0).to_radians();
         let void_height = rng.random_range(1.5..2.5);
         let corner = [MOUTH_X_M + leg1, 0.0];
         let end = [corner[0] + leg2 * bend.cos(), corner[1] + leg2 * bend.sin()];
-
-        // The route: along the ditch's legs with an arc at the bend, into the void, one full
-        // loop to the left that comes back to where it began, then straight on.
-        let r = TURN_RADIUS_M;
-        let tangent = r * (0.5 * bend.abs()).tan();
-        let line1 = MOUTH_X_M + leg1 - tangent;
-        let bend_arc = Segment::Arc {
-            radius: r,
-            angle: bend,
-        };
-        let exit = line1 + bend_arc.length() + (leg2 - tangent);
-        let spacing = TAU * r / LOOP_STEPS as f64;
-        // The loop starts on a stop, so that the stop LOOP_STEPS later is at the same place.
-        let loop_stop = ((exit + MIN_STEM_M) / spacing).ceil() as usize;
-        let loop_start = loop_stop as f64 * spacing;
-        let loop_start_x = loop_start - exit;
-        let loop_end = loop_start + TAU * r;
-        let tail = ((MAX_STOPS - 1) as f64 * spacing + 0.2 - loop_end).max(0.2);
-        let route = Route {
-            segments: vec![
-                Segment::Line(line1),
-                bend_arc,
-                Segment::Line(leg2 - tangent + loop_start_x),
-                Segment::Arc {
-                    radius: r,
-                    angle: TAU,
-                },
-                Segment::Line(tail),
-            ],
-            spacing_m: spacing,
-            low_lift: (MOUTH_X_M, exit),
-            anchors: [loop_stop, loop_stop + LOOP_STEPS],
-        };
+        let (route, loop_start_x) = plan_route(leg1, leg2, bend);
         Plan {
             leg1,
             leg2,
@@ -804,22 +796,64 @@ impl Plan {
     }
 }
 
+/// The route for a ditch with legs `leg1`, `leg2` and a `bend` between them: along the legs
+/// with an arc at the bend, into the void, one full loop to the left that comes back to where
+/// it began, then straight on. Returns the route and where the loop starts on the void's axis.
+fn plan_route(leg1: f64, leg2: f64, bend: f64) -> (Route, f64) {
+    let r = TURN_RADIUS_M;
+    let tangent = r * (0.5 * bend.abs()).tan();
+    let line1 = MOUTH_X_M + leg1 - tangent;
+    let bend_arc = Segment::Arc {
+        radius: r,
+        angle: bend,
+    };
+    let exit = line1 + bend_arc.length() + (leg2 - tangent);
+    let spacing = TAU * r / LOOP_STEPS as f64;
+    // The loop starts on a stop, so that the stop LOOP_STEPS later is at the same place.
+    let loop_stop = ((exit + MIN_STEM_M) / spacing).ceil() as usize;
+    let loop_start = loop_stop as f64 * spacing;
+    let loop_start_x = loop_start - exit;
+    let loop_end = loop_start + TAU * r;
+    // Room for MAX_STOPS stops (and their jitter) in all.
+    let tail = ((MAX_STOPS - 1) as f64 * spacing + 0.2 - loop_end).max(0.2);
+    let route = Route {
+        segments: vec![
+            Segment::Line(line1),
+            bend_arc,
+            Segment::Line(leg2 - tangent + loop_start_x),
+            Segment::Arc {
+                radius: r,
+                angle: TAU,
+            },
+            Segment::Line(tail),
+        ],
+        spacing_m: spacing,
+        low_lift: (MOUTH_X_M, exit),
+        anchors: [loop_stop, loop_stop + LOOP_STEPS],
+    };
+    (route, loop_start_x)
+}
+
 /// One straight piece of the ditch: a free box along a leg.
 #[derive(Debug, Clone, Copy)]
 struct DitchPiece {
     /// The leg's start and heading.
     leg: Frame2,
-    /// Range along the leg, metres.
+    /// Start of the piece along the leg, metres.
     from: f64,
+    /// End of the piece along the leg, metres.
     to: f64,
+    /// Half the ditch's width here, metres.
     half_width: f64,
+    /// Height of the floor, metres.
     floor: f64,
+    /// Height of the ceiling, metres.
     ceiling: f64,
 }
 
 impl DitchPiece {
     fn air(&self) -> OrientedBox {
-        let [x, y] = self.leg.to_world(0.5 * (self.from + self.to), 0.0);
+        let [x, y] = self.leg.point(0.5 * (self.from + self.to), 0.0);
         OrientedBox::build(
             Vec3::new(x, y, 0.5 * (self.floor + self.ceiling)),
             Vec3::new(
@@ -888,7 +922,12 @@ impl Builder {
             }
             let mut z = t.floor + LOW_RUBBLE_TOP_M + 0.005;
             while z <= t.floor + t.top + 1e-9 {
-                if solid.distance_lower_bound(&Vec3::new(t.x, t.y, z)) < t.radius {
+                let radius = if z < t.floor + TRACK_ZONE_TOP_M {
+                    TUBE_RADIUS_M
+                } else {
+                    t.radius
+                };
+                if solid.distance_lower_bound(&Vec3::new(t.x, t.y, z)) < radius {
                     return false;
                 }
                 z += 0.05;
@@ -901,6 +940,27 @@ impl Builder {
     fn place(&mut self, tries: usize, mut make: impl FnMut(&mut ChaCha8Rng) -> Solid) -> bool {
         for _ in 0..tries {
             let solid = make(&mut self.rng);
+            if self.clear_of_tube(&solid) {
+                self.scene.add_solid(solid);
+                return true;
+            }
+        }
+        false
+    }
+
+    /// Like [`Self::place`], but first sets each candidate down on the floor or rubble under
+    /// its centre, a fifth of its height sunk into it.
+    fn place_resting(
+        &mut self,
+        tries: usize,
+        mut make: impl FnMut(&mut ChaCha8Rng) -> Solid,
+    ) -> bool {
+        for _ in 0..tries {
+            let mut solid = make(&mut self.rng);
+            let c = *solid.center();
+            if let Some(base) = self.scene.floor_height(c.x, c.y) {
+                solid.rest_on(base);
+            }
             if self.clear_of_tube(&solid) {
                 self.scene.add_solid(solid);
                 return true;
@@ -945,7 +1005,7 @@ impl Builder {
     fn add_void_air(&mut self, plan: &Plan, floor: f64) {
         let v = plan.void_frame;
         let h = plan.void_height;
-        let main = v.to_world(0.5 * VOID_LENGTH_M, 0.5 * (VOID_LEFT_M - VOID_RIGHT_M));
+        let main = v.point(0.5 * VOID_LENGTH_M, 0.5 * (VOID_LEFT_M - VOID_RIGHT_M));
         self.scene.add_free(OrientedBox::build(
             Vec3::new(main[0], main[1], floor + 0.5 * h),
             Vec3::new(
@@ -957,7 +1017,7 @@ impl Builder {
         ));
         // Irregular walls: an alcove at the far end and one on the right, turned a little.
         let far_half = [self.uniform(0.5, 0.8), self.uniform(0.8, 1.4)];
-        let far = v.to_world(
+        let far = v.point(
             VOID_LENGTH_M - 0.2 + far_half[0] * 0.8,
             self.uniform(-0.5, 1.5),
         );
@@ -969,7 +1029,7 @@ impl Builder {
             yaw_rotation(far_yaw),
         ));
         let side_half = [self.uniform(0.5, 0.9), self.uniform(0.4, 0.7)];
-        let side = v.to_world(
+        let side = v.point(
             self.uniform(1.6, 3.5),
             -VOID_RIGHT_M - self.uniform(0.2, 0.4),
         );
@@ -985,7 +1045,7 @@ impl Builder {
     fn add_room_obstacles(&mut self, floor: f64) {
         // A pillar, floor to ceiling.
         self.place(20, |rng| {
-            let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let side = random_sign(rng);
             let c = [
                 rng.random_range(-2.0..0.6),
                 side * rng.random_range(0.8..1.4),
@@ -994,7 +1054,7 @@ impl Builder {
         });
         // A cabinet against the front wall.
         self.place(20, |rng| {
-            let side = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let side = random_sign(rng);
             let half = [0.2, rng.random_range(0.3..0.45), rng.random_range(0.5..0.8)];
             let y = side * rng.random_range(0.9..1.3);
             Solid::Box(yawed_box(
@@ -1022,90 +1082,31 @@ impl Builder {
     fn add_ditch_obstacles(&mut self, pieces: &[DitchPiece]) {
         let n = pieces.len();
         for (k, p) in pieces.iter().enumerate() {
-            let along = |rng: &mut ChaCha8Rng| rng.random_range(p.from..p.to);
-            // Low rubble on the floor, anywhere across.
-            let low = self.count(1, 3);
-            for _ in 0..low {
+            for _ in 0..self.count(1, 3) {
                 self.place(4, |rng| {
-                    let [x, y] = p
-                        .leg
-                        .to_world(along(rng), rng.random_range(-p.half_width..p.half_width));
+                    let lateral = rng.random_range(-p.half_width..p.half_width);
+                    let [x, y] = p.leg.point(rng.random_range(p.from..p.to), lateral);
                     low_rubble(rng, x, y, p.floor)
                 });
             }
-            // Bigger rubble against the walls.
-            let side = self.count(0, 2);
-            for _ in 0..side {
-                self.place(6, |rng| {
-                    let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
-                    let lateral = sign * (p.half_width - rng.random_range(0.0..0.05));
-                    let [x, y] = p.leg.to_world(along(rng), lateral);
-                    rubble_piece(rng, x, y, p.floor, 0.05, 0.12)
-                });
+            for _ in 0..self.count(0, 2) {
+                self.place(6, |rng| wall_rubble(rng, p));
             }
-            // Broken concrete sticking out of the walls at any height.
-            let chunks = self.count(2, 4);
-            for _ in 0..chunks {
-                self.place(6, |rng| {
-                    let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
-                    let half = Vec3::new(
-                        rng.random_range(0.05..0.15),
-                        rng.random_range(0.1..0.2),
-                        rng.random_range(0.05..0.2),
-                    );
-                    let lateral = sign * (p.half_width + half.y - rng.random_range(0.03..0.15));
-                    let [x, y] = p.leg.to_world(along(rng), lateral);
-                    let z = rng.random_range(p.floor..p.ceiling);
-                    let tilt = 20f64.to_radians();
-                    let rotation = Rotation3::from_euler_angles(
-                        rng.random_range(-tilt..tilt),
-                        rng.random_range(-tilt..tilt),
-                        p.leg.yaw + rng.random_range(-tilt..tilt),
-                    );
-                    Solid::Box(OrientedBox::build(Vec3::new(x, y, z), half, rotation))
-                });
+            for _ in 0..self.count(2, 4) {
+                self.place(6, |rng| wall_chunk(rng, p));
             }
-            // Debris hanging from the ceiling (not at the ditch's ends).
+            // Not at the ditch's ends, where the lift is high.
             if k > 0 && k + 1 < n {
-                let hanging = self.count(1, 3);
-                for _ in 0..hanging {
-                    self.place(8, |rng| {
-                        let lateral = rng.random_range(-p.half_width..p.half_width);
-                        let [x, y] = p.leg.to_world(along(rng), lateral);
-                        let half = Vec3::new(
-                            rng.random_range(0.06..0.18),
-                            rng.random_range(0.06..0.18),
-                            rng.random_range(0.06..0.18),
-                        );
-                        let z = p.ceiling - rng.random_range(-0.05..0.1);
-                        Solid::Box(OrientedBox::build(
-                            Vec3::new(x, y, z),
-                            half,
-                            random_rotation(rng),
-                        ))
-                    });
+                for _ in 0..self.count(1, 3) {
+                    self.place(8, |rng| hanging_debris(rng, p));
                 }
             }
         }
-        // One or two slabs leaning across the ditch under its ceiling.
-        let slabs = self.count(1, 2);
-        for _ in 0..slabs {
-            if n < 3 {
-                break;
+        if n >= 3 {
+            for _ in 0..self.count(1, 2) {
+                let p = pieces[self.rng.random_range(1..n - 1)];
+                self.place(12, |rng| leaning_across(rng, &p));
             }
-            let k = self.rng.random_range(1..n - 1);
-            let p = pieces[k];
-            self.place(12, |rng| {
-                let s = rng.random_range(p.from + 0.1..p.to - 0.1);
-                let [x, y] = p.leg.to_world(s, 0.0);
-                let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
-                let roll = sign * rng.random_range(10f64..28.0).to_radians();
-                let pitch = rng.random_range(-8f64..8.0).to_radians();
-                let half = Vec3::new(rng.random_range(0.15..0.3), p.half_width + 0.12, 0.025);
-                let z = p.ceiling - rng.random_range(0.0..0.12);
-                let rotation = Rotation3::from_euler_angles(roll, pitch, p.leg.yaw);
-                Solid::Box(OrientedBox::build(Vec3::new(x, y, z), half, rotation))
-            });
         }
     }
 
@@ -1113,17 +1114,35 @@ impl Builder {
         let v = plan.void_frame;
         let h = plan.void_height;
         let in_void = |rng: &mut ChaCha8Rng| {
-            v.to_world(
+            v.point(
                 rng.random_range(0.3..VOID_LENGTH_M - 0.2),
                 rng.random_range(-VOID_RIGHT_M + 0.2..VOID_LEFT_M - 0.2),
             )
         };
         // The pile the loop goes round, and two more piles.
-        let centre = v.to_world(plan.loop_start_x, TURN_RADIUS_M);
+        let centre = v.point(plan.loop_start_x, TURN_RADIUS_M);
         self.add_pile(centre, floor, 0.45, 5, 8);
-        for _ in 0..2 {
+        for _ in 0..self.count(2, 3) {
             let c = in_void(&mut self.rng);
             self.add_pile(c, floor, 0.5, 3, 6);
+        }
+        // Pillars still standing, a little askew, some broken off.
+        for _ in 0..self.count(1, 2) {
+            self.place_resting(20, |rng| {
+                let [x, y] = in_void(rng);
+                let half = Vec3::new(
+                    rng.random_range(0.12..0.2),
+                    rng.random_range(0.12..0.2),
+                    0.5 * h * rng.random_range(0.4..1.2),
+                );
+                let tilt = 5f64.to_radians();
+                let rotation = Rotation3::from_euler_angles(
+                    rng.random_range(-tilt..tilt),
+                    rng.random_range(-tilt..tilt),
+                    rng.random_range(-PI..PI),
+                );
+                Solid::Box(OrientedBox::build(Vec3::new(x, y, floor), half, rotation))
+            });
         }
         // A fallen column, one end propped up.
         self.place(40, |rng| {
@@ -1165,11 +1184,11 @@ impl Builder {
         }
     }
 
-    /// A pile of `lo..=hi` blocks and rocks within `radius` of `centre`.
+    /// A pile of `lo..=hi` blocks and rocks within `radius` of `centre`, each resting on the
+    /// floor or on the rubble already there.
     fn add_pile(&mut self, centre: [f64; 2], floor: f64, radius: f64, lo: usize, hi: usize) {
-        let n = self.count(lo, hi);
-        for i in 0..n {
-            self.place(8, |rng| {
+        for i in 0..self.count(lo, hi) {
+            self.place_resting(8, |rng| {
                 let r = radius * rng.random::<f64>().sqrt();
                 let a = rng.random_range(-PI..PI);
                 let (x, y) = (centre[0] + r * a.cos(), centre[1] + r * a.sin());
@@ -1179,19 +1198,77 @@ impl Builder {
                         rng.random_range(0.1..0.28),
                         rng.random_range(0.08..0.22),
                     );
-                    let z = floor + radii.z * rng.random_range(0.3..0.9);
-                    Solid::Ellipsoid(Ellipsoid::build(
-                        Vec3::new(x, y, z),
-                        radii,
-                        random_rotation(rng),
-                    ))
+                    let rotation = random_rotation(rng);
+                    Solid::Ellipsoid(Ellipsoid::build(Vec3::new(x, y, floor), radii, rotation))
                 } else {
-                    let base = floor + rng.random_range(0.0..0.4);
-                    rubble_piece(rng, x, y, base, 0.08, 0.25)
+                    rubble_piece(rng, x, y, floor, 0.08, 0.25)
                 }
             });
         }
     }
+}
+
+fn random_sign(rng: &mut ChaCha8Rng) -> f64 {
+    if rng.random_bool(0.5) {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// A block of rubble against one of the ditch piece's walls, on the floor.
+fn wall_rubble(rng: &mut ChaCha8Rng, p: &DitchPiece) -> Solid {
+    let lateral = random_sign(rng) * (p.half_width - rng.random_range(0.0..0.05));
+    let [x, y] = p.leg.point(rng.random_range(p.from..p.to), lateral);
+    rubble_piece(rng, x, y, p.floor, 0.05, 0.12)
+}
+
+/// Broken concrete sticking 3–15 cm out of one of the ditch piece's walls, at any height.
+fn wall_chunk(rng: &mut ChaCha8Rng, p: &DitchPiece) -> Solid {
+    let half = Vec3::new(
+        rng.random_range(0.05..0.15),
+        rng.random_range(0.1..0.2),
+        rng.random_range(0.05..0.2),
+    );
+    let lateral = random_sign(rng) * (p.half_width + half.y - rng.random_range(0.03..0.15));
+    let [x, y] = p.leg.point(rng.random_range(p.from..p.to), lateral);
+    let z = rng.random_range(p.floor..p.ceiling);
+    let tilt = 20f64.to_radians();
+    let rotation = Rotation3::from_euler_angles(
+        rng.random_range(-tilt..tilt),
+        rng.random_range(-tilt..tilt),
+        p.leg.yaw + rng.random_range(-tilt..tilt),
+    );
+    Solid::Box(OrientedBox::build(Vec3::new(x, y, z), half, rotation))
+}
+
+/// A block hanging from the ditch piece's ceiling, partly in it.
+fn hanging_debris(rng: &mut ChaCha8Rng, p: &DitchPiece) -> Solid {
+    let lateral = rng.random_range(-p.half_width..p.half_width);
+    let [x, y] = p.leg.point(rng.random_range(p.from..p.to), lateral);
+    let half = Vec3::new(
+        rng.random_range(0.06..0.18),
+        rng.random_range(0.06..0.18),
+        rng.random_range(0.06..0.18),
+    );
+    let z = p.ceiling - rng.random_range(-0.05..0.1);
+    Solid::Box(OrientedBox::build(
+        Vec3::new(x, y, z),
+        half,
+        random_rotation(rng),
+    ))
+}
+
+/// A slab leaning across the ditch under its ceiling: rolled 10–28° about the ditch's axis,
+/// its ends in the walls.
+fn leaning_across(rng: &mut ChaCha8Rng, p: &DitchPiece) -> Solid {
+    let [x, y] = p.leg.point(rng.random_range(p.from + 0.1..p.to - 0.1), 0.0);
+    let roll = random_sign(rng) * rng.random_range(10f64..28.0).to_radians();
+    let pitch = rng.random_range(-8f64..8.0).to_radians();
+    let half = Vec3::new(rng.random_range(0.15..0.3), p.half_width + 0.12, 0.025);
+    let z = p.ceiling - rng.random_range(0.0..0.12);
+    let rotation = Rotation3::from_euler_angles(roll, pitch, p.leg.yaw);
+    Solid::Box(OrientedBox::build(Vec3::new(x, y, z), half, rotation))
 }
 
 /// A full random rotation (rubble lies any way up).
@@ -1247,7 +1324,7 @@ fn leaning_slab(rng: &mut ChaCha8Rng, v: &Frame2, floor: f64) -> Solid {
     let foot = length * angle.cos();
     // Centre: halfway up the slab, which rises from its foot toward the wall.
     let run = foot - 0.5 * length * angle.cos();
-    let c = v.to_world(
+    let c = v.point(
         wall_point[0] + inward[0] * run,
         wall_point[1] + inward[1] * run,
     );
@@ -1274,8 +1351,9 @@ fn leaning_slab(rng: &mut ChaCha8Rng, v: &Frame2, floor: f64) -> Solid {
 ///   (±1 cm) and ceiling 0.6–0.9 m above it; hanging debris, one or two slabs leaning across
 ///   under the ceiling, rubble at the walls and flat rubble (≤ 2.8 cm) on the floor.
 /// - **Void**: 5 m along the ditch's direction × 4.4 m, 1.5–2.5 m high, with two alcoves, three
-///   rubble piles (blocks and rocks), a fallen column, slabs leaning on the walls, tilted pieces
-///   of the ceiling and scattered flat rubble.
+///   or four rubble piles (blocks and rocks; the route loops round one), one or two pillars
+///   askew, a fallen column, slabs leaning on the walls, tilted pieces of the ceiling and
+///   scattered flat rubble.
 ///
 /// Obstacles are drawn and kept only if they leave a tube of 0.27 m around the route clear
 /// (flat rubble excepted), so the route stays drivable and the sensor clear of every surface.
@@ -1358,7 +1436,7 @@ fn stance(scene: &Scene, body_xy: [f64; 2], yaw: f64) -> Result<(f64, f64, f64)>
         yaw,
     };
     let floor = |dx: f64, dy: f64| -> Result<f64> {
-        let [x, y] = body.to_world(dx, dy);
+        let [x, y] = body.point(dx, dy);
         scene.floor_height(x, y).ok_or_else(|| {
             Error::Invalid(format!(
                 "collapsed_building_stops: no floor under the robot at ({x:.2}, {y:.2})"
@@ -1409,10 +1487,12 @@ fn lift_settings(lift: &LiftConfig) -> Result<(f64, f64)> {
 /// R = 1.1 m (≤ 19.6° of heading per stop). The lift is low (slide 5 % short of `slide_max_m`)
 /// while the sensor is in the ditch and high (sensor 0.4 m up, near `slide_min_m`) in the room
 /// and the void: it changes at two stops. The body stands on the floor under its four track
-/// contacts (roll and pitch from their plane plus N(0, 0.5°), within ±4°). The loop in the void
-/// starts at a stop `i` (16–18 depending on the scene) and the stop `i + 20` is at the same
-/// place and heading, so runs of `count` ≥ `i + 21` (≈ 38) close the loop; shorter runs end
-/// inside the void. Every sensor origin is checked to be free and at least
+/// contacts (roll and pitch from their plane plus N(0, 0.5°), within ±4°). Stops 0–2 are in the
+/// room, about 3–12 in the ditch, the rest in the void. The loop in the void starts at a stop
+/// `i` (17 or 18, depending on the scene) and the stop `j = i + 20` is at the same place and
+/// heading ([`Scene::loop_closure_stops`] gives both), so runs of `count` > `j` (38 or 39
+/// stops) close the loop; a full turn at ≤ 20° per stop takes at least 18 stops, which is why
+/// shorter runs cannot. Every sensor origin is checked to be free and at least
 /// [`MIN_SENSOR_CLEARANCE_M`] from every surface.
 ///
 /// # Errors
@@ -1982,7 +2062,7 @@ mod tests {
         // Low in the ditch, high in the void.
         assert!(stops[6].lift_slide_m > 0.5 && stops[MAX_STOPS - 1].lift_slide_m < 0.25);
         // The loop comes back to the place and heading where it began.
-        let [i, j] = scene.route.as_ref().unwrap().anchors;
+        let (i, j) = scene.loop_closure_stops().unwrap();
         assert!(j < MAX_STOPS, "seed {seed}: loop closes at stop {j}");
         let (pi, pj) = (poses[i].translation.vector, poses[j].translation.vector);
         assert!(
@@ -2065,149 +2145,5 @@ mod tests {
         assert!(sweep.lines.iter().all(|l| l.attitude == reading));
         assert!((reading.roll - truth.roll).abs() < 1f64.to_radians());
         assert!((wrap_angle(reading.yaw - truth.yaw)).abs() < 1f64.to_radians());
-    }
-}
-
-#[cfg(test)]
-mod explore {
-    use super::*;
-
-    #[test]
-    #[ignore]
-    fn many_seeds() {
-        let lift = LiftConfig::default();
-        let t = std::time::Instant::now();
-        let mut worst_dz: f64 = 0.0;
-        let mut worst_step = (1.0f64, 0.0f64);
-        let mut worst_clear: f64 = 9.0;
-        let mut worst_turn: f64 = 0.0;
-        for seed in 0..300u64 {
-            let scene = collapsed_building(seed);
-            let stops = match collapsed_building_stops(&scene, seed, MAX_STOPS, &lift) {
-                Ok(s) => s,
-                Err(e) => {
-                    println!("seed {seed}: {e}");
-                    continue;
-                }
-            };
-            let poses: Vec<Pose> = stops
-                .iter()
-                .map(|s| s.world_from_sensor(&lift).unwrap())
-                .collect();
-            for k in 1..stops.len() {
-                let p = poses[k].translation.vector;
-                let q = poses[k - 1].translation.vector;
-                let step = (p - q).xy().norm();
-                worst_step = (worst_step.0.min(step), worst_step.1.max(step));
-                if stops[k].lift_slide_m == stops[k - 1].lift_slide_m {
-                    worst_dz = worst_dz.max((p.z - q.z).abs());
-                }
-                let turn = wrap_angle(
-                    attitude_of(&stops[k].world_from_body).yaw
-                        - attitude_of(&stops[k - 1].world_from_body).yaw,
-                )
-                .abs();
-                worst_turn = worst_turn.max(turn.to_degrees());
-            }
-            if seed < 40 {
-                for p in &poses {
-                    worst_clear = worst_clear.min(scene.clearance(&p.translation.vector, 2000));
-                }
-            }
-            if seed < 3 {
-                println!(
-                    "seed {seed}: {} free, {} solids, anchors {:?}",
-                    scene.free.len(),
-                    scene.solids.len(),
-                    scene.route.as_ref().unwrap().anchors
-                );
-            }
-        }
-        println!("worst dz {worst_dz:.4} step {worst_step:?} clear {worst_clear:.3} turn {worst_turn:.2} in {:?}", t.elapsed());
-    }
-}
-
-#[cfg(test)]
-mod render {
-    use super::*;
-    use std::io::Write;
-
-    #[test]
-    #[ignore]
-    fn top_view() {
-        let seed: u64 = std::env::var("SEED")
-            .ok()
-            .and_then(|s| s.parse().ok())
-            .unwrap_or(1);
-        let scene = collapsed_building(seed);
-        let lift = LiftConfig::default();
-        let stops = collapsed_building_stops(&scene, seed, MAX_STOPS, &lift).unwrap();
-        let (lo, hi) = scene.air_bounds().unwrap();
-        let res = 0.02;
-        let w = ((hi.x - lo.x) / res) as usize;
-        let h = ((hi.y - lo.y) / res) as usize;
-        let mut img = vec![[0u8; 3]; w * h];
-        for j in 0..h {
-            for i in 0..w {
-                let x = lo.x + (i as f64 + 0.5) * res;
-                let y = hi.y - (j as f64 + 0.5) * res;
-                let px = &mut img[j * w + i];
-                if let Some(f) = scene.floor_height(x, y) {
-                    // ceiling above the floor
-                    let ceil = f + scene
-                        .raycast(&Vec3::new(x, y, f + 0.001), &Vec3::z(), 10.0)
-                        .unwrap_or(0.0);
-                    let g = (60.0 + 80.0 * (ceil - f)).min(255.0) as u8;
-                    *px = [g, g, g];
-                    // solids at robot height
-                    let blocked =
-                        (1..10).any(|k| !scene.is_free(&Vec3::new(x, y, f + 0.05 * k as f64)));
-                    if f > -0.38 {
-                        *px = [200, 150, 60];
-                    }
-                    if blocked {
-                        *px = [200, 40, 40];
-                    }
-                }
-            }
-        }
-        for s in &stops {
-            let p = s.world_from_sensor(&lift).unwrap().translation.vector;
-            let i = ((p.x - lo.x) / res) as i64;
-            let j = ((hi.y - p.y) / res) as i64;
-            for dj in -2..=2 {
-                for di in -2..=2 {
-                    let (ii, jj) = (i + di, j + dj);
-                    if ii >= 0 && jj >= 0 && (ii as usize) < w && (jj as usize) < h {
-                        img[jj as usize * w + ii as usize] = [40, 220, 40];
-                    }
-                }
-            }
-        }
-        let mut f = std::fs::File::create(format!("/tmp/top_{seed}.ppm")).unwrap();
-        write!(f, "P6\n{w} {h}\n255\n").unwrap();
-        for px in img {
-            f.write_all(&px).unwrap();
-        }
-        // A range image of a ditch scan and of a void scan.
-        let sensor = SensorConfig::default();
-        let run = simulate_run(&scene, &[stops[8], stops[20]], &sensor, seed).unwrap();
-        for (n, st) in run.iter().enumerate() {
-            let mut f = std::fs::File::create(format!("/tmp/range_{seed}_{n}.pgm")).unwrap();
-            let lines = &st.sweep.lines;
-            write!(f, "P5\n{} {}\n255\n", 181 * 3, lines.len() * 3).unwrap();
-            for l in lines.iter().rev() {
-                for _ in 0..3 {
-                    for r in l.ranges.iter().rev() {
-                        let v = if r.is_finite() {
-                            (40.0 + 215.0 * (1.0 - (*r as f64 / 2.5).min(1.0)).powi(2)) as u8
-                        } else {
-                            0
-                        };
-                        f.write_all(&[v, v, v]).unwrap();
-                    }
-                }
-            }
-        }
     }
 }
