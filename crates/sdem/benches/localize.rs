@@ -5,8 +5,11 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use sdem::cost::Correlator;
 use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
-use sdem::localize::{localize, CostConfig, Correlator, LocalizeConfig, SearchMode, SearchWindow};
+use sdem::localize::{
+    localize, CostConfig, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow,
+};
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::sensor::SensorConfig;
 use sdem::sim;
@@ -38,12 +41,32 @@ fn benches(c: &mut Criterion) {
     let mut correlator = Correlator::new(&reference, &query, &cost).expect("same grid");
     let origin = Vec3::new(0.22, 0.36, 0.05);
     c.bench_function("virtual_sdem_evaluation", |b| {
-        b.iter(|| black_box(correlator.evaluate(black_box(&origin))))
+        b.iter(|| black_box(correlator.evaluate(black_box(&origin), 0.0)))
     });
     let mut group = c.benchmark_group("search");
     group.sample_size(10);
+    group.bench_function("branch_and_bound_paper_window_1cm", |b| {
+        let config = LocalizeConfig {
+            heading: HeadingWindow::none(),
+            refine: false,
+            ..Default::default()
+        };
+        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+    });
+    group.bench_function("branch_and_bound_paper_window_1cm_heading_10deg", |b| {
+        let config = LocalizeConfig {
+            refine: false,
+            ..Default::default()
+        };
+        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+    });
     group.bench_function("coarse_to_fine_paper_window_1cm", |b| {
-        let config = LocalizeConfig::default();
+        let config = LocalizeConfig {
+            heading: HeadingWindow::none(),
+            mode: SearchMode::CoarseToFine,
+            refine: false,
+            ..Default::default()
+        };
         b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
     });
     // The exhaustive search over the paper's whole window takes minutes; measure it on a
@@ -51,6 +74,7 @@ fn benches(c: &mut Criterion) {
     group.bench_function("exhaustive_21cube_1cm", |b| {
         let config = LocalizeConfig {
             window: SearchWindow::around(&origin, [0.1, 0.1, 0.1]),
+            heading: HeadingWindow::none(),
             mode: SearchMode::Exhaustive,
             refine: false,
             ..Default::default()

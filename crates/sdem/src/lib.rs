@@ -12,6 +12,9 @@
 //! The modules hold pure algorithms over plain values, except [`io`], which reads and writes files.
 #![deny(missing_docs)]
 
+pub mod benchmark;
+pub mod bnb;
+pub mod cost;
 pub mod error;
 pub mod experiment;
 pub mod geometry;
@@ -19,6 +22,7 @@ pub mod io;
 pub mod localize;
 pub mod refine;
 pub mod sdem;
+pub mod search;
 pub mod sensor;
 pub mod sim;
 

@@ -1,238 +1,28 @@
-//! Correlation localization (Nagatani et al. 2003, Sec. III-C).
+//! Correlation localization (Nagatani et al. 2003, Sec. III-C): the search for the candidate
+//! whose comparison with the reference S-DEM (eq. 1, [`crate::cost`]) is smallest, then a
+//! continuous refinement of that grid optimum ([`crate::refine`]).
 //!
-//! A reference S-DEM's boundary points are re-projected around a candidate origin into a *virtual
-//! S-DEM*; the candidate whose virtual S-DEM differs least from the new (local) S-DEM is the
-//! sensor's position. Both S-DEMs are levelled by the gyro/compass, so the search runs over
-//! translation only: the candidate is the query sensor's origin minus the reference sensor's
-//! origin, on world axes.
-//!
-//! Two searches share one cost: the paper's exhaustive search over a window at a step (the oracle,
-//! kept forever), and a coarse-to-fine search that evaluates a small fraction of the candidates.
+//! Both S-DEMs are levelled by their gyro/compass readings, so a candidate is a translation (the
+//! query origin minus the reference origin on world axes) and a heading correction (the compass
+//! is disturbed near steel). Three searches share one cost:
+//! * [`SearchMode::Exhaustive`] — every candidate of the grid (the paper's method; the oracle,
+//!   kept forever);
+//! * [`SearchMode::BranchAndBound`] — the exact fast search ([`crate::bnb`]): the same minimum as
+//!   the exhaustive search, provably, for the projective cost;
+//! * [`SearchMode::CoarseToFine`] — a pyramid heuristic, for the paper's virtual-S-DEM cost.
 
+use crate::bnb::{self, BranchAndBoundStats};
+use crate::cost::{Correlator, CostModel};
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Pose, Vec3};
 use crate::refine::{refine, RefineConfig, Refinement, SurfaceNormals};
 use crate::sdem::Sdem;
-use nalgebra::{Isometry3, SMatrix, SVector, Translation3, UnitQuaternion};
-use rayon::prelude::*;
+use crate::search::{matched_heading_step, CandidateGrid, Evaluator, Index, Scored};
+use nalgebra::{Isometry3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 
-/// How the difference between a virtual and a local S-DEM is scored.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct CostConfig {
-    /// Range differences are truncated at this value, metres, so moved rubble or a person walking
-    /// by adds a bounded penalty instead of dragging the estimate.
-    pub truncation_m: f64,
-    /// A candidate must compare at least this many cells.
-    pub min_overlap_cells: usize,
-    /// … and at least this fraction of the local S-DEM's known cells.
-    pub min_overlap_fraction: f64,
-}
-
-impl Default for CostConfig {
-    fn default() -> Self {
-        Self {
-            truncation_m: 0.10,
-            min_overlap_cells: 200,
-            min_overlap_fraction: 0.2,
-        }
-    }
-}
-
-impl CostConfig {
-    /// Checks the values.
-    pub fn validate(&self) -> Result<()> {
-        if !(self.truncation_m.is_finite() && self.truncation_m > 0.0) {
-            return Err(Error::Invalid(format!(
-                "cost truncation {} m must be a positive number",
-                self.truncation_m
-            )));
-        }
-        if !(0.0..=1.0).contains(&self.min_overlap_fraction) {
-            return Err(Error::Invalid(format!(
-                "minimum overlap fraction {} must lie in [0, 1]",
-                self.min_overlap_fraction
-            )));
-        }
-        Ok(())
-    }
-
-    /// The overlap (cells) a candidate needs against a local S-DEM with `local_known` cells.
-    pub fn min_overlap(&self, local_known: usize) -> usize {
-        let fraction = (self.min_overlap_fraction * local_known as f64).ceil() as usize;
-        self.min_overlap_cells.max(fraction).max(1)
-    }
-}
-
-/// The score of one candidate.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Correlation {
-    /// Mean truncated squared range difference over the compared cells, m² (the paper's `d`).
-    pub cost: f64,
-    /// Number of cells known in both S-DEMs.
-    pub overlap: usize,
-}
-
-/// Accumulates eq. (1) cell by cell; shared by [`correlate`] and [`Correlator`] so both compute
-/// exactly the same number.
-struct CostSum {
-    sum: f64,
-    count: usize,
-    truncation_sq: f32,
-}
-
-impl CostSum {
-    fn new(truncation_m: f64) -> Self {
-        let t = truncation_m as f32;
-        Self {
-            sum: 0.0,
-            count: 0,
-            truncation_sq: t * t,
-        }
-    }
-
-    #[inline]
-    fn add(&mut self, virtual_range: f32, local_range: f32) {
-        // Nagatani 2003, Sec. III-C, eq. (1): the difference between the virtual S-DEM's and the
-        // local S-DEM's range in the same cell, here squared and truncated (robust), summed over the
-        // cells known in both.
-        let e = virtual_range - local_range;
-        self.sum += (e * e).min(self.truncation_sq) as f64;
-        self.count += 1;
-    }
-
-    fn finish(self, min_overlap: usize) -> Option<Correlation> {
-        // Eq. (1), normalized by the cells compared, so a candidate cannot win by seeing less.
-        (self.count >= min_overlap && self.count > 0).then(|| Correlation {
-            cost: self.sum / self.count as f64,
-            overlap: self.count,
-        })
-    }
-}
-
-/// Eq. (1) between a virtual S-DEM and the local S-DEM: the mean truncated squared range
-/// difference over cells known in both, or `None` when they share too few cells.
-pub fn correlate(virtual_sdem: &Sdem, local: &Sdem, cost: &CostConfig) -> Option<Correlation> {
-    let mut acc = CostSum::new(cost.truncation_m);
-    for &cell in local.cells() {
-        let c = cell as usize;
-        let v = virtual_sdem.ranges()[c];
-        if !v.is_nan() {
-            acc.add(v, local.ranges()[c]);
-        }
-    }
-    acc.finish(cost.min_overlap(local.known_cells()))
-}
-
-/// Evaluates eq. (1) at many candidate origins without allocating: the virtual S-DEM is rendered
-/// into a reusable z-buffer. `evaluate(o)` equals `correlate(&reference.virtual_at(o), local)`.
-pub struct Correlator<'a> {
-    reference: &'a Sdem,
-    local: &'a Sdem,
-    truncation_m: f64,
-    min_overlap: usize,
-    min_range: f32,
-    zbuffer: Vec<f32>,
-}
-
-impl<'a> Correlator<'a> {
-    /// A correlator of `local` against virtual S-DEMs of `reference`; both must share one grid.
-    pub fn new(reference: &'a Sdem, local: &'a Sdem, cost: &CostConfig) -> Result<Self> {
-        cost.validate()?;
-        if reference.grid() != local.grid() {
-            return Err(Error::Invalid(
-                "the reference and local S-DEMs use different grids; build both with one SdemConfig"
-                    .into(),
-            ));
-        }
-        Ok(Self {
-            reference,
-            local,
-            truncation_m: cost.truncation_m,
-            min_overlap: cost.min_overlap(local.known_cells()),
-            min_range: reference.config().min_range_m as f32,
-            zbuffer: vec![f32::NAN; reference.grid().len()],
-        })
-    }
-
-    /// The score of the candidate origin `origin` (reference levelled frame, metres).
-    pub fn evaluate(&mut self, origin: &Vec3) -> Option<Correlation> {
-        let o = [origin.x as f32, origin.y as f32, origin.z as f32];
-        let grid = *self.reference.grid();
-        self.zbuffer.fill(f32::NAN);
-        // Paper Sec. III-C: move each boundary point of the reference to the candidate origin and
-        // keep the nearest per cell (the virtual S-DEM).
-        for p in self.reference.points() {
-            let q = [p[0] - o[0], p[1] - o[1], p[2] - o[2]];
-            if let Some((cell, r)) = grid.cell_of(q) {
-                let z = &mut self.zbuffer[cell as usize];
-                if r >= self.min_range && !(*z <= r) {
-                    *z = r;
-                }
-            }
-        }
-        let mut acc = CostSum::new(self.truncation_m);
-        let local_ranges = self.local.ranges();
-        for &cell in self.local.cells() {
-            let v = self.zbuffer[cell as usize];
-            if !v.is_nan() {
-                acc.add(v, local_ranges[cell as usize]);
-            }
-        }
-        acc.finish(self.min_overlap)
-    }
-}
-
-/// The box of candidate offsets (query origin minus reference origin, world axes, metres).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct SearchWindow {
-    /// Smallest offset on each axis.
-    pub min: [f64; 3],
-    /// Largest offset on each axis.
-    pub max: [f64; 3],
-}
-
-impl SearchWindow {
-    /// The paper's window (Sec. V, P-3): x −0.5..0.5, y −0.3..0.6, z −0.1..0.1 m.
-    pub fn paper() -> Self {
-        Self {
-            min: [-0.5, -0.3, -0.1],
-            max: [0.5, 0.6, 0.1],
-        }
-    }
-
-    /// A window of half-size `half` (metres per axis) around `center`.
-    pub fn around(center: &Vec3, half: [f64; 3]) -> Self {
-        Self {
-            min: [center.x - half[0], center.y - half[1], center.z - half[2]],
-            max: [center.x + half[0], center.y + half[1], center.z + half[2]],
-        }
-    }
-
-    /// Checks that the window is finite and not inverted.
-    pub fn validate(&self) -> Result<()> {
-        for axis in 0..3 {
-            let (lo, hi) = (self.min[axis], self.max[axis]);
-            if !lo.is_finite() || !hi.is_finite() {
-                return Err(Error::Invalid(format!(
-                    "search window {}: bounds must be finite numbers (got {lo}:{hi})",
-                    AXES[axis]
-                )));
-            }
-            if lo > hi {
-                return Err(Error::Invalid(format!(
-                    "search window {} is inverted ({lo}:{hi}); give it as min:max with min <= max",
-                    AXES[axis]
-                )));
-            }
-        }
-        Ok(())
-    }
-}
-
-const AXES: [&str; 3] = ["x", "y", "z"];
+pub use crate::cost::{correlate, Correlation, CostConfig};
+pub use crate::search::{HeadingWindow, SearchWindow};
 
 /// Which search runs over the window.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -240,8 +30,10 @@ const AXES: [&str; 3] = ["x", "y", "z"];
 pub enum SearchMode {
     /// Every candidate of the grid (the paper's method; the oracle).
     Exhaustive,
+    /// Exact branch-and-bound (projective cost only).
+    BranchAndBound,
     /// A pyramid of coarser grids, keeping the best candidates at each level, then a descent to a
-    /// local minimum on the full grid.
+    /// local minimum on the full grid (a heuristic; any cost).
     CoarseToFine,
 }
 
@@ -249,16 +41,18 @@ pub enum SearchMode {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct LocalizeConfig {
-    /// The candidate window.
+    /// The candidate translations.
     pub window: SearchWindow,
     /// Grid step, metres (paper: 1 cm).
     pub step_m: f64,
-    /// Exhaustive or coarse-to-fine.
+    /// The candidate headings around the compass reading.
+    pub heading: HeadingWindow,
+    /// Which search.
     pub mode: SearchMode,
     /// The cost.
     pub cost: CostConfig,
-    /// Refine the grid optimum to sub-grid accuracy: robust 6-DoF point-to-plane refinement
-    /// ([`crate::refine`]), falling back to a quadratic fit of the grid costs around the optimum.
+    /// Refine the grid optimum: robust 6-DoF point-to-plane refinement ([`crate::refine`]),
+    /// falling back to a quadratic fit of the grid costs around the optimum.
     pub refine: bool,
     /// Settings of the 6-DoF refinement.
     pub refinement: RefineConfig,
@@ -266,6 +60,16 @@ pub struct LocalizeConfig {
     pub coarse_step_m: f64,
     /// Coarse-to-fine: candidates kept at each level.
     pub keep: usize,
+    /// Search again outside the peak's neighbourhood for the runner-up cost (doubles the time).
+    pub runner_up: bool,
+    /// The peak's neighbourhood: candidates whose translation lies within this of the optimum's,
+    /// metres.
+    pub peak_radius_m: f64,
+    /// The match is `ambiguous` when the runner-up's cost is below this multiple of the best.
+    pub ambiguous_cost_ratio: f64,
+    /// … or when the weakest translational direction's standard deviation exceeds this multiple
+    /// of the strongest's (the cost is flat along it, as in a featureless corridor).
+    pub ambiguous_sigma_ratio: f64,
 }
 
 impl Default for LocalizeConfig {
@@ -273,12 +77,17 @@ impl Default for LocalizeConfig {
         Self {
             window: SearchWindow::paper(),
             step_m: 0.01,
-            mode: SearchMode::CoarseToFine,
+            heading: HeadingWindow::default(),
+            mode: SearchMode::BranchAndBound,
             cost: CostConfig::default(),
             refine: true,
             refinement: RefineConfig::default(),
             coarse_step_m: 0.08,
             keep: 8,
+            runner_up: true,
+            peak_radius_m: 0.1,
+            ambiguous_cost_ratio: 1.1,
+            ambiguous_sigma_ratio: 10.0,
         }
     }
 }
@@ -291,22 +100,68 @@ pub struct Localization {
     pub reference_from_query: Pose,
     /// The estimated offset (query origin − reference origin, world axes), refined when asked.
     pub offset: Vec3,
+    /// The estimated heading correction to the query's compass reading, radians.
+    pub heading_correction: f64,
     /// The best grid candidate's offset.
     pub grid_offset: Vec3,
-    /// The best grid candidate's integer coordinates in the window's grid.
-    pub grid_index: [usize; 3],
+    /// The best grid candidate's heading correction, radians.
+    pub grid_heading: f64,
+    /// The best grid candidate's integer coordinates (x, y, z, heading).
+    pub grid_index: [usize; 4],
     /// Eq. (1) at the best grid candidate, m².
     pub cost: f64,
     /// Cells compared at the best grid candidate.
     pub overlap: usize,
-    /// Candidate origins scored.
+    /// Candidates in the grid.
+    pub candidates_total: usize,
+    /// Candidates scored exactly.
     pub candidates_evaluated: usize,
+    /// Boxes of candidates bounded (branch-and-bound only).
+    pub nodes_bounded: usize,
     /// True when the grid optimum lies on the window's boundary (the true minimum may be outside).
     pub on_window_edge: bool,
     /// How the estimate was refined below the grid.
     pub refined: RefineOutcome,
     /// The 6-DoF refinement's result, when it succeeded.
     pub refinement: Option<Refinement>,
+    /// How far the result can be trusted.
+    pub diagnostics: Diagnostics,
+}
+
+/// How far a localization can be trusted.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Diagnostics {
+    /// Cells compared at the best candidate over the query's known cells.
+    pub overlap_fraction: f64,
+    /// Cells within the truncation at the best candidate over the query's known cells.
+    pub inlier_fraction: f64,
+    /// The smallest cost outside the peak's neighbourhood, when it lies below
+    /// [`LocalizeConfig::ambiguous_cost_ratio`] × the best (the runner-up search looks no
+    /// higher); `None` otherwise.
+    pub runner_up_cost: Option<f64>,
+    /// Every candidate outside the peak's neighbourhood costs at least this (the cap of the
+    /// runner-up search, or the runner-up's cost); `None` when not searched.
+    pub runner_up_cost_at_least: Option<f64>,
+    /// Where that runner-up lies (offset, metres).
+    pub runner_up_offset: Option<[f64; 3]>,
+    /// Its heading correction, degrees.
+    pub runner_up_heading_deg: Option<f64>,
+    /// Covariance of `[x, y, z, roll, pitch, yaw]` (metres, radians; rotations about the
+    /// reference's levelled axes) from the curvature of the refinement's cost, assuming
+    /// independent residuals (optimistic); `None` without a 6-DoF refinement.
+    pub covariance: Option<[[f64; 6]; 6]>,
+    /// The translational direction the scans constrain least (unit vector, levelled reference
+    /// axes).
+    pub weakest_direction: Option<[f64; 3]>,
+    /// Standard deviation along it, metres.
+    pub weakest_sigma_m: Option<f64>,
+    /// Standard deviation along the best-constrained direction, metres.
+    pub strongest_sigma_m: Option<f64>,
+    /// True when another, distant candidate scores almost as well or the cost is flat along
+    /// some direction: the pose along [`Self::weakest_direction`] should not be trusted.
+    pub ambiguous: bool,
+    /// Why the match is ambiguous, in words.
+    pub ambiguity: Vec<String>,
 }
 
 /// Which refinement produced the final estimate.
@@ -323,147 +178,12 @@ pub enum RefineOutcome {
     Failed,
 }
 
-/// The regular grid of candidates over a window.
-#[derive(Debug, Clone, Copy)]
-struct CandidateGrid {
-    min: [f64; 3],
-    step: f64,
-    counts: [usize; 3],
-}
-
-impl CandidateGrid {
-    fn new(window: &SearchWindow, step: f64) -> Result<Self> {
-        window.validate()?;
-        if !(step.is_finite() && step > 0.0) {
-            return Err(Error::Invalid(format!(
-                "search step {step} m must be a positive number"
-            )));
-        }
-        let mut counts = [0; 3];
-        for axis in 0..3 {
-            let n = ((window.max[axis] - window.min[axis]) / step + 1e-9).floor() + 1.0;
-            if n > 100_000.0 {
-                return Err(Error::Invalid(format!(
-                    "search window {} spans {n} steps; use a larger step or a smaller window",
-                    AXES[axis]
-                )));
-            }
-            counts[axis] = n as usize;
-        }
-        let total = counts.iter().product::<usize>();
-        if total > 200_000_000 {
-            return Err(Error::Invalid(format!(
-                "the search grid has {total} candidates; use a larger step or a smaller window"
-            )));
-        }
-        Ok(Self {
-            min: window.min,
-            step,
-            counts,
-        })
-    }
-
-    fn len(&self) -> usize {
-        self.counts.iter().product()
-    }
-
-    fn index(&self, flat: usize) -> [usize; 3] {
-        let i = flat % self.counts[0];
-        let j = (flat / self.counts[0]) % self.counts[1];
-        let k = flat / (self.counts[0] * self.counts[1]);
-        [i, j, k]
-    }
-
-    fn flat(&self, idx: [usize; 3]) -> usize {
-        idx[0] + self.counts[0] * (idx[1] + self.counts[1] * idx[2])
-    }
-
-    fn offset_at(&self, idx: [f64; 3]) -> Vec3 {
-        Vec3::new(
-            self.min[0] + idx[0] * self.step,
-            self.min[1] + idx[1] * self.step,
-            self.min[2] + idx[2] * self.step,
-        )
-    }
-
-    fn offset(&self, idx: [usize; 3]) -> Vec3 {
-        self.offset_at([idx[0] as f64, idx[1] as f64, idx[2] as f64])
-    }
-
-    fn on_edge(&self, idx: [usize; 3]) -> bool {
-        (0..3).any(|a| self.counts[a] > 1 && (idx[a] == 0 || idx[a] + 1 == self.counts[a]))
-    }
-
-    /// The neighbour of `idx` displaced by `d` grid steps, if it lies inside the grid.
-    fn neighbour(&self, idx: [usize; 3], d: [i64; 3]) -> Option<[usize; 3]> {
-        let mut out = [0; 3];
-        for a in 0..3 {
-            let v = idx[a] as i64 + d[a];
-            if v < 0 || v >= self.counts[a] as i64 {
-                return None;
-            }
-            out[a] = v as usize;
-        }
-        Some(out)
-    }
-}
-
-/// A scored candidate: `(cost, flat index)`, ordered by cost then index so every search breaks
-/// ties the same way.
-type Scored = (f64, usize);
-
-fn better(a: &Scored, b: &Scored) -> bool {
-    a.0 < b.0 || (a.0 == b.0 && a.1 < b.1)
-}
-
-/// Scores candidates in parallel and memoizes them, so each is evaluated once.
-struct Evaluator<'a> {
-    reference: &'a Sdem,
-    local: &'a Sdem,
-    cost: &'a CostConfig,
-    grid: CandidateGrid,
-    memo: HashMap<usize, Option<Correlation>>,
-    /// Candidates scored so far (the refinement's included).
-    evaluated: usize,
-}
-
-impl<'a> Evaluator<'a> {
-    fn score(&mut self, flats: &[usize]) -> Result<Vec<Scored>> {
-        let fresh: Vec<usize> = {
-            let mut f: Vec<usize> = flats
-                .iter()
-                .copied()
-                .filter(|f| !self.memo.contains_key(f))
-                .collect();
-            f.sort_unstable();
-            f.dedup();
-            f
-        };
-        // Validate once (grids, cost) before fanning out.
-        Correlator::new(self.reference, self.local, self.cost)?;
-        let grid = self.grid;
-        let results: Vec<(usize, Option<Correlation>)> = fresh
-            .par_iter()
-            .map_init(
-                || Correlator::new(self.reference, self.local, self.cost).expect("validated above"),
-                |c, &flat| (flat, c.evaluate(&grid.offset(grid.index(flat)))),
-            )
-            .collect();
-        self.evaluated += results.len();
-        self.memo.extend(results);
-        Ok(flats
-            .iter()
-            .filter_map(|f| self.memo[f].map(|c| (c.cost, *f)))
-            .collect())
-    }
-}
-
 /// Localizes `query` against `reference`.
 ///
 /// # Arguments
 /// * `reference`, `query` — S-DEMs on one grid, each levelled by its own attitude reading.
 /// * `reference_attitude`, `query_attitude` — those readings (they set the relative rotation).
-/// * `config` — window, step, search mode, cost.
+/// * `config` — window, step, heading window, search mode, cost.
 ///
 /// # Returns
 /// The best candidate with its cost and overlap, or an error when the configuration is invalid or
@@ -472,7 +192,7 @@ impl<'a> Evaluator<'a> {
 /// # Example
 /// ```
 /// use sdem::geometry::{Attitude, Vec3};
-/// use sdem::localize::{localize, LocalizeConfig, SearchWindow};
+/// use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchWindow};
 /// use sdem::sdem::{Sdem, SdemConfig};
 /// // A box-shaped room sampled densely; the query stands 10 cm further along x.
 /// let mut room = Vec::new();
@@ -491,6 +211,7 @@ impl<'a> Evaluator<'a> {
 /// let query = Sdem::from_points(&moved, &level.rotation(), &cfg).unwrap();
 /// let config = LocalizeConfig {
 ///     window: SearchWindow { min: [-0.2, -0.1, -0.05], max: [0.2, 0.1, 0.05] },
+///     heading: HeadingWindow::none(),
 ///     ..Default::default()
 /// };
 /// let found = localize(&reference, &level, &query, &level, &config).unwrap();
@@ -504,19 +225,27 @@ pub fn localize(
     config: &LocalizeConfig,
 ) -> Result<Localization> {
     config.cost.validate()?;
-    let grid = CandidateGrid::new(&config.window, config.step_m)?;
-    let mut evaluator = Evaluator {
-        reference,
-        local: query,
-        cost: &config.cost,
-        grid,
-        memo: HashMap::new(),
-        evaluated: 0,
-    };
-    let best = match config.mode {
-        SearchMode::Exhaustive => exhaustive(&mut evaluator)?,
-        SearchMode::CoarseToFine => coarse_to_fine(&mut evaluator, config)?,
-    };
+    config.heading.validate()?;
+    if config.mode == SearchMode::BranchAndBound && config.cost.model != CostModel::Projective {
+        return Err(Error::Invalid(
+            "the branch-and-bound search needs the projective cost; use the exhaustive or \
+             coarse-to-fine search with the virtual-S-DEM cost"
+                .into(),
+        ));
+    }
+    if !(config.step_m.is_finite() && config.step_m > 0.0) {
+        return Err(Error::Invalid(format!(
+            "search step {} m must be a positive number",
+            config.step_m
+        )));
+    }
+    let yaws = config
+        .heading
+        .samples(matched_heading_step(query, config.step_m));
+    let full_turn = (config.heading.half_range_deg - 180.0).abs() < 1e-9;
+    let grid = CandidateGrid::new(&config.window, config.step_m, yaws)?;
+    let mut evaluator = Evaluator::new(reference, query, &config.cost, &grid)?;
+    let (best, stats) = run_search(&mut evaluator, config, full_turn, f64::INFINITY)?;
     let Some((cost, flat)) = best else {
         return Err(Error::Localize(format!(
             "no candidate in the window shares {} cells with the query S-DEM ({} known); \
@@ -527,46 +256,198 @@ pub fn localize(
     };
     let grid_index = grid.index(flat);
     let grid_offset = grid.offset(grid_index);
-    let overlap = evaluator.memo[&flat].map_or(0, |c| c.overlap);
-    let mut rotation_correction = UnitQuaternion::identity();
+    let grid_heading = grid.yaw(grid_index);
+    let at_best = Correlator::new(reference, query, &config.cost)?
+        .evaluate(&grid_offset, grid_heading)
+        .ok_or_else(|| Error::Localize("the best candidate could not be scored again".into()))?;
+    let overlap = at_best.overlap;
+    let needed_inliers = (config.cost.min_inlier_fraction * query.known_cells() as f64).ceil();
+    if (at_best.inliers as f64) < needed_inliers {
+        return Err(Error::Localize(format!(
+            "nothing in the window matches: at the best candidate only {} of the query's {} \
+             known cells lie within {} m of the reference (need {}); the scans may not overlap, \
+             or the motion lies outside the window",
+            at_best.inliers,
+            query.known_cells(),
+            config.cost.truncation_m,
+            needed_inliers
+        )));
+    }
+    let grid_rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), grid_heading);
+    let mut rotation = grid_rotation;
     let mut refinement = None;
     let (offset, refined) = if !config.refine {
         (grid_offset, RefineOutcome::None)
     } else {
         let normals = SurfaceNormals::new(reference, config.refinement.normal_radius_cells);
-        let initial =
-            Isometry3::from_parts(Translation3::from(grid_offset), UnitQuaternion::identity());
+        let initial = Isometry3::from_parts(Translation3::from(grid_offset), grid_rotation);
         match refine(reference, &normals, query, &initial, &config.refinement) {
             Ok(r) => {
-                rotation_correction = r.transform.rotation;
+                rotation = r.transform.rotation;
                 let t = r.transform.translation.vector;
                 refinement = Some(r);
                 (t, RefineOutcome::SixDof)
             }
-            Err(_) => match refine_quadratic(&mut evaluator, grid_index)? {
+            Err(_) => match refine_quadratic(&mut evaluator, grid_index) {
                 Some(o) => (o, RefineOutcome::Quadratic),
                 None => (grid_offset, RefineOutcome::Failed),
             },
         }
     };
-    // reference_level_from_query_level = (correction, offset); the levelled frames are the sensor
+    let heading_correction = {
+        let (_, _, yaw) = rotation.euler_angles();
+        yaw
+    };
+    // reference_level_from_query_level = (rotation, offset); the levelled frames are the sensor
     // frames rotated by their attitude readings.
     let world_from_reference = rotation_only(reference_attitude);
     let world_from_query = Isometry3::from_parts(
         Translation3::from(offset),
-        rotation_correction * rotation_only(query_attitude).rotation,
+        rotation * rotation_only(query_attitude).rotation,
+    );
+    let runner_up = if config.runner_up {
+        let mut outside = grid.clone();
+        outside.exclude = Some((grid_offset, config.peak_radius_m));
+        let mut e = Evaluator::new(reference, query, &config.cost, &outside)?;
+        // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
+        // the exact search cheap.
+        let (second, _) = run_search(
+            &mut e,
+            config,
+            full_turn,
+            config.ambiguous_cost_ratio * cost,
+        )?;
+        second.map(|(c, flat)| {
+            let idx = outside.index(flat);
+            (c, outside.offset(idx), outside.yaw(idx))
+        })
+    } else {
+        None
+    };
+    let diagnostics = diagnose(
+        config,
+        query.known_cells(),
+        &at_best,
+        grid_offset,
+        runner_up,
+        refinement.as_ref(),
     );
     Ok(Localization {
         reference_from_query: world_from_reference.inverse() * world_from_query,
         offset,
+        heading_correction,
         grid_offset,
+        grid_heading,
         grid_index,
         cost,
         overlap,
+        candidates_total: grid.len(),
         candidates_evaluated: evaluator.evaluated,
-        on_window_edge: grid.on_edge(grid_index),
+        nodes_bounded: stats.nodes_bounded,
+        on_window_edge: grid.on_edge(grid_index, full_turn),
         refined,
         refinement,
+        diagnostics,
+    })
+}
+
+/// The diagnostics of a match: overlap, runner-up, covariance and ambiguity.
+fn diagnose(
+    config: &LocalizeConfig,
+    query_known: usize,
+    best: &crate::cost::Correlation,
+    best_offset: Vec3,
+    runner_up: Option<(f64, Vec3, f64)>,
+    refinement: Option<&Refinement>,
+) -> Diagnostics {
+    let known = query_known.max(1) as f64;
+    let mut ambiguity = Vec::new();
+    if let Some((c, at, _)) = runner_up {
+        if c < config.ambiguous_cost_ratio * best.cost {
+            ambiguity.push(format!(
+                "a candidate {:.0} cm away scores {:.3e} m² against the best {:.3e} m²",
+                (at - best_offset).norm() * 100.0,
+                c,
+                best.cost
+            ));
+        }
+    }
+    let covariance = refinement.and_then(|r| r.information.try_inverse());
+    let mut weakest = None;
+    if let Some(cov) = &covariance {
+        let translation: nalgebra::Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
+        let eigen = translation.symmetric_eigen();
+        let (mut i_max, mut i_min) = (0, 0);
+        for i in 0..3 {
+            if eigen.eigenvalues[i] > eigen.eigenvalues[i_max] {
+                i_max = i;
+            }
+            if eigen.eigenvalues[i] < eigen.eigenvalues[i_min] {
+                i_min = i;
+            }
+        }
+        let v = eigen.eigenvectors.column(i_max).into_owned();
+        let sigma_max = eigen.eigenvalues[i_max].max(0.0).sqrt();
+        let sigma_min = eigen.eigenvalues[i_min].max(0.0).sqrt();
+        if sigma_max > config.ambiguous_sigma_ratio * sigma_min {
+            ambiguity.push(format!(
+                "the cost is flat along ({:.2}, {:.2}, {:.2}): σ {:.2} mm there against {:.2} mm \
+                 across",
+                v.x,
+                v.y,
+                v.z,
+                sigma_max * 1e3,
+                sigma_min * 1e3
+            ));
+        }
+        weakest = Some(([v.x, v.y, v.z], sigma_max, sigma_min));
+    }
+    Diagnostics {
+        overlap_fraction: best.overlap as f64 / known,
+        inlier_fraction: best.inliers as f64 / known,
+        runner_up_cost: runner_up.map(|r| r.0),
+        runner_up_cost_at_least: config
+            .runner_up
+            .then(|| runner_up.map_or(config.ambiguous_cost_ratio * best.cost, |r| r.0)),
+        runner_up_offset: runner_up.map(|r| [r.1.x, r.1.y, r.1.z]),
+        runner_up_heading_deg: runner_up.map(|r| r.2.to_degrees()),
+        covariance: covariance.map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)]))),
+        weakest_direction: weakest.map(|w| w.0),
+        weakest_sigma_m: weakest.map(|w| w.1),
+        strongest_sigma_m: weakest.map(|w| w.2),
+        ambiguous: !ambiguity.is_empty(),
+        ambiguity,
+    }
+}
+
+/// Runs the configured search over the evaluator's grid.
+fn run_search(
+    evaluator: &mut Evaluator,
+    config: &LocalizeConfig,
+    full_turn: bool,
+    cap: f64,
+) -> Result<(Option<Scored>, BranchAndBoundStats)> {
+    let capped = |best: Option<Scored>| best.filter(|s| s.0 <= cap);
+    Ok(match config.mode {
+        SearchMode::Exhaustive => (
+            capped(evaluator.exhaustive()),
+            BranchAndBoundStats::default(),
+        ),
+        SearchMode::CoarseToFine => (
+            capped(evaluator.coarse_to_fine(config.coarse_step_m, config.keep, full_turn)),
+            BranchAndBoundStats::default(),
+        ),
+        SearchMode::BranchAndBound => {
+            let (best, stats) = bnb::search(
+                evaluator.reference,
+                evaluator.query,
+                evaluator.cost,
+                evaluator.grid,
+                cap,
+            )?;
+            evaluator.evaluated += stats.leaves_evaluated;
+            (best, stats)
+        }
     })
 }
 
@@ -577,128 +458,15 @@ fn rotation_only(attitude: &Attitude) -> Pose {
     )
 }
 
-/// The paper's search: every candidate of the grid, in parallel.
-fn exhaustive(evaluator: &mut Evaluator) -> Result<Option<Scored>> {
+/// Sub-grid fallback: fits `c(u) = a + bᵀu + ½ uᵀHu` to the 27 costs around the grid optimum
+/// (u in grid steps, heading fixed) and returns the fitted minimum when the fit is convex and the
+/// minimum lies within one step. Neighbours outside the window are scored too: the cost exists
+/// there.
+fn refine_quadratic(evaluator: &mut Evaluator, idx: Index) -> Option<Vec3> {
     let grid = evaluator.grid;
-    Correlator::new(evaluator.reference, evaluator.local, evaluator.cost)?;
-    let (reference, local, cost) = (evaluator.reference, evaluator.local, evaluator.cost);
-    let best = (0..grid.len())
-        .into_par_iter()
-        .map_init(
-            || Correlator::new(reference, local, cost).expect("validated above"),
-            |c, flat| {
-                c.evaluate(&grid.offset(grid.index(flat)))
-                    .map(|r| (r.cost, flat, r))
-            },
-        )
-        .flatten()
-        .reduce_with(|a, b| {
-            if better(&(b.0, b.1), &(a.0, a.1)) {
-                b
-            } else {
-                a
-            }
-        });
-    // Record only the winner in the memo (the refinement reads it); count every candidate.
-    if let Some((_, flat, r)) = best {
-        evaluator.memo.insert(flat, Some(r));
-    }
-    evaluator.evaluated += grid.len();
-    Ok(best.map(|(c, f, _)| (c, f)))
-}
-
-/// Coarse-to-fine: score a coarse sub-grid, keep the best few, score their neighbourhoods on the
-/// next finer level, and finish with a descent to a local minimum of the full grid.
-fn coarse_to_fine(evaluator: &mut Evaluator, config: &LocalizeConfig) -> Result<Option<Scored>> {
-    let grid = evaluator.grid;
-    let max_count = *grid.counts.iter().max().unwrap_or(&1);
-    let mut level = 0u32;
-    while grid.step * f64::from(1u32 << (level + 1)) <= config.coarse_step_m + 1e-12
-        && (1usize << (level + 1)) < max_count
-    {
-        level += 1;
-    }
-    // Level `level`: every 2^level-th candidate, plus the last one on each axis.
-    let spacing = 1usize << level;
-    let axis_samples = |n: usize| -> Vec<usize> {
-        let mut v: Vec<usize> = (0..n).step_by(spacing).collect();
-        if v.last() != Some(&(n - 1)) {
-            v.push(n - 1);
-        }
-        v
-    };
-    let (xs, ys, zs) = (
-        axis_samples(grid.counts[0]),
-        axis_samples(grid.counts[1]),
-        axis_samples(grid.counts[2]),
-    );
-    let mut flats = Vec::with_capacity(xs.len() * ys.len() * zs.len());
-    for &k in &zs {
-        for &j in &ys {
-            for &i in &xs {
-                flats.push(grid.flat([i, j, k]));
-            }
-        }
-    }
-    let mut kept = best_few(evaluator.score(&flats)?, config.keep.max(1));
-    while level > 0 {
-        level -= 1;
-        let s = 1i64 << level;
-        let mut next = Vec::new();
-        for &(_, flat) in &kept {
-            let idx = grid.index(flat);
-            for dz in -2..=2 {
-                for dy in -2..=2 {
-                    for dx in -2..=2 {
-                        if let Some(n) = grid.neighbour(idx, [dx * s, dy * s, dz * s]) {
-                            next.push(grid.flat(n));
-                        }
-                    }
-                }
-            }
-        }
-        kept = best_few(evaluator.score(&next)?, config.keep.max(1));
-    }
-    // Descend on the full grid until the best candidate beats all 26 neighbours.
-    let Some(mut best) = kept.first().copied() else {
-        return Ok(None);
-    };
-    loop {
-        let idx = grid.index(best.1);
-        let mut around = Vec::with_capacity(26);
-        for dz in -1..=1 {
-            for dy in -1..=1 {
-                for dx in -1..=1 {
-                    if let Some(n) = grid.neighbour(idx, [dx, dy, dz]) {
-                        around.push(grid.flat(n));
-                    }
-                }
-            }
-        }
-        let scored = evaluator.score(&around)?;
-        let candidate = scored
-            .into_iter()
-            .fold(best, |b, s| if better(&s, &b) { s } else { b });
-        if candidate == best {
-            return Ok(Some(best));
-        }
-        best = candidate;
-    }
-}
-
-fn best_few(mut scored: Vec<Scored>, keep: usize) -> Vec<Scored> {
-    scored.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    scored.dedup_by_key(|s| s.1);
-    scored.truncate(keep);
-    scored
-}
-
-/// Sub-grid refinement: fits `c(u) = a + bᵀu + ½ uᵀHu` to the 27 costs around the grid optimum
-/// (u in grid steps) and returns the fitted minimum when the fit is convex and the minimum lies
-/// within one step. Neighbours outside the window are scored too: the cost exists there.
-fn refine_quadratic(evaluator: &mut Evaluator, idx: [usize; 3]) -> Result<Option<Vec3>> {
-    let grid = evaluator.grid;
-    let mut correlator = Correlator::new(evaluator.reference, evaluator.local, evaluator.cost)?;
+    let mut correlator =
+        Correlator::new(evaluator.reference, evaluator.query, evaluator.cost).ok()?;
+    let yaw = grid.yaw(idx);
     let mut ata = SMatrix::<f64, 10, 10>::zeros();
     let mut atb = SVector::<f64, 10>::zeros();
     for dz in -1..=1 {
@@ -711,9 +479,7 @@ fn refine_quadratic(evaluator: &mut Evaluator, idx: [usize; 3]) -> Result<Option
                     idx[2] as f64 + u[2],
                 ];
                 evaluator.evaluated += 1;
-                let Some(c) = correlator.evaluate(&grid.offset_at(at)) else {
-                    return Ok(None);
-                };
+                let c = correlator.evaluate(&grid.offset_at(at), yaw)?;
                 let row = SVector::<f64, 10>::from_column_slice(&[
                     1.0,
                     u[0],
@@ -731,31 +497,28 @@ fn refine_quadratic(evaluator: &mut Evaluator, idx: [usize; 3]) -> Result<Option
             }
         }
     }
-    let Some(theta) = ata.cholesky().map(|ch| ch.solve(&atb)) else {
-        return Ok(None);
-    };
-    let b = nalgebra::Vector3::new(theta[1], theta[2], theta[3]);
+    let theta = ata.cholesky()?.solve(&atb);
+    let b = Vector3::new(theta[1], theta[2], theta[3]);
     let h = nalgebra::Matrix3::new(
         theta[4], theta[7], theta[8], theta[7], theta[5], theta[9], theta[8], theta[9], theta[6],
     );
-    let Some(chol) = h.cholesky() else {
-        return Ok(None);
-    };
-    let u = -chol.solve(&b);
+    let u = -h.cholesky()?.solve(&b);
     if u.iter().any(|v| !v.is_finite() || v.abs() > 1.0) {
-        return Ok(None);
+        return None;
     }
-    Ok(Some(grid.offset_at([
+    Some(grid.offset_at([
         idx[0] as f64 + u[0],
         idx[1] as f64 + u[1],
         idx[2] as f64 + u[2],
-    ])))
+    ]))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cost::CostModel;
     use crate::geometry::pose_from_parts;
+    use crate::sdem::SdemConfig;
     use crate::sensor::SensorConfig;
     use crate::sim;
     use proptest::prelude::*;
@@ -788,7 +551,12 @@ mod tests {
         }
     }
 
-    use crate::sdem::SdemConfig;
+    fn virtual_cost() -> CostConfig {
+        CostConfig {
+            model: CostModel::VirtualSdem,
+            ..Default::default()
+        }
+    }
 
     #[test]
     fn correlator_equals_the_virtual_sdem_correlation() {
@@ -798,21 +566,30 @@ mod tests {
         let (reference, _) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 1);
         let moved = pose_from_parts(Vec3::new(0.1, 0.05, 0.02), Attitude::default());
         let (local, _) = sdem_at(&scene, &moved, &sensor, &grid, 2);
-        let cost = CostConfig::default();
+        let cost = virtual_cost();
         let mut correlator = Correlator::new(&reference, &local, &cost).unwrap();
         for o in [
             Vec3::zeros(),
             Vec3::new(0.1, 0.05, 0.02),
             Vec3::new(-0.3, 0.2, -0.05),
         ] {
-            let fast = correlator.evaluate(&o);
+            let fast = correlator.evaluate(&o, 0.0);
             let slow = correlate(&reference.virtual_at(&o), &local, &cost);
             assert_eq!(fast, slow, "at {o:?}");
         }
-        // The truth scores better than a candidate 5 cm away.
-        let at_truth = correlator.evaluate(&Vec3::new(0.1, 0.05, 0.02)).unwrap();
-        let off = correlator.evaluate(&Vec3::new(0.15, 0.05, 0.02)).unwrap();
-        assert!(at_truth.cost < off.cost);
+        // For both costs the truth scores better than a candidate 5 cm or 2° away.
+        for cost in [virtual_cost(), CostConfig::default()] {
+            let mut c = Correlator::new(&reference, &local, &cost).unwrap();
+            let truth = c.evaluate(&Vec3::new(0.1, 0.05, 0.02), 0.0).unwrap();
+            let shifted = c.evaluate(&Vec3::new(0.15, 0.05, 0.02), 0.0).unwrap();
+            let turned = c
+                .evaluate(&Vec3::new(0.1, 0.05, 0.02), 2f64.to_radians())
+                .unwrap();
+            assert!(
+                truth.cost < shifted.cost && truth.cost < turned.cost,
+                "{cost:?}"
+            );
+        }
     }
 
     #[test]
@@ -829,29 +606,35 @@ mod tests {
             &grid,
             4,
         );
-        let config = LocalizeConfig {
-            window: SearchWindow {
-                min: [-0.1, -0.1, -0.1],
-                max: [0.1, 0.1, 0.1],
-            },
-            step_m: 0.02,
-            mode: SearchMode::Exhaustive,
-            refine: false,
-            ..Default::default()
-        };
-        let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
-        assert_eq!(found.candidates_evaluated, 11 * 11 * 11);
-        assert!(
-            (found.grid_offset - truth).norm() < 1e-9,
-            "found {:?}, truth {truth:?}",
-            found.grid_offset
-        );
-        assert!(!found.on_window_edge);
+        for cost in [virtual_cost(), CostConfig::default()] {
+            let config = LocalizeConfig {
+                window: SearchWindow {
+                    min: [-0.1, -0.1, -0.1],
+                    max: [0.1, 0.1, 0.1],
+                },
+                step_m: 0.02,
+                heading: HeadingWindow::none(),
+                mode: SearchMode::Exhaustive,
+                cost,
+                refine: false,
+                ..Default::default()
+            };
+            let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+            assert_eq!(found.candidates_evaluated, 11 * 11 * 11);
+            assert!(
+                (found.grid_offset - truth).norm() < 1e-9,
+                "{:?}: found {:?}, truth {truth:?}",
+                config.cost.model,
+                found.grid_offset
+            );
+            assert!(!found.on_window_edge);
+        }
     }
 
     #[test]
     fn tilted_query_is_localized() {
-        // The paper's second case: the body stands on a rock, tilted 8°.
+        // The paper's second case: the body stands on a rock, tilted 8°; default search (exact
+        // branch-and-bound with ±10° heading, then the 6-DoF refinement).
         let scene = sim::paper_room();
         let grid = SdemConfig::default();
         let sensor = SensorConfig::default();
@@ -861,10 +644,65 @@ mod tests {
         );
         let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 5);
         let (query, qa) = sdem_at(&scene, &truth, &sensor, &grid, 6);
-        let found = localize(&reference, &ra, &query, &qa, &LocalizeConfig::default()).unwrap();
-        let error =
-            (found.reference_from_query.translation.vector - truth.translation.vector).norm();
-        assert!(error < 0.01, "error {error} m");
+        // A window of ±8 cm around the truth keeps the test quick; the benchmarks run the paper's.
+        let config = LocalizeConfig {
+            window: SearchWindow::around(&truth.translation.vector, [0.08, 0.08, 0.05]),
+            heading: HeadingWindow {
+                half_range_deg: 3.0,
+                step_deg: None,
+            },
+            ..Default::default()
+        };
+        let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+        let (dt, dr) = crate::geometry::pose_error(&truth, &found.reference_from_query);
+        assert!(
+            dt < 0.005 && dr.to_degrees() < 0.1,
+            "error {dt} m, {} deg",
+            dr.to_degrees()
+        );
+        assert_eq!(found.refined, RefineOutcome::SixDof);
+    }
+
+    #[test]
+    fn compass_error_is_found_by_the_heading_search() {
+        let scene = sim::paper_room();
+        let grid = SdemConfig::default();
+        let sensor = SensorConfig::default();
+        let truth = pose_from_parts(
+            Vec3::new(0.3, -0.1, 0.0),
+            Attitude::from_degrees(0.0, 0.0, 25.0),
+        );
+        let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 9);
+        let mut rng = ChaCha8Rng::seed_from_u64(10);
+        let sweep = sim::scan(&scene, &sensor, &truth, 0.0, &mut rng);
+        // The compass reads 8° off (steel nearby).
+        let mut qa = sweep.mean_attitude();
+        qa.yaw += 8f64.to_radians();
+        let query = Sdem::from_points(&sweep.points_in_sensor(), &qa.rotation(), &grid).unwrap();
+        // The default ±10° heading window; a translation window of ±5 cm around the truth keeps
+        // the test quick (the benchmarks run the paper's window).
+        let config = LocalizeConfig {
+            window: SearchWindow::around(&truth.translation.vector, [0.05, 0.05, 0.03]),
+            ..Default::default()
+        };
+        let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+        let (dt, dr) = crate::geometry::pose_error(&truth, &found.reference_from_query);
+        assert!(
+            dt < 0.005 && dr.to_degrees() < 0.1,
+            "error {dt} m, {} deg",
+            dr.to_degrees()
+        );
+        assert!((found.heading_correction.to_degrees() + 8.0).abs() < 0.2);
+        // Trusting the compass, the same pair localizes badly or not at all.
+        let trusting = LocalizeConfig {
+            heading: HeadingWindow::none(),
+            refine: false,
+            ..config
+        };
+        if let Ok(f) = localize(&reference, &ra, &query, &qa, &trusting) {
+            let (dt, _) = crate::geometry::pose_error(&truth, &f.reference_from_query);
+            assert!(dt > 0.01, "a wrong compass should hurt: {dt}");
+        }
     }
 
     #[test]
@@ -902,6 +740,19 @@ mod tests {
             ..Default::default()
         };
         assert!(localize(&s, &a, &s, &a, &nan).is_err());
+        let bad_heading = LocalizeConfig {
+            heading: HeadingWindow {
+                half_range_deg: 200.0,
+                step_deg: None,
+            },
+            ..Default::default()
+        };
+        assert!(localize(&s, &a, &s, &a, &bad_heading).is_err());
+        let bnb_on_virtual = LocalizeConfig {
+            cost: virtual_cost(),
+            ..Default::default()
+        };
+        assert!(localize(&s, &a, &s, &a, &bnb_on_virtual).is_err());
     }
 
     #[test]
@@ -916,35 +767,100 @@ mod tests {
             8,
         );
         // Candidates 50 m away see nothing of the reference.
-        let far = LocalizeConfig {
-            window: SearchWindow {
-                min: [50.0, 50.0, 0.0],
-                max: [50.1, 50.1, 0.0],
-            },
+        for mode in [SearchMode::BranchAndBound, SearchMode::Exhaustive] {
+            let far = LocalizeConfig {
+                window: SearchWindow {
+                    min: [50.0, 50.0, 0.0],
+                    max: [50.1, 50.1, 0.0],
+                },
+                mode,
+                ..Default::default()
+            };
+            let error = localize(&s, &a, &s, &a, &far).unwrap_err();
+            assert!(matches!(error, Error::Localize(_)), "{error}");
+        }
+    }
+
+    /// A small seeded problem: coarse 2° scans, a query displaced and turned.
+    fn small_problem(
+        seed: u64,
+        x: f64,
+        y: f64,
+        z: f64,
+        yaw: f64,
+    ) -> (Sdem, Attitude, Sdem, Attitude) {
+        let scene = sim::paper_room();
+        let grid = SdemConfig {
+            resolution_deg: 2.0,
             ..Default::default()
         };
-        let error = localize(&s, &a, &s, &a, &far).unwrap_err();
-        assert!(matches!(error, Error::Localize(_)), "{error}");
+        let sensor = SensorConfig {
+            tilt_step_deg: 2.0,
+            pan_step_deg: 2.0,
+            ..Default::default()
+        };
+        let truth = pose_from_parts(Vec3::new(x, y, z), Attitude::from_degrees(0.0, 0.0, yaw));
+        let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seed);
+        let (query, qa) = sdem_at(&scene, &truth, &sensor, &grid, seed + 1);
+        (reference, ra, query, qa)
     }
 
     proptest! {
         #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
 
-        /// The default search lands on the same grid minimum as the exhaustive oracle.
+        /// The exact search lands on the exhaustive oracle's minimum, heading included, wherever
+        /// the truth lies relative to the window (inside, near an edge, or outside it).
+        #[test]
+        fn branch_and_bound_finds_the_exhaustive_minimum(
+            seed in 0u64..1_000_000,
+            x in -0.3f64..0.3, y in -0.2f64..0.4, z in -0.05f64..0.05,
+            yaw in -30.0f64..30.0,
+            compass_error in -3.0f64..3.0,
+            window_shift in -0.1f64..0.1,
+        ) {
+            let (reference, ra, query, mut qa) = small_problem(seed, x, y, z, yaw);
+            qa.yaw += compass_error.to_radians();
+            let centre = Vec3::new(x + window_shift, y - window_shift, z);
+            let base = LocalizeConfig {
+                window: SearchWindow::around(&centre, [0.08, 0.08, 0.04]),
+                step_m: 0.02,
+                heading: HeadingWindow { half_range_deg: 3.0, step_deg: Some(1.0) },
+                refine: false,
+                ..Default::default()
+            };
+            let oracle = localize(&reference, &ra, &query, &qa,
+                &LocalizeConfig { mode: SearchMode::Exhaustive, ..base.clone() });
+            let fast = localize(&reference, &ra, &query, &qa, &base);
+            match (oracle, fast) {
+                (Ok(oracle), Ok(fast)) => {
+                    prop_assert_eq!(fast.grid_index, oracle.grid_index);
+                    prop_assert_eq!(fast.cost, oracle.cost);
+                    prop_assert!(fast.candidates_evaluated < oracle.candidates_evaluated);
+                }
+                (Err(_), Err(_)) => {}
+                (o, f) => prop_assert!(false, "oracle {:?} vs fast {:?}", o.map(|l| l.cost), f.map(|l| l.cost)),
+            }
+        }
+
+        /// The coarse-to-fine heuristic lands on the oracle's minimum of the paper's cost on these
+        /// small problems (it can miss in general: it is not exact).
         #[test]
         fn coarse_to_fine_finds_the_exhaustive_minimum(
             seed in 0u64..1_000_000,
             x in -0.3f64..0.3, y in -0.2f64..0.4, z in -0.05f64..0.05,
             yaw in -30.0f64..30.0,
         ) {
-            let scene = sim::paper_room();
-            let grid = SdemConfig { resolution_deg: 2.0, ..Default::default() };
-            let sensor = SensorConfig { tilt_step_deg: 2.0, pan_step_deg: 2.0, ..Default::default() };
-            let truth = pose_from_parts(Vec3::new(x, y, z), Attitude::from_degrees(0.0, 0.0, yaw));
-            let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seed);
-            let (query, qa) = sdem_at(&scene, &truth, &sensor, &grid, seed + 1);
+            let (reference, ra, query, qa) = small_problem(seed, x, y, z, yaw);
             let window = SearchWindow::around(&Vec3::new(x, y, z), [0.12, 0.12, 0.06]);
-            let base = LocalizeConfig { window, step_m: 0.02, refine: false, ..Default::default() };
+            let base = LocalizeConfig {
+                window,
+                step_m: 0.02,
+                heading: HeadingWindow::none(),
+                mode: SearchMode::CoarseToFine,
+                cost: virtual_cost(),
+                refine: false,
+                ..Default::default()
+            };
             let oracle = localize(&reference, &ra, &query, &qa,
                 &LocalizeConfig { mode: SearchMode::Exhaustive, ..base.clone() }).unwrap();
             let fast = localize(&reference, &ra, &query, &qa, &base).unwrap();

@@ -7,7 +7,7 @@
 //! horizontal plane, whatever the robot's tilt. Cells with no return are *unknown*, never zero.
 
 use crate::error::{Error, Result};
-use crate::geometry::Vec3;
+use crate::geometry::{fast_atan2, floor_i64, Vec3};
 use nalgebra::Rotation3;
 use serde::{Deserialize, Serialize};
 
@@ -158,12 +158,10 @@ impl GridSpec {
             return None;
         }
         let range = range_sq.sqrt();
-        let azimuth = p[1].atan2(p[0]);
-        let elevation = p[2].atan2(horizontal_sq.sqrt());
-        let fa = ((azimuth - self.azimuth_min) * self.inv_resolution).floor();
-        let fe = ((elevation - self.elevation_min) * self.inv_resolution).floor();
-        let mut ia = fa as i64;
-        let ie = fe as i64;
+        let azimuth = fast_atan2(p[1], p[0]);
+        let elevation = fast_atan2(p[2], horizontal_sq.sqrt());
+        let mut ia = floor_i64((azimuth - self.azimuth_min) * self.inv_resolution);
+        let ie = floor_i64((elevation - self.elevation_min) * self.inv_resolution);
         if self.full_circle {
             ia = ia.rem_euclid(self.azimuth_cells as i64);
         } else if ia < 0 || ia >= self.azimuth_cells as i64 {
@@ -253,7 +251,7 @@ impl Sdem {
         for (i, p) in points.iter().enumerate() {
             if let Some((cell, r)) = spec.cell_of(*p) {
                 let c = cell as usize;
-                if r >= min_range && !(ranges[c] <= r) {
+                if r >= min_range && (ranges[c].is_nan() || r < ranges[c]) {
                     ranges[c] = r;
                     best[c] = i as u32;
                 }

@@ -1,0 +1,588 @@
+//! Exact branch-and-bound search over translation and heading for the projective cost
+//! ([`crate::cost::CostModel::Projective`]), after the idea of correlative scan matching with
+//! precomputed multi-resolution tables (Olson 2009; Hess et al. 2016, Cartographer).
+//!
+//! A node is a box of grid candidates (index intervals in x, y, z and heading). For every
+//! candidate in it, each query point lies within a ball around its position at the box centre:
+//! the radius is the half-diagonal of the translation box plus the chord the heading interval
+//! sweeps. The ball spans a range interval and a cone of directions; precomputed tables give the
+//! smallest and largest reference range and the count of known cells over that cone. From them
+//! each point gets a valid lower bound on its truncated squared difference, and whether it is
+//! certainly, possibly or never compared. The smallest mean any candidate of the box can reach is
+//! then a lower bound on its cost (normalization and the minimum overlap included). Boxes whose
+//! bound exceeds the best cost found so far are dropped; single candidates are scored exactly with
+//! the same [`Correlator`] the exhaustive search uses, so both return the same minimum.
+//!
+//! Query points are grouped (by S-DEM block and range) at coarser levels, so large boxes are
+//! bounded from a few hundred groups instead of every point: a group's ball covers its members'.
+
+use crate::cost::{yaw_matrix, Correlator, CostConfig};
+use crate::geometry::FAST_ATAN2_MAX_ERROR;
+use crate::geometry::{fast_atan2, floor_i64};
+use crate::sdem::Sdem;
+use crate::search::{better, CandidateGrid, Index, Scored};
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// Range minimum, maximum and known-cell count of the reference S-DEM over rectangles of cells.
+pub(crate) struct RangeTables {
+    n_az: usize,
+    n_el: usize,
+    /// Columns stored: twice the azimuth cells on a full circle, so windows can wrap.
+    width: usize,
+    full_circle: bool,
+    /// Known-cell prefix sums, `(n_el + 1) × (width + 1)`.
+    known_prefix: Vec<u32>,
+    /// Square sparse tables: level `k` holds `(min, max)` over the `2^k × 2^k` square starting at
+    /// each cell, `n_el × width` entries (squares running off the grid are clipped).
+    squares: Vec<Vec<(f32, f32)>>,
+    /// 1-D sparse table over whole rows: level `k` holds `(min, max)` over rows `e..e + 2^k`.
+    rows: Vec<Vec<(f32, f32)>>,
+    global: (u32, f32, f32),
+    elevation_min: f32,
+    elevation_max: f32,
+    azimuth_min: f32,
+    inv_resolution: f32,
+}
+
+const EMPTY: (f32, f32) = (f32::INFINITY, f32::NEG_INFINITY);
+
+fn merge(a: (f32, f32), b: (f32, f32)) -> (f32, f32) {
+    (a.0.min(b.0), a.1.max(b.1))
+}
+
+impl RangeTables {
+    pub fn new(reference: &Sdem) -> Self {
+        let grid = reference.grid();
+        let (n_az, n_el) = (grid.azimuth_cells(), grid.elevation_cells());
+        let config = reference.config();
+        let full_circle = (config.azimuth_max_deg - config.azimuth_min_deg - 360.0).abs() < 1e-9;
+        let width = if full_circle { 2 * n_az } else { n_az };
+        let ranges = reference.ranges();
+        let cell = |e: usize, a: usize| ranges[e * n_az + a % n_az];
+        let mut base = vec![EMPTY; n_el * width];
+        let mut known_prefix = vec![0u32; (n_el + 1) * (width + 1)];
+        for e in 0..n_el {
+            for a in 0..width {
+                let r = cell(e, a);
+                let known = !r.is_nan();
+                if known {
+                    base[e * width + a] = (r, r);
+                }
+                known_prefix[(e + 1) * (width + 1) + a + 1] = known_prefix[e * (width + 1) + a + 1]
+                    + known_prefix[(e + 1) * (width + 1) + a]
+                    - known_prefix[e * (width + 1) + a]
+                    + known as u32;
+            }
+        }
+        let mut squares = vec![base];
+        while (1usize << squares.len()) <= n_el.min(width) && squares.len() < 8 {
+            let half = 1usize << (squares.len() - 1);
+            let prev = squares.last().expect("level 0 exists");
+            let mut next = vec![EMPTY; n_el * width];
+            for e in 0..n_el {
+                for a in 0..width {
+                    let mut v = prev[e * width + a];
+                    if e + half < n_el {
+                        v = merge(v, prev[(e + half) * width + a]);
+                    }
+                    if a + half < width {
+                        v = merge(v, prev[e * width + a + half]);
+                        if e + half < n_el {
+                            v = merge(v, prev[(e + half) * width + a + half]);
+                        }
+                    }
+                    next[e * width + a] = v;
+                }
+            }
+            squares.push(next);
+        }
+        let row: Vec<(f32, f32)> = (0..n_el)
+            .map(|e| (0..n_az).fold(EMPTY, |acc, a| merge(acc, squares[0][e * width + a])))
+            .collect();
+        let mut rows = vec![row];
+        while (1usize << rows.len()) <= n_el {
+            let half = 1usize << (rows.len() - 1);
+            let prev = rows.last().expect("level 0 exists");
+            let next = (0..n_el)
+                .map(|e| {
+                    if e + half < n_el {
+                        merge(prev[e], prev[e + half])
+                    } else {
+                        prev[e]
+                    }
+                })
+                .collect();
+            rows.push(next);
+        }
+        let global_range = rows[0].iter().fold(EMPTY, |acc, &r| merge(acc, r));
+        Self {
+            n_az,
+            n_el,
+            width,
+            full_circle,
+            known_prefix,
+            squares,
+            rows,
+            global: (
+                reference.known_cells() as u32,
+                global_range.0,
+                global_range.1,
+            ),
+            elevation_min: config.elevation_min_deg.to_radians() as f32,
+            elevation_max: config.elevation_max_deg.to_radians() as f32,
+            azimuth_min: config.azimuth_min_deg.to_radians() as f32,
+            inv_resolution: (1.0 / config.resolution_deg.to_radians()) as f32,
+        }
+    }
+
+    fn known(&self, e0: usize, e1: usize, a0: usize, a1: usize) -> u32 {
+        let w = self.width + 1;
+        self.known_prefix[(e1 + 1) * w + a1 + 1] + self.known_prefix[e0 * w + a0]
+            - self.known_prefix[e0 * w + a1 + 1]
+            - self.known_prefix[(e1 + 1) * w + a0]
+    }
+
+    fn rows_range(&self, e0: usize, e1: usize) -> (f32, f32) {
+        let h = e1 - e0 + 1;
+        let k = (usize::BITS - 1 - h.leading_zeros()) as usize;
+        let s = 1usize << k;
+        merge(self.rows[k][e0], self.rows[k][e1 + 1 - s])
+    }
+
+    /// `(known, cells, min, max)` over rows `e0..=e1` and columns `a0..=a1` (columns may run past
+    /// `n_az` on a full circle; `a1 - a0 < n_az`).
+    fn window(&self, e0: usize, e1: usize, a0: usize, a1: usize) -> (u32, u32, f32, f32) {
+        let (h, w) = (e1 - e0 + 1, a1 - a0 + 1);
+        let cells = (h * w) as u32;
+        let known = self.known(e0, e1, a0, a1);
+        if known == 0 {
+            return (0, cells, f32::INFINITY, f32::NEG_INFINITY);
+        }
+        let k = ((usize::BITS - 1 - h.min(w).leading_zeros()) as usize).min(self.squares.len() - 1);
+        let s = 1usize << k;
+        let (ne, na) = (h.div_ceil(s), w.div_ceil(s));
+        if ne * na > 12 {
+            // A wide band near a pole: whole rows bound it (a superset, still valid).
+            let (lo, hi) = self.rows_range(e0, e1);
+            return (known, cells, lo, hi);
+        }
+        let table = &self.squares[k];
+        let mut acc = EMPTY;
+        for i in 0..ne {
+            let e = (e0 + i * s).min(e1 + 1 - s);
+            for j in 0..na {
+                let a = (a0 + j * s).min(a1 + 1 - s);
+                acc = merge(acc, table[e * self.width + a]);
+            }
+        }
+        (known, cells, acc.0, acc.1)
+    }
+}
+
+/// One query point, or a group of nearby ones that share a bound.
+#[derive(Clone, Copy, Debug)]
+struct Group {
+    center: [f32; 3],
+    radius: f32,
+    /// Horizontal distance of the farthest member from the z axis (for the heading chord).
+    horizontal: f32,
+    count: u32,
+}
+
+/// The query's points at several groupings: level 0 one point per group; level `m` the points of
+/// a `2^m × 2^m` block of cells whose ranges fall in one `2^m · 2 cm` bin.
+pub(crate) struct QueryGroups {
+    levels: Vec<Vec<Group>>,
+    /// The 75th-percentile group radius of each level, metres.
+    typical_radius: Vec<f32>,
+}
+
+impl QueryGroups {
+    pub fn new(query: &Sdem, levels: usize) -> Self {
+        let n_az = query.grid().azimuth_cells() as u32;
+        let points = query.points();
+        let make = |members: &[usize]| -> Group {
+            let mut c = [0f64; 3];
+            for &i in members {
+                for a in 0..3 {
+                    c[a] += points[i][a] as f64;
+                }
+            }
+            let n = members.len() as f64;
+            let center = [(c[0] / n) as f32, (c[1] / n) as f32, (c[2] / n) as f32];
+            let mut radius = 0f32;
+            let mut horizontal = 0f32;
+            for &i in members {
+                let p = points[i];
+                let d = ((p[0] - center[0]).powi(2)
+                    + (p[1] - center[1]).powi(2)
+                    + (p[2] - center[2]).powi(2))
+                .sqrt();
+                radius = radius.max(d);
+                horizontal = horizontal.max((p[0] * p[0] + p[1] * p[1]).sqrt());
+            }
+            // Rounding margin: the members' distance was computed in f32.
+            Group {
+                center,
+                radius: radius * (1.0 + 1e-5) + 1e-6,
+                horizontal,
+                count: members.len() as u32,
+            }
+        };
+        let mut out = Vec::new();
+        let mut typical = Vec::new();
+        for m in 0..levels.max(1) {
+            let mut buckets: HashMap<(u32, u32, u32), Vec<usize>> = HashMap::new();
+            for (i, (&cell, p)) in query.cells().iter().zip(points).enumerate() {
+                let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                let bin = (range / (0.02 * (1u32 << m) as f32)) as u32;
+                let key = ((cell / n_az) >> m, (cell % n_az) >> m, bin);
+                buckets.entry(key).or_default().push(i);
+            }
+            let mut keys: Vec<_> = buckets.keys().copied().collect();
+            keys.sort_unstable();
+            let groups: Vec<Group> = keys.iter().map(|k| make(&buckets[k])).collect();
+            let mut radii: Vec<f32> = groups.iter().map(|g| g.radius).collect();
+            radii.sort_by(f32::total_cmp);
+            typical.push(radii.get(radii.len() * 3 / 4).copied().unwrap_or(0.0));
+            out.push(groups);
+        }
+        Self {
+            levels: out,
+            typical_radius: typical,
+        }
+    }
+}
+
+/// A box of candidates: inclusive index intervals per axis (x, y, z, heading).
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    lo: Index,
+    hi: Index,
+}
+
+impl Node {
+    fn is_leaf(&self) -> bool {
+        self.lo == self.hi
+    }
+
+    fn children(&self) -> Vec<Node> {
+        let mut out = vec![*self];
+        for a in 0..4 {
+            if self.hi[a] > self.lo[a] {
+                let mid = (self.lo[a] + self.hi[a]) / 2;
+                out = out
+                    .into_iter()
+                    .flat_map(|n| {
+                        let mut left = n;
+                        let mut right = n;
+                        left.hi[a] = mid;
+                        right.lo[a] = mid + 1;
+                        [left, right]
+                    })
+                    .collect();
+            }
+        }
+        out
+    }
+}
+
+/// What the search did, for reports and benchmarks.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BranchAndBoundStats {
+    /// Boxes bounded.
+    pub nodes_bounded: usize,
+    /// Single candidates scored exactly.
+    pub leaves_evaluated: usize,
+}
+
+/// The search state shared by the recursion.
+pub(crate) struct BranchAndBound<'a> {
+    reference: &'a Sdem,
+    query: &'a Sdem,
+    cost: &'a CostConfig,
+    grid: &'a CandidateGrid,
+    tables: &'a RangeTables,
+    groups: &'a QueryGroups,
+    min_overlap: u64,
+    truncation_sq: f32,
+    /// Only candidates costing at most this are of interest (∞: all).
+    cap: f64,
+    best: Option<Scored>,
+    stats: BranchAndBoundStats,
+}
+
+impl<'a> BranchAndBound<'a> {
+    pub fn new(
+        reference: &'a Sdem,
+        query: &'a Sdem,
+        cost: &'a CostConfig,
+        grid: &'a CandidateGrid,
+        tables: &'a RangeTables,
+        groups: &'a QueryGroups,
+    ) -> crate::Result<Self> {
+        let correlator = Correlator::new(reference, query, cost)?;
+        Ok(Self {
+            reference,
+            query,
+            cost,
+            grid,
+            tables,
+            groups,
+            min_overlap: correlator.min_overlap() as u64,
+            truncation_sq: cost.truncation_sq(),
+            cap: f64::INFINITY,
+            best: None,
+            stats: BranchAndBoundStats::default(),
+        })
+    }
+
+    /// Runs the search over the whole grid; returns the exhaustive search's minimum.
+    pub fn run(mut self) -> (Option<Scored>, BranchAndBoundStats) {
+        let c = self.grid.counts;
+        let root = Node {
+            lo: [0; 4],
+            hi: [c[0] - 1, c[1] - 1, c[2] - 1, c[3] - 1],
+        };
+        if root.is_leaf() {
+            let (score, _) = self.score_leaf(&root);
+            self.stats.leaves_evaluated += 1;
+            return (score.filter(|s| s.0 <= self.cap), self.stats);
+        }
+        self.visit(root);
+        (self.best, self.stats)
+    }
+
+    fn prunable(&self, bound: f64) -> bool {
+        let limit = self.best.map_or(self.cap, |(cost, _)| cost.min(self.cap));
+        if limit.is_infinite() {
+            return bound.is_infinite();
+        }
+        // A margin far above rounding: bounds are computed with slack, costs exactly.
+        bound > limit * (1.0 + 1e-9) + 1e-15
+    }
+
+    fn score_leaf(&self, node: &Node) -> (Option<Scored>, f64) {
+        let mut correlator =
+            Correlator::new(self.reference, self.query, self.cost).expect("validated in new()");
+        let idx = node.lo;
+        let flat = self.grid.flat(idx);
+        if self.grid.excluded(idx) {
+            return (None, f64::INFINITY);
+        }
+        match correlator.evaluate(&self.grid.offset(idx), self.grid.yaw(idx)) {
+            Some(c) => (Some((c.cost, flat)), c.cost),
+            None => (None, f64::INFINITY),
+        }
+    }
+
+    fn visit(&mut self, node: Node) {
+        let mut children = node.children();
+        children.retain(|c| !self.grid.box_excluded(c.lo, c.hi));
+        let scored: Vec<(Node, f64, Option<Scored>)> = children
+            .par_iter()
+            .map(|child| {
+                if child.is_leaf() {
+                    let (score, bound) = self.score_leaf(child);
+                    (*child, bound, score)
+                } else {
+                    (*child, self.bound(child), None)
+                }
+            })
+            .collect();
+        let mut pending = Vec::with_capacity(scored.len());
+        for (child, bound, score) in scored {
+            if child.is_leaf() {
+                self.stats.leaves_evaluated += 1;
+                if let Some(s) = score.filter(|s| s.0 <= self.cap) {
+                    if self.best.is_none_or(|b| better(&s, &b)) {
+                        self.best = Some(s);
+                    }
+                }
+            } else {
+                self.stats.nodes_bounded += 1;
+                pending.push((bound, child));
+            }
+        }
+        pending.sort_by(|a, b| a.0.total_cmp(&b.0));
+        for (bound, child) in pending {
+            if self.prunable(bound) {
+                break;
+            }
+            self.visit(child);
+        }
+    }
+
+    /// A lower bound on the cost of every candidate in `node` (∞ when none can reach the minimum
+    /// overlap).
+    fn bound(&self, node: &Node) -> f64 {
+        let grid = self.grid;
+        let lo = grid.offset(node.lo);
+        let hi = grid.offset(node.hi);
+        let centre = (lo + hi) * 0.5;
+        let translation_radius = ((hi - lo) * 0.5).norm();
+        let (yaw_lo, yaw_hi) = (grid.yaws[node.lo[3]], grid.yaws[node.hi[3]]);
+        let yaw_centre = 0.5 * (yaw_lo + yaw_hi);
+        let chord = 2.0 * (0.25 * (yaw_hi - yaw_lo)).sin();
+        // The coarsest grouping whose groups are small against the box.
+        let reach = translation_radius + chord;
+        let level = (0..self.groups.levels.len())
+            .rev()
+            .find(|&m| self.groups.typical_radius[m] as f64 <= 0.5 * reach)
+            .unwrap_or(0);
+        let groups = &self.groups.levels[level];
+        let rotation = yaw_matrix(yaw_centre);
+        let t = centre.cast::<f32>();
+        let tables = self.tables;
+        let truncation_sq = self.truncation_sq;
+        let (rt, chord) = (translation_radius as f32, chord as f32);
+        let mut certain_sum = 0f64;
+        let mut certain_count = 0u64;
+        let mut maybe: Vec<(f32, u32)> = Vec::new();
+        let mut maybe_count = 0u64;
+        for g in groups {
+            // Slack covers single-precision rounding in the members' positions.
+            let radius = rt + g.radius + chord * g.horizontal + 1e-4;
+            let c = g.center;
+            let u = rotation * nalgebra::Vector3::new(c[0], c[1], c[2]) + t;
+            let (status, lb) = point_bound(tables, [u.x, u.y, u.z], radius, truncation_sq);
+            match status {
+                Status::Never => {}
+                Status::Certain => {
+                    certain_sum += lb as f64 * g.count as f64;
+                    certain_count += g.count as u64;
+                }
+                Status::Maybe => {
+                    maybe.push((lb, g.count));
+                    maybe_count += g.count as u64;
+                }
+            }
+        }
+        if certain_count + maybe_count < self.min_overlap {
+            return f64::INFINITY;
+        }
+        // The smallest mean over the certain terms plus any subset of the possible ones that
+        // reaches the minimum overlap: take the possible ones from the smallest up.
+        maybe.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (mut sum, mut count) = (certain_sum, certain_count);
+        for (lb, n) in maybe {
+            let lb = lb as f64;
+            if count < self.min_overlap {
+                let take = (self.min_overlap - count).min(n as u64);
+                sum += lb * take as f64;
+                count += take;
+                if take < n as u64 && lb * (count as f64) < sum {
+                    let rest = n as u64 - take;
+                    sum += lb * rest as f64;
+                    count += rest;
+                }
+            } else if lb * (count as f64) < sum {
+                sum += lb * n as f64;
+                count += n as u64;
+            } else {
+                break;
+            }
+        }
+        if count == 0 {
+            f64::INFINITY
+        } else {
+            sum / count as f64
+        }
+    }
+}
+
+enum Status {
+    Never,
+    Maybe,
+    Certain,
+}
+
+/// Bounds one ball (centre `u` in the reference's levelled frame, radius `radius`): whether the
+/// points it may hold are compared with a known reference cell, and a lower bound on their
+/// truncated squared range difference.
+#[inline]
+fn point_bound(t: &RangeTables, u: [f32; 3], radius: f32, truncation_sq: f32) -> (Status, f32) {
+    let horizontal = (u[0] * u[0] + u[1] * u[1]).sqrt();
+    let range = (horizontal * horizontal + u[2] * u[2]).sqrt();
+    let (lo_r, hi_r) = (range - radius, range + radius);
+    let lb_of = |min: f32, max: f32| -> f32 {
+        let d = if min > hi_r {
+            min - hi_r
+        } else if max < lo_r {
+            lo_r - max
+        } else {
+            0.0
+        };
+        (d * d).min(truncation_sq)
+    };
+    if range <= radius * 1.0001 {
+        // The ball holds the origin: any direction.
+        let (known, min, max) = t.global;
+        return if known == 0 {
+            (Status::Never, 0.0)
+        } else {
+            (Status::Maybe, lb_of(min, max))
+        };
+    }
+    // Angular radius: tan(asin(ρ/|u|)) ≥ asin(ρ/|u|), plus the arctangent's error.
+    let margin = 2.0 * FAST_ATAN2_MAX_ERROR;
+    let alpha = radius / (range * range - radius * radius).sqrt() + margin;
+    let elevation = fast_atan2(u[2], horizontal);
+    let (el_lo, el_hi) = (elevation - alpha, elevation + alpha);
+    let mut outside = el_lo < t.elevation_min || el_hi > t.elevation_max;
+    let e0 =
+        (floor_i64((el_lo - t.elevation_min) * t.inv_resolution).max(0) as usize).min(t.n_el - 1);
+    let e1 =
+        (floor_i64((el_hi - t.elevation_min) * t.inv_resolution).max(0) as usize).min(t.n_el - 1);
+    let (a0, a1) = if horizontal <= radius * 1.0001 {
+        if !t.full_circle {
+            outside = true;
+        }
+        (0, t.n_az - 1)
+    } else {
+        let beta = radius / (horizontal * horizontal - radius * radius).sqrt() + margin;
+        let azimuth = fast_atan2(u[1], u[0]);
+        let lo = floor_i64((azimuth - beta - t.azimuth_min) * t.inv_resolution);
+        let hi = floor_i64((azimuth + beta - t.azimuth_min) * t.inv_resolution);
+        let n = t.n_az as i64;
+        if t.full_circle {
+            if hi - lo + 1 >= n {
+                (0, t.n_az - 1)
+            } else {
+                let start = lo.rem_euclid(n);
+                (start as usize, (start + hi - lo) as usize)
+            }
+        } else {
+            if lo < 0 || hi >= n {
+                outside = true;
+            }
+            (lo.clamp(0, n - 1) as usize, hi.clamp(0, n - 1) as usize)
+        }
+    };
+    let (known, cells, min, max) = t.window(e0, e1, a0, a1);
+    if known == 0 {
+        (Status::Never, 0.0)
+    } else if known == cells && !outside {
+        (Status::Certain, lb_of(min, max))
+    } else {
+        (Status::Maybe, lb_of(min, max))
+    }
+}
+
+/// Runs the exact search; see the module documentation. With a finite `cap`, only candidates
+/// costing at most `cap` are looked for (the minimum among them, or `None`): a much cheaper
+/// question when the cap is low.
+pub(crate) fn search(
+    reference: &Sdem,
+    query: &Sdem,
+    cost: &CostConfig,
+    grid: &CandidateGrid,
+    cap: f64,
+) -> crate::Result<(Option<Scored>, BranchAndBoundStats)> {
+    let tables = RangeTables::new(reference);
+    let groups = QueryGroups::new(query, 4);
+    let mut bnb = BranchAndBound::new(reference, query, cost, grid, &tables, &groups)?;
+    bnb.cap = cap;
+    Ok(bnb.run())
+}
