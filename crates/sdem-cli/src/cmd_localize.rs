@@ -2,9 +2,12 @@
 
 use crate::output::{elapsed_ms, pose_line, print_json};
 use anyhow::{bail, Context, Result};
+use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, PoseRecord};
 use sdem::io::Dataset;
-use sdem::localize::{localize, LocalizeConfig, SearchMode, SearchWindow};
+use sdem::localize::{
+    localize, Diagnostics, HeadingWindow, LocalizeConfig, RefineOutcome, SearchMode, SearchWindow,
+};
 use sdem::sdem::{Sdem, SdemConfig};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -28,15 +31,50 @@ pub struct Args {
     /// Grid step of the search, metres.
     #[arg(long, default_value_t = 0.01, allow_hyphen_values = true)]
     step: f64,
-    /// Score every candidate of the window (the paper's search; slow).
+    /// Score every candidate of the window (the paper's search; slow). Same as
+    /// `--search exhaustive`.
     #[arg(long)]
     exhaustive: bool,
+    /// Which search: exact branch-and-bound (projective cost), the exhaustive oracle, or the
+    /// coarse-to-fine heuristic.
+    #[arg(long, value_enum, default_value_t = Search::BranchAndBound)]
+    search: Search,
+    /// Which form of the paper's eq. (1): query points looked up in the reference S-DEM
+    /// (projective), or the paper's z-buffered virtual S-DEM (virtual; not with branch-and-bound).
+    #[arg(long, value_enum, default_value_t = Cost::Projective)]
+    cost: Cost,
+    /// Heading searched around the compass reading, ± degrees (0 trusts the compass; 180 is a
+    /// full turn).
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
+    heading_window: f64,
+    /// Heading step, degrees [default: matched to the scan's extent and --step].
+    #[arg(long, allow_hyphen_values = true)]
+    heading_step: Option<f64>,
+    /// Skip the second search for the runner-up outside the peak (halves the time; the
+    /// `ambiguous` flag then rests on the covariance only).
+    #[arg(long)]
+    no_runner_up: bool,
     /// S-DEM cell size, degrees.
     #[arg(long, default_value_t = 1.0)]
     resolution: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
+}
+
+/// The `--search` values.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Search {
+    BranchAndBound,
+    Exhaustive,
+    CoarseToFine,
+}
+
+/// The `--cost` values.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Cost {
+    Projective,
+    Virtual,
 }
 
 /// Parses `x0:x1,y0:y1,z0:z1`.
@@ -76,12 +114,18 @@ struct Report {
     reference: usize,
     query: usize,
     reference_from_query: PoseRecord,
+    heading_correction_deg: f64,
     cost: f64,
     rms_m: f64,
     overlap: usize,
+    candidates_total: usize,
     candidates_evaluated: usize,
+    nodes_bounded: usize,
     search: SearchMode,
+    cost_model: CostModel,
     on_window_edge: bool,
+    refined: RefineOutcome,
+    diagnostics: Diagnostics,
     time_ms: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     truth: Option<PoseRecord>,
@@ -110,14 +154,45 @@ pub fn run(args: Args) -> Result<()> {
         resolution_deg: args.resolution,
         ..Default::default()
     };
+    if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
+        bail!(
+            "--heading-window {} must lie in 0..=180 degrees (0 trusts the compass)",
+            args.heading_window
+        );
+    }
+    if let Some(step) = args.heading_step {
+        if !(step.is_finite() && step > 0.0) {
+            bail!("--heading-step {step} must be a positive number of degrees");
+        }
+    }
+    let mode = match (args.exhaustive, args.search) {
+        (true, _) | (_, Search::Exhaustive) => SearchMode::Exhaustive,
+        (_, Search::BranchAndBound) => SearchMode::BranchAndBound,
+        (_, Search::CoarseToFine) => SearchMode::CoarseToFine,
+    };
+    let model = match args.cost {
+        Cost::Projective => CostModel::Projective,
+        Cost::Virtual => CostModel::VirtualSdem,
+    };
+    if mode == SearchMode::BranchAndBound && model == CostModel::VirtualSdem {
+        bail!(
+            "--cost virtual needs --search exhaustive or --search coarse-to-fine; the exact \
+             branch-and-bound search bounds the projective cost only"
+        );
+    }
     let config = LocalizeConfig {
         window: args.window.unwrap_or_else(SearchWindow::paper),
         step_m: args.step,
-        mode: if args.exhaustive {
-            SearchMode::Exhaustive
-        } else {
-            SearchMode::CoarseToFine
+        heading: HeadingWindow {
+            half_range_deg: args.heading_window,
+            step_deg: args.heading_step,
         },
+        mode,
+        cost: CostConfig {
+            model,
+            ..Default::default()
+        },
+        runner_up: !args.no_runner_up,
         ..Default::default()
     };
     let reference_attitude = dataset.attitudes[args.reference];
@@ -149,12 +224,18 @@ pub fn run(args: Args) -> Result<()> {
         reference: args.reference,
         query: args.query,
         reference_from_query: PoseRecord::from(&found.reference_from_query),
+        heading_correction_deg: found.heading_correction.to_degrees(),
         cost: found.cost,
         rms_m: found.cost.sqrt(),
         overlap: found.overlap,
+        candidates_total: found.candidates_total,
         candidates_evaluated: found.candidates_evaluated,
+        nodes_bounded: found.nodes_bounded,
         search: config.mode,
+        cost_model: model,
         on_window_edge: found.on_window_edge,
+        refined: found.refined,
+        diagnostics: found.diagnostics.clone(),
         time_ms,
         truth: truth.as_ref().map(PoseRecord::from),
         error_m: errors.map(|e| e.0),
@@ -174,15 +255,54 @@ pub fn run(args: Args) -> Result<()> {
     if let (Some(e_m), Some(e_deg)) = (report.error_m, report.error_deg) {
         println!("  error     {:.2} cm, {:.3}°", e_m * 100.0, e_deg);
     }
+    let d = &found.diagnostics;
     println!(
-        "  cost {:.3e} m² (rms {:.2} cm) over {} cells; {} candidates in {:.0} ms ({:?})",
+        "  heading correction {:+.2}° to the compass; refined: {:?}",
+        report.heading_correction_deg, found.refined
+    );
+    println!(
+        "  cost {:.3e} m² (rms {:.2} cm) over {} cells ({:.0} % of the query, {:.0} % within \
+         {} cm)",
         report.cost,
         report.rms_m * 100.0,
         report.overlap,
+        d.overlap_fraction * 100.0,
+        d.inlier_fraction * 100.0,
+        config.cost.truncation_m * 100.0
+    );
+    if let Some(r) = d.runner_up_cost {
+        println!(
+            "  runner-up outside {:.0} cm: cost {:.3e} m² ({:.2}× the best)",
+            config.peak_radius_m * 100.0,
+            r,
+            r / report.cost
+        );
+    }
+    if let (Some(v), Some(w), Some(s)) =
+        (d.weakest_direction, d.weakest_sigma_m, d.strongest_sigma_m)
+    {
+        println!(
+            "  weakest direction ({:.2}, {:.2}, {:.2}): σ {:.2} mm (strongest {:.2} mm)",
+            v[0],
+            v[1],
+            v[2],
+            w * 1e3,
+            s * 1e3
+        );
+    }
+    println!(
+        "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({:?})",
         report.candidates_evaluated,
+        report.candidates_total,
+        report.nodes_bounded,
         report.time_ms,
         config.mode
     );
+    if d.ambiguous {
+        for why in &d.ambiguity {
+            println!("  AMBIGUOUS: {why}");
+        }
+    }
     if found.on_window_edge {
         println!(
             "  warning: the optimum lies on the window's edge; the true position may be outside it"

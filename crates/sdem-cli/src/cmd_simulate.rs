@@ -1,11 +1,11 @@
 //! `sdem simulate`: a simulated collapsed-building run written as a dataset folder.
 
 use crate::output::print_json;
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use sdem::sensor::SensorConfig;
 use sdem::sim;
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `sdem simulate`.
 #[derive(clap::Args)]
@@ -28,7 +28,8 @@ pub struct Args {
     /// Drop returns beyond this range, metres (the paper trusts 3 m).
     #[arg(long)]
     trusted_range: Option<f64>,
-    /// Write into a folder that already holds a dataset (its files are replaced).
+    /// Write into a folder that already holds a dataset: its scans, sweeps, attitudes, truth and
+    /// sensor file are removed first, so no old file mixes into the new dataset.
     #[arg(long)]
     force: bool,
     /// Print one JSON object instead of text.
@@ -52,6 +53,14 @@ pub fn run(args: Args) -> Result<()> {
             args.out.display()
         );
     }
+    if !(1..=sim::MAX_STOPS).contains(&args.stops) {
+        bail!(
+            "--stops {} must lie in 1..={} (the simulated route holds {} stops)",
+            args.stops,
+            sim::MAX_STOPS,
+            sim::MAX_STOPS
+        );
+    }
     let mut sensor = SensorConfig {
         range_noise_m: args.range_noise,
         trusted_range_m: args.trusted_range,
@@ -69,6 +78,9 @@ pub fn run(args: Args) -> Result<()> {
         .map(|s| (s.sweep.points_in_sensor(), s.sweep.mean_attitude()))
         .collect();
     let sweeps: Vec<_> = run.iter().map(|s| s.sweep.clone()).collect();
+    if args.force {
+        remove_old_dataset(&args.out)?;
+    }
     let truth: Vec<_> = run.iter().map(|s| s.world_from_sensor).collect();
     sdem::io::write_dataset(&args.out, &sensor, &scans, Some(&sweeps), Some(&truth))?;
     let summary = Summary {
@@ -92,5 +104,29 @@ pub fn run(args: Args) -> Result<()> {
         n.iter().min().unwrap_or(&0),
         n.iter().max().unwrap_or(&0)
     );
+    Ok(())
+}
+
+/// Removes the files of the dataset in `root` that `simulate` writes (and nothing else).
+fn remove_old_dataset(root: &Path) -> Result<()> {
+    for dir in ["scans", "sweeps"] {
+        let path = root.join(dir);
+        if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+                .with_context(|| format!("cannot remove {} for --force", path.display()))?;
+        }
+    }
+    for file in [
+        "attitude.csv",
+        "poses_truth.txt",
+        "poses_truth.tum",
+        "sensor.toml",
+    ] {
+        let path = root.join(file);
+        if path.is_file() {
+            std::fs::remove_file(&path)
+                .with_context(|| format!("cannot remove {} for --force", path.display()))?;
+        }
+    }
     Ok(())
 }
