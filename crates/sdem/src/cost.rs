@@ -180,6 +180,12 @@ pub struct Correlator<'a> {
     min_overlap: usize,
     min_range: f32,
     zbuffer: Vec<f32>,
+    /// The query's boundary points, one coordinate per array (projective model).
+    query_xyz: [Vec<f32>; 3],
+    /// Scratch: moved points, their cells and ranges.
+    moved: [Vec<f32>; 3],
+    cells: Vec<u32>,
+    ranges: Vec<f32>,
 }
 
 impl<'a> Correlator<'a> {
@@ -196,7 +202,16 @@ impl<'a> Correlator<'a> {
             CostModel::VirtualSdem => vec![f32::NAN; reference.grid().len()],
             CostModel::Projective => Vec::new(),
         };
+        let n = match cost.model {
+            CostModel::Projective => query.points().len(),
+            CostModel::VirtualSdem => 0,
+        };
+        let column = |k: usize| -> Vec<f32> { query.points()[..n].iter().map(|p| p[k]).collect() };
         Ok(Self {
+            query_xyz: [column(0), column(1), column(2)],
+            moved: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
+            cells: vec![0; n],
+            ranges: vec![0.0; n],
             reference,
             query,
             model: cost.model,
@@ -221,15 +236,30 @@ impl<'a> Correlator<'a> {
         }
     }
 
-    fn evaluate_projective(&self, offset: &Vec3, rotation: &Matrix3<f32>) -> Option<Correlation> {
+    fn evaluate_projective(
+        &mut self,
+        offset: &Vec3,
+        rotation: &Matrix3<f32>,
+    ) -> Option<Correlation> {
         let grid = self.reference.grid();
-        let ranges = self.reference.ranges();
+        let reference_ranges = self.reference.ranges();
         let t = offset.cast::<f32>();
+        let m = rotation;
+        let [qx, qy, qz] = &self.query_xyz;
+        let [mx, my, mz] = &mut self.moved;
+        // Written as plain loops over arrays so the compiler vectorizes them; the same
+        // arithmetic as `rotation * q + t`.
+        for i in 0..qx.len() {
+            let (x, y, z) = (qx[i], qy[i], qz[i]);
+            mx[i] = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
+            my[i] = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
+            mz[i] = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
+        }
+        grid.cells_of(mx, my, mz, &mut self.cells, &mut self.ranges);
         let mut acc = CostSum::new(self.truncation_sq);
-        for q in self.query.points() {
-            let x = rotation * nalgebra::Vector3::new(q[0], q[1], q[2]) + t;
-            if let Some((cell, r)) = grid.cell_of([x.x, x.y, x.z]) {
-                let reference_range = ranges[cell as usize];
+        for (&cell, &r) in self.cells.iter().zip(&self.ranges) {
+            if cell != u32::MAX {
+                let reference_range = reference_ranges[cell as usize];
                 if !reference_range.is_nan() {
                     acc.add(r, reference_range);
                 }
