@@ -3,6 +3,7 @@
 //! This binary parses arguments, reports progress and prints results; the work is done by the
 //! `sdem` library. Errors go to stderr as one line, with a non-zero exit code.
 
+mod cmd_bench;
 mod cmd_demo;
 mod cmd_localize;
 mod cmd_simulate;
@@ -28,6 +29,8 @@ enum Command {
     Simulate(cmd_simulate::Args),
     /// Localize one scan of a dataset against another and print the pose.
     Localize(cmd_localize::Args),
+    /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs.
+    Bench(cmd_bench::Args),
 }
 
 fn main() -> ExitCode {
@@ -36,6 +39,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => cmd_demo::run(args),
         Command::Simulate(args) => cmd_simulate::run(args),
         Command::Localize(args) => cmd_localize::run(args),
+        Command::Bench(args) => cmd_bench::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

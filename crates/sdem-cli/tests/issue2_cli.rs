@@ -823,3 +823,39 @@ fn demo_json_meets_the_paper_and_writes_its_files() {
     let poses = parse_kitti(&out.join("poses.txt"));
     assert!(poses.len() >= 5, "{} stops", poses.len());
 }
+
+// ---------------------------------------------------------------------------------------------
+// sdem bench
+// ---------------------------------------------------------------------------------------------
+
+/// `bench --quick --json`: the exact search and the oracle agree, and the figures are all there
+/// (one coarse pair keeps the test short; the README quotes a full run).
+#[test]
+fn bench_quick_json_reports_identical_minima_and_figures() {
+    let dir = TempDir::new().unwrap();
+    let report = run_json(
+        dir.path(),
+        &[
+            "bench", "--quick", "--pairs", "1", "--step", "0.04", "--json",
+        ],
+    );
+    let exact = &report["exact"];
+    assert_eq!(exact["identical"], true, "{exact}");
+    assert_eq!(
+        num(exact, "exhaustive_cost"),
+        num(exact, "branch_and_bound_cost")
+    );
+    assert!(num(exact, "ratio") > 0.0, "{exact}");
+    assert!(
+        exact["candidates_scored"].as_u64().unwrap() < exact["candidates"].as_u64().unwrap(),
+        "{exact}"
+    );
+    let pairs = &report["pairs"];
+    assert_eq!(pairs["count"], 1, "{pairs}");
+    for key in ["translation_error_mm", "rotation_error_deg", "time_ms"] {
+        for stat in ["median", "p95", "max"] {
+            assert!(pairs[key][stat].is_number(), "{key}.{stat} in {pairs}");
+        }
+    }
+    assert!(num(pairs, "success_rate_2cm") >= 0.0, "{pairs}");
+}

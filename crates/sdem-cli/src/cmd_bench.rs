@@ -1,0 +1,291 @@
+//! `sdem bench`: speed and accuracy figures from one run on fixed seeded scenes.
+//!
+//! 1. Exact search against the oracle: the paper's experiment (its room, the scan after moving
+//!    (22, 36, 5) cm), the paper's window at 1 cm with the compass trusted, searched once
+//!    exhaustively and several times by branch-and-bound; times, ratio, and whether both return
+//!    the same grid candidate with the same cost.
+//! 2. Accuracy and time over seeded pairs in the simulated collapsed building
+//!    ([`sdem::benchmark::bench_pairs`]): the query anywhere within ±0.5 m (±0.1 m in height) of
+//!    the reference, turned up to ±15°, tilted up to ±3°, its compass off by up to ±10°; 5 mm
+//!    range noise. Each is localized with the ±10° heading search, refinement and diagnostics.
+
+use crate::output::{elapsed_ms, print_json};
+use anyhow::{Context, Result};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use sdem::benchmark::{bench_pairs, localize_pair, success_rate, summarize, PairConfig, Stats};
+use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow};
+use sdem::sdem::{Sdem, SdemConfig};
+use sdem::sensor::SensorConfig;
+use sdem::sim;
+use serde::Serialize;
+use std::time::Instant;
+
+/// Arguments of `sdem bench`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// A short run: a smaller window for the oracle comparison and 10 pairs.
+    #[arg(long)]
+    quick: bool,
+    /// Number of seeded pairs for the accuracy figures [default: 50, or 10 with --quick].
+    #[arg(long)]
+    pairs: Option<usize>,
+    /// Seed of the pairs' scene.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Grid step of the pairs' search, metres (the refinement goes below it).
+    #[arg(long, default_value_t = 0.02)]
+    step: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct ExactReport {
+    scene: &'static str,
+    window: SearchWindow,
+    step_m: f64,
+    candidates: usize,
+    exhaustive_ms: f64,
+    branch_and_bound_ms: Stats,
+    ratio: f64,
+    identical: bool,
+    exhaustive_cost: f64,
+    branch_and_bound_cost: f64,
+    candidates_scored: usize,
+    boxes_bounded: usize,
+}
+
+#[derive(Serialize)]
+struct PairsReport {
+    count: usize,
+    seed: u64,
+    step_m: f64,
+    heading_window_deg: f64,
+    window: SearchWindow,
+    translation_error_mm: Stats,
+    rotation_error_deg: Stats,
+    time_ms: Stats,
+    success_rate_2cm: f64,
+    failures: Vec<String>,
+}
+
+#[derive(Serialize)]
+struct Report {
+    threads: usize,
+    exact: ExactReport,
+    pairs: PairsReport,
+}
+
+/// The paper's pair: a scan at the origin of its room and one after moving (22, 36, 5) cm.
+fn paper_pair() -> Result<(Sdem, Attitude, Sdem, Attitude)> {
+    let scene = sim::paper_room();
+    let sensor = SensorConfig::default();
+    let grid = SdemConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut sdem_at = |pose: &Pose| -> Result<(Sdem, Attitude)> {
+        let sweep = sim::scan(&scene, &sensor, pose, 0.0, &mut rng);
+        let attitude = sweep.mean_attitude();
+        Ok((
+            Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), &grid)?,
+            attitude,
+        ))
+    };
+    let (r, ra) = sdem_at(&Pose::identity())?;
+    let (q, qa) = sdem_at(&pose_from_parts(
+        Vec3::new(0.22, 0.36, 0.05),
+        Attitude::default(),
+    ))?;
+    Ok((r, ra, q, qa))
+}
+
+fn exact_vs_exhaustive(quick: bool, say: &dyn Fn(&str)) -> Result<ExactReport> {
+    let (r, ra, q, qa) = paper_pair()?;
+    let window = if quick {
+        SearchWindow::around(&Vec3::new(0.22, 0.36, 0.05), [0.15, 0.15, 0.05])
+    } else {
+        SearchWindow::paper()
+    };
+    let base = LocalizeConfig {
+        window: window.clone(),
+        step_m: 0.01,
+        heading: HeadingWindow::none(),
+        refine: false,
+        runner_up: false,
+        ..Default::default()
+    };
+    let exhaustive_config = LocalizeConfig {
+        mode: SearchMode::Exhaustive,
+        ..base.clone()
+    };
+    say("exact search: the exhaustive oracle over the window ...");
+    let start = Instant::now();
+    let oracle = localize(&r, &ra, &q, &qa, &exhaustive_config).context("exhaustive search")?;
+    let exhaustive_ms = elapsed_ms(start);
+    let repeats = if quick { 3 } else { 5 };
+    let mut times = Vec::new();
+    let mut fast = None;
+    for i in 0..repeats {
+        say(&format!(
+            "exact search: branch-and-bound, run {} of {repeats} ...",
+            i + 1
+        ));
+        let start = Instant::now();
+        let found = localize(&r, &ra, &q, &qa, &base).context("branch-and-bound search")?;
+        times.push(elapsed_ms(start));
+        fast = Some(found);
+    }
+    let fast = fast.expect("at least one run");
+    let bnb = summarize(&times);
+    Ok(ExactReport {
+        scene: "paper room, scan after moving (22, 36, 5) cm, compass trusted",
+        window,
+        step_m: 0.01,
+        candidates: oracle.candidates_total,
+        exhaustive_ms,
+        ratio: exhaustive_ms / bnb.median,
+        branch_and_bound_ms: bnb,
+        identical: fast.grid_index == oracle.grid_index && fast.cost == oracle.cost,
+        exhaustive_cost: oracle.cost,
+        branch_and_bound_cost: fast.cost,
+        candidates_scored: fast.candidates_evaluated,
+        boxes_bounded: fast.nodes_bounded,
+    })
+}
+
+fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
+    let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
+    if count == 0 {
+        anyhow::bail!("--pairs must be at least 1");
+    }
+    if !(args.step.is_finite() && args.step > 0.0) {
+        anyhow::bail!("--step {} must be a positive number of metres", args.step);
+    }
+    let pair_config = PairConfig::default();
+    say(&format!("pairs: simulating {count} seeded pairs ..."));
+    let pairs = bench_pairs(args.seed, count, &pair_config)?;
+    let config = LocalizeConfig {
+        window: pair_config.search_window(),
+        step_m: args.step,
+        ..Default::default()
+    };
+    let sdem_config = SdemConfig::default();
+    let (mut translation, mut rotation, mut times, mut failures) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (i, pair) in pairs.iter().enumerate() {
+        say(&format!("pairs: localizing {} of {count} ...", i + 1));
+        match localize_pair(pair, &sdem_config, &config) {
+            Ok(result) => {
+                translation.push(result.translation_error_m * 1e3);
+                rotation.push(result.rotation_error_deg);
+                times.push(result.time_ms);
+                if result.translation_error_m >= 0.02 {
+                    failures.push(format!(
+                        "pair {i}: error {:.1} mm, {:.2}°",
+                        result.translation_error_m * 1e3,
+                        result.rotation_error_deg
+                    ));
+                }
+            }
+            Err(e) => {
+                translation.push(f64::NAN);
+                rotation.push(f64::NAN);
+                failures.push(format!("pair {i}: {e}"));
+            }
+        }
+    }
+    let errors_m: Vec<f64> = translation.iter().map(|e| e / 1e3).collect();
+    Ok(PairsReport {
+        count,
+        seed: args.seed,
+        step_m: args.step,
+        heading_window_deg: config.heading.half_range_deg,
+        window: config.window,
+        translation_error_mm: summarize(&translation),
+        rotation_error_deg: summarize(&rotation),
+        time_ms: summarize(&times),
+        success_rate_2cm: success_rate(&errors_m, 0.02),
+        failures,
+    })
+}
+
+/// Runs `sdem bench`.
+pub fn run(args: Args) -> Result<()> {
+    let quiet = args.json;
+    let say = move |m: &str| {
+        if !quiet {
+            eprintln!("  {m}");
+        }
+    };
+    let exact = exact_vs_exhaustive(args.quick, &say)?;
+    let pairs = accuracy(&args, &say)?;
+    let report = Report {
+        threads: rayon::current_num_threads(),
+        exact,
+        pairs,
+    };
+    if args.json {
+        return print_json(&report);
+    }
+    let e = &report.exact;
+    println!("sdem bench ({} threads)", report.threads);
+    println!();
+    println!(
+        "1. Exact search against the exhaustive oracle ({})",
+        e.scene
+    );
+    println!(
+        "   window x {:.2}..{:.2}, y {:.2}..{:.2}, z {:.2}..{:.2} m at {} cm: {} candidates",
+        e.window.min[0],
+        e.window.max[0],
+        e.window.min[1],
+        e.window.max[1],
+        e.window.min[2],
+        e.window.max[2],
+        e.step_m * 100.0,
+        e.candidates
+    );
+    println!("   exhaustive        {:>10.0} ms", e.exhaustive_ms);
+    println!(
+        "   branch-and-bound  {:>10.1} ms median of {} (scored {} candidates, bounded {} boxes)",
+        e.branch_and_bound_ms.median,
+        e.branch_and_bound_ms.count,
+        e.candidates_scored,
+        e.boxes_bounded
+    );
+    println!("   ratio             {:>10.0}x", e.ratio);
+    println!(
+        "   same minimum      {} (cost {:.6e} vs {:.6e})",
+        if e.identical { "yes" } else { "NO" },
+        e.branch_and_bound_cost,
+        e.exhaustive_cost
+    );
+    let p = &report.pairs;
+    println!();
+    println!(
+        "2. {} seeded pairs (seed {}): motion within ±0.5 m, compass off by up to 10°; search at {} cm, heading ±{}°",
+        p.count,
+        p.seed,
+        p.step_m * 100.0,
+        p.heading_window_deg
+    );
+    println!(
+        "   translation error  median {:.2} mm, 95th percentile {:.2} mm, max {:.2} mm",
+        p.translation_error_mm.median, p.translation_error_mm.p95, p.translation_error_mm.max
+    );
+    println!(
+        "   rotation error     median {:.3}°, 95th percentile {:.3}°, max {:.3}°",
+        p.rotation_error_deg.median, p.rotation_error_deg.p95, p.rotation_error_deg.max
+    );
+    println!(
+        "   time per localization  median {:.0} ms, 95th percentile {:.0} ms",
+        p.time_ms.median, p.time_ms.p95
+    );
+    println!("   success (< 2 cm)   {:.1} %", p.success_rate_2cm * 100.0);
+    for f in &p.failures {
+        println!("   failed: {f}");
+    }
+    Ok(())
+}
