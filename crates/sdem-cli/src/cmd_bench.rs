@@ -109,7 +109,7 @@ fn exact_vs_exhaustive(quick: bool, say: &dyn Fn(&str)) -> Result<ExactReport> {
         SearchWindow::paper()
     };
     let base = LocalizeConfig {
-        window: window.clone(),
+        window,
         step_m: 0.01,
         heading: HeadingWindow::none(),
         refine: false,
