@@ -586,3 +586,107 @@ pub(crate) fn search(
     bnb.cap = cap;
     Ok(bnb.run())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+    use crate::localize::SearchWindow;
+    use crate::sdem::SdemConfig;
+    use crate::sensor::SensorConfig;
+    use crate::sim;
+    use rand::SeedableRng;
+
+    /// The bound of every box is at most the smallest cost of its candidates (the property the
+    /// exactness rests on), at every box size, with and without a heading interval; and it is
+    /// tight enough near the optimum to prune most small boxes.
+    #[test]
+    fn bound_never_exceeds_the_boxes_minimum() {
+        let scene = sim::paper_room();
+        let sensor = SensorConfig {
+            tilt_step_deg: 2.0,
+            pan_step_deg: 2.0,
+            ..Default::default()
+        };
+        let grid_cfg = SdemConfig {
+            resolution_deg: 2.0,
+            ..Default::default()
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let mut at = |p: &Pose| {
+            let s = sim::scan(&scene, &sensor, p, 0.0, &mut rng);
+            let a = s.mean_attitude();
+            Sdem::from_points(&s.points_in_sensor(), &a.rotation(), &grid_cfg).unwrap()
+        };
+        let r = at(&Pose::identity());
+        let truth = Vec3::new(0.22, 0.36, 0.05);
+        let q = at(&pose_from_parts(
+            truth,
+            Attitude::from_degrees(0.0, 0.0, 1.0),
+        ));
+        let cost = CostConfig::default();
+        let window = SearchWindow::around(&truth, [0.08, 0.08, 0.04]);
+        let yaws: Vec<f64> = (-2..=2).map(|k| (k as f64).to_radians()).collect();
+        let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
+        let tables = RangeTables::new(&r);
+        let groups = QueryGroups::new(&q, 4);
+        let bnb = BranchAndBound::new(&r, &q, &cost, &grid, &tables, &groups).unwrap();
+        let mut c = Correlator::new(&r, &q, &cost).unwrap();
+        let n = grid.counts;
+        let costs: Vec<f64> = (0..grid.len())
+            .map(|f| {
+                let i = grid.index(f);
+                c.evaluate(&grid.offset(i), grid.yaw(i))
+                    .map_or(f64::INFINITY, |x| x.cost)
+            })
+            .collect();
+        let best = costs.iter().cloned().fold(f64::INFINITY, f64::min);
+        assert!(best.is_finite());
+        for (size, yaw_size) in [(2, 1), (4, 1), (8, 1), (2, 2), (4, 5), (9, 5)] {
+            let (mut pruned, mut boxes) = (0, 0);
+            for l in (0..n[3]).step_by(yaw_size) {
+                for z in (0..n[2]).step_by(size) {
+                    for y in (0..n[1]).step_by(size) {
+                        for x in (0..n[0]).step_by(size) {
+                            let lo = [x, y, z, l];
+                            let hi = [
+                                (x + size).min(n[0]) - 1,
+                                (y + size).min(n[1]) - 1,
+                                (z + size).min(n[2]) - 1,
+                                (l + yaw_size).min(n[3]) - 1,
+                            ];
+                            let node = Node { lo, hi };
+                            if node.is_leaf() {
+                                continue;
+                            }
+                            let bound = bnb.bound(&node);
+                            let mut min = f64::INFINITY;
+                            for ll in lo[3]..=hi[3] {
+                                for zz in lo[2]..=hi[2] {
+                                    for yy in lo[1]..=hi[1] {
+                                        for xx in lo[0]..=hi[0] {
+                                            min = min.min(costs[grid.flat([xx, yy, zz, ll])]);
+                                        }
+                                    }
+                                }
+                            }
+                            assert!(
+                                bound <= min,
+                                "box {lo:?}..{hi:?}: bound {bound:e} above its minimum {min:e}"
+                            );
+                            boxes += 1;
+                            pruned += (bound > best) as usize;
+                        }
+                    }
+                }
+            }
+            println!("boxes of {size}^3 x {yaw_size} headings: {pruned} of {boxes} pruned");
+            if (size, yaw_size) == (2, 1) {
+                assert!(
+                    pruned * 2 > boxes,
+                    "only {pruned} of {boxes} small boxes pruned"
+                );
+            }
+        }
+    }
+}
