@@ -388,14 +388,14 @@ impl Sdem {
 
 /// `floor` to `i32` without a library call (see [`floor_i64`]); exact for the cell indices here.
 #[inline(always)]
-fn floor_i32(x: f32) -> i32 {
+pub(crate) fn floor_i32(x: f32) -> i32 {
     let i = x as i32;
     i - ((i as f32) > x) as i32
 }
 
 /// [`fast_atan2`] with selects instead of branches (vectorizable); equal to it bit for bit.
 #[inline(always)]
-fn atan2_select(y: f32, x: f32) -> f32 {
+pub(crate) fn atan2_select(y: f32, x: f32) -> f32 {
     let (ax, ay) = (x.abs(), y.abs());
     let big = ax.max(ay);
     // fast_atan2 returns 0 at the origin; 0/0 would give NaN.
