@@ -468,6 +468,9 @@ impl<'a> BranchAndBound<'a> {
         let truncation_sq = self.truncation_sq;
         let (rt, chord) = (translation_radius as f32, chord as f32);
         let margin = 2.0 * FAST_ATAN2_MAX_ERROR;
+        // 2 |t_c,h| δ, with δ the largest turn from the middle heading (slightly enlarged for
+        // rounding).
+        let yaw_spread = (2.0 * centre.xy().norm() * 0.5 * (yaw_hi - yaw_lo) * (1.0 + 1e-6)) as f32;
         let mut certain_sum = 0f64;
         let mut certain_count = 0u64;
         let mut maybe: Vec<(f32, u32)> = Vec::new();
@@ -484,12 +487,22 @@ impl<'a> BranchAndBound<'a> {
                 let u0 = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
                 let u1 = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
                 let u2 = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
-                // Slack covers single-precision rounding in the members' positions.
-                let radius = rt + balls.radius[k] + chord * balls.horizontal[k] + 1e-4;
+                // Every member at every candidate of the box lies within `rt + group radius` of
+                // the group centre's arc `Rz(ψ) c + t_c`, and the arc within `chord · ρ` of its
+                // middle: a ball bounds the azimuths (slack covers single-precision rounding).
+                let near = rt + balls.radius[k] + 1e-4;
+                let radius = near + chord * balls.horizontal[k];
                 let horizontal = (u0 * u0 + u1 * u1).sqrt();
                 let range = (horizontal * horizontal + u2 * u2).sqrt();
+                // Turning about z keeps the height, and changes the squared horizontal distance
+                // by at most 2 ρ |t_c,h| δ: in the (horizontal, height) plane the members lie
+                // within `near + dh` of the centre's middle position, which bounds their range
+                // and elevation far tighter than the ball.
+                let w = yaw_spread * balls.horizontal[k];
+                let dh = horizontal - (horizontal * horizontal - w).max(0.0).sqrt();
+                let radial = (near + dh).min(radius);
                 // Angular radius: tan(asin(ρ/|u|)) ≥ asin(ρ/|u|), plus the arctangent's error.
-                let alpha = radius / (range * range - radius * radius).sqrt() + margin;
+                let alpha = radial / (range * range - radial * radial).sqrt() + margin;
                 let elevation = atan2_select(u2, horizontal);
                 let beta = radius / (horizontal * horizontal - radius * radius).sqrt() + margin;
                 let azimuth = atan2_select(u1, u0);
@@ -497,6 +510,7 @@ impl<'a> BranchAndBound<'a> {
                 *g = BallGeometry {
                     range,
                     radius,
+                    radial,
                     horizontal,
                     el_lo,
                     el_hi,
@@ -566,7 +580,11 @@ struct BallGeometry {
     /// Distance of the ball's centre from the reference origin, and its horizontal part.
     range: f32,
     horizontal: f32,
+    /// The ball's radius (bounds the azimuths, and decides whether it holds the origin or the z
+    /// axis).
     radius: f32,
+    /// Radius in the (horizontal, height) plane (bounds the range and the elevation).
+    radial: f32,
     /// Elevation interval the ball spans, radians, and its cell rows (unclamped).
     el_lo: f32,
     el_hi: f32,
@@ -582,7 +600,7 @@ struct BallGeometry {
 #[inline]
 fn ball_bound(t: &RangeTables, g: &BallGeometry, truncation_sq: f32) -> (Status, f32) {
     let (range, radius) = (g.range, g.radius);
-    let (lo_r, hi_r) = (range - radius, range + radius);
+    let (lo_r, hi_r) = (range - g.radial, range + g.radial);
     let lb_of = |min: f32, max: f32| -> f32 {
         let d = if min > hi_r {
             min - hi_r
