@@ -5,8 +5,8 @@
 
 RAW_DIR holds pair_NNN.noguess.jsonl and pair_NNN.guess.jsonl: register_pair.py's output for
 each pair from the identity and from the seeded guess (0.2 m / 5° off the truth). Per method and
-mode the table gives the median time_ms, the median and 95th-percentile translation error, the
-median rotation error and the success rate (translation error below --threshold-m). A method
+mode the table gives the median time_ms, the median and 95th-percentile translation and rotation
+errors and the success rate (translation error below --threshold-m). A method
 that raised an error on a pair counts as a failure there (no time, infinite error). With --sdem,
 sdem's lines (from `export_bench_pairs --localize`) join the table as one more row: sdem takes
 no position guess, only the gyro/compass attitude reading (compass off by up to 10°).
@@ -71,6 +71,7 @@ def summary(recs, threshold):
         "trans_med": percentile(trans, 0.5),
         "trans_p95": percentile(trans, 0.95),
         "rot_med": percentile(rot, 0.5),
+        "rot_p95": percentile(rot, 0.95),
         "success": sum(t < threshold for t in trans) / len(recs) if recs else math.nan,
         "failed": sum(1 for r in recs if "error" in r),
     }
@@ -86,10 +87,10 @@ def fmt_len(m):
 
 def fmt(s):
     if s is None:
-        return ["–"] * 5
-    rot = "fail" if math.isinf(s["rot_med"]) else f"{s['rot_med']:.2f}°"
+        return ["–"] * 6
+    rot = ["fail" if math.isinf(d) else f"{d:.2f}°" for d in (s["rot_med"], s["rot_p95"])]
     ms = "–" if math.isnan(s["time_ms"]) else f"{s['time_ms']:.0f}"
-    return [ms, fmt_len(s["trans_med"]), fmt_len(s["trans_p95"]), rot, f"{100 * s['success']:.0f} %"]
+    return [ms, fmt_len(s["trans_med"]), fmt_len(s["trans_p95"]), *rot, f"{100 * s['success']:.0f} %"]
 
 
 def main():
@@ -110,7 +111,7 @@ def main():
 
     methods = list(dict.fromkeys(r["method"] for r in records))
     pairs = len({r["pair"] for r in records})
-    cols = ["time ms", "trans. err. median", "p95", "rot. err. median", f"success (< {100 * a.threshold_m:g} cm)"]
+    cols = ["time ms", "trans. err. median", "trans. p95", "rot. err. median", "rot. p95", f"success (< {100 * a.threshold_m:g} cm)"]
     print(f"{pairs} pairs; median over pairs; success = translation error below {100 * a.threshold_m:g} cm.\n")
     print("| method | " + " | ".join(f"no guess: {c}" if i == 0 else c for i, c in enumerate(cols))
           + " | " + " | ".join(f"guess 0.2 m / 5°: {c}" if i == 0 else c for i, c in enumerate(cols)) + " |")
