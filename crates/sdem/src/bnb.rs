@@ -143,6 +143,23 @@ impl RangeTables {
             - self.known_prefix[(e1 + 1) * w + a0]
     }
 
+    /// The range of the cell at row `e`, column `a` (columns wrap on a full circle), or `None`
+    /// when it is unknown or outside the grid.
+    fn range_at(&self, e: i32, a: i32) -> Option<f32> {
+        if e < 0 || e >= self.n_el as i32 {
+            return None;
+        }
+        let a = if self.full_circle {
+            a.rem_euclid(self.n_az as i32)
+        } else if a < 0 || a >= self.n_az as i32 {
+            return None;
+        } else {
+            a
+        };
+        let (lo, _) = self.squares[0][e as usize * self.width + a as usize];
+        lo.is_finite().then_some(lo)
+    }
+
     fn rows_range(&self, e0: usize, e1: usize) -> (f32, f32) {
         let h = e1 - e0 + 1;
         let k = (usize::BITS - 1 - h.leading_zeros()) as usize;
@@ -410,19 +427,20 @@ impl<'a> BranchAndBound<'a> {
     fn visit(&mut self, node: Node) {
         let mut children = node.children();
         children.retain(|c| !self.grid.box_excluded(c.lo, c.hi));
-        let scored: Vec<(Node, f64, Option<Scored>)> = children
+        let scored: Vec<(Node, f64, f64, Option<Scored>)> = children
             .par_iter()
             .map(|child| {
                 if child.is_leaf() {
                     let (score, bound) = self.score_leaf(child);
-                    (*child, bound, score)
+                    (*child, bound, bound, score)
                 } else {
-                    (*child, self.bound(child), None)
+                    let (bound, estimate) = self.bound(child);
+                    (*child, bound, estimate, None)
                 }
             })
             .collect();
         let mut pending = Vec::with_capacity(scored.len());
-        for (child, bound, score) in scored {
+        for (child, bound, estimate, score) in scored {
             if child.is_leaf() {
                 self.stats.leaves_evaluated += 1;
                 if let Some(s) = score.filter(|s| s.0 <= self.cap) {
@@ -432,11 +450,14 @@ impl<'a> BranchAndBound<'a> {
                 }
             } else {
                 self.stats.nodes_bounded += 1;
-                pending.push((bound, child));
+                pending.push((bound, estimate, child));
             }
         }
-        pending.sort_by(|a, b| a.0.total_cmp(&b.0));
-        for (bound, child) in pending {
+        // By bound (so the first prunable box ends the loop), ties (every bound is 0 while boxes
+        // are large) broken by the estimated cost at the box's centre, so the search reaches a
+        // good candidate early and prunes with it.
+        pending.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+        for (bound, _, child) in pending {
             if self.prunable(bound) {
                 break;
             }
@@ -445,8 +466,9 @@ impl<'a> BranchAndBound<'a> {
     }
 
     /// A lower bound on the cost of every candidate in `node` (∞ when none can reach the minimum
-    /// overlap).
-    fn bound(&self, node: &Node) -> f64 {
+    /// overlap), and an estimate of the cost at its centre (the groups' centres looked up in
+    /// their cells; only for ordering the search).
+    fn bound(&self, node: &Node) -> (f64, f64) {
         let grid = self.grid;
         let lo = grid.offset(node.lo);
         let hi = grid.offset(node.hi);
@@ -475,6 +497,7 @@ impl<'a> BranchAndBound<'a> {
         let mut certain_count = 0u64;
         let mut maybe: Vec<(f32, u32)> = Vec::new();
         let mut maybe_count = 0u64;
+        let (mut estimate_sum, mut estimate_count) = (0f64, 0u64);
         const CHUNK: usize = 64;
         let mut geometry = [BallGeometry::default(); CHUNK];
         let n = balls.cx.len();
@@ -518,10 +541,17 @@ impl<'a> BranchAndBound<'a> {
                     e1: floor_i32((el_hi - tables.elevation_min) * tables.inv_resolution),
                     a0: floor_i32((azimuth - beta - tables.azimuth_min) * tables.inv_resolution),
                     a1: floor_i32((azimuth + beta - tables.azimuth_min) * tables.inv_resolution),
+                    ec: floor_i32((elevation - tables.elevation_min) * tables.inv_resolution),
+                    ac: floor_i32((azimuth - tables.azimuth_min) * tables.inv_resolution),
                 };
             }
             for (i, g) in geometry[..len].iter().enumerate() {
                 let count = balls.count[start + i];
+                if let Some(r) = tables.range_at(g.ec, g.ac) {
+                    let e = g.range - r;
+                    estimate_sum += (e * e).min(truncation_sq) as f64 * count as f64;
+                    estimate_count += count as u64;
+                }
                 match ball_bound(tables, g, truncation_sq) {
                     (Status::Never, _) => {}
                     (Status::Certain, lb) => {
@@ -535,8 +565,13 @@ impl<'a> BranchAndBound<'a> {
                 }
             }
         }
+        let estimate = if estimate_count == 0 {
+            f64::INFINITY
+        } else {
+            estimate_sum / estimate_count as f64
+        };
         if certain_count + maybe_count < self.min_overlap {
-            return f64::INFINITY;
+            return (f64::INFINITY, estimate);
         }
         // The smallest mean over the certain terms plus any subset of the possible ones that
         // reaches the minimum overlap: take the possible ones from the smallest up.
@@ -561,9 +596,9 @@ impl<'a> BranchAndBound<'a> {
             }
         }
         if count == 0 {
-            f64::INFINITY
+            (f64::INFINITY, estimate)
         } else {
-            sum / count as f64
+            (sum / count as f64, estimate)
         }
     }
 }
@@ -593,6 +628,9 @@ struct BallGeometry {
     /// Azimuth cell columns the ball spans (unclamped), when it does not hold the z axis.
     a0: i32,
     a1: i32,
+    /// The cell of the centre's direction (unclamped).
+    ec: i32,
+    ac: i32,
 }
 
 /// Bounds one ball: whether the points it may hold are compared with a known reference cell,
@@ -746,7 +784,7 @@ mod tests {
                             if node.is_leaf() {
                                 continue;
                             }
-                            let bound = bnb.bound(&node);
+                            let (bound, _) = bnb.bound(&node);
                             let mut min = f64::INFINITY;
                             for ll in lo[3]..=hi[3] {
                                 for zz in lo[2]..=hi[2] {
