@@ -270,13 +270,20 @@ pub fn run(args: Args) -> Result<()> {
         d.inlier_fraction * 100.0,
         config.cost.truncation_m * 100.0
     );
-    if let Some(r) = d.runner_up_cost {
-        println!(
+    match (d.runner_up_cost, d.runner_up_cost_at_least) {
+        (Some(r), _) => println!(
             "  runner-up outside {:.0} cm: cost {:.3e} m² ({:.2}× the best)",
             config.peak_radius_m * 100.0,
             r,
             r / report.cost
-        );
+        ),
+        (None, Some(at_least)) => println!(
+            "  no candidate outside {:.0} cm costs less than {:.3e} m² ({:.2}× the best)",
+            config.peak_radius_m * 100.0,
+            at_least,
+            at_least / report.cost
+        ),
+        (None, None) => {}
     }
     if let (Some(v), Some(w), Some(s)) =
         (d.weakest_direction, d.weakest_sigma_m, d.strongest_sigma_m)

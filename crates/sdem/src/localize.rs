@@ -70,6 +70,9 @@ pub struct LocalizeConfig {
     /// … or when the weakest translational direction's standard deviation exceeds this multiple
     /// of the strongest's (the cost is flat along it, as in a featureless corridor).
     pub ambiguous_sigma_ratio: f64,
+    /// … or when, half the peak radius from the optimum, the cost rises along some principal
+    /// direction by less than this fraction of its rise along the steepest.
+    pub ambiguous_rise_ratio: f64,
 }
 
 impl Default for LocalizeConfig {
@@ -88,6 +91,7 @@ impl Default for LocalizeConfig {
             peak_radius_m: 0.1,
             ambiguous_cost_ratio: 1.1,
             ambiguous_sigma_ratio: 10.0,
+            ambiguous_rise_ratio: 0.05,
         }
     }
 }
@@ -324,6 +328,12 @@ pub fn localize(
     } else {
         None
     };
+    let mut correlator = Correlator::new(reference, query, &config.cost)?;
+    let mut cost_at = |offset: Vec3| {
+        correlator
+            .evaluate(&offset, grid_heading)
+            .map_or(f64::INFINITY, |c| c.cost)
+    };
     let diagnostics = diagnose(
         config,
         query.known_cells(),
@@ -331,6 +341,7 @@ pub fn localize(
         grid_offset,
         runner_up,
         refinement.as_ref(),
+        &mut cost_at,
     );
     Ok(Localization {
         reference_from_query: world_from_reference.inverse() * world_from_query,
@@ -359,6 +370,7 @@ fn diagnose(
     best_offset: Vec3,
     runner_up: Option<(f64, Vec3, f64)>,
     refinement: Option<&Refinement>,
+    cost_at: &mut dyn FnMut(Vec3) -> f64,
 ) -> Diagnostics {
     let known = query_known.max(1) as f64;
     let mut ambiguity = Vec::new();
@@ -401,6 +413,54 @@ fn diagnose(
             ));
         }
         weakest = Some(([v.x, v.y, v.z], sigma_max, sigma_min));
+    }
+    // The cost's own shape: how much it rises half the peak radius away from the optimum, along
+    // the covariance's principal directions (the axes without one). Flat along one direction and
+    // steep along another is a corridor.
+    let directions: Vec<Vec3> = match &covariance {
+        Some(cov) => {
+            let translation: nalgebra::Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
+            let eigen = translation.symmetric_eigen();
+            (0..3)
+                .map(|i| eigen.eigenvectors.column(i).into_owned())
+                .collect()
+        }
+        None => vec![Vec3::x(), Vec3::y(), Vec3::z()],
+    };
+    let d = 0.5 * config.peak_radius_m;
+    let rises: Vec<(f64, Vec3)> = directions
+        .iter()
+        .map(|v| {
+            let rise = cost_at(best_offset + v * d).min(cost_at(best_offset - v * d)) - best.cost;
+            (rise, *v)
+        })
+        .collect();
+    let flattest = rises
+        .iter()
+        .cloned()
+        .fold((f64::INFINITY, Vec3::zeros()), |a, b| {
+            if b.0 < a.0 {
+                b
+            } else {
+                a
+            }
+        });
+    let steepest = rises.iter().map(|r| r.0).fold(0.0, f64::max);
+    if flattest.0 < config.ambiguous_rise_ratio * steepest {
+        let v = flattest.1;
+        ambiguity.push(format!(
+            "the cost is flat along ({:.2}, {:.2}, {:.2}): {:.0} cm away it rises {:.2e} m², \
+             against {:.2e} m² across",
+            v.x,
+            v.y,
+            v.z,
+            d * 100.0,
+            flattest.0.max(0.0),
+            steepest
+        ));
+        if weakest.is_none() {
+            weakest = Some(([v.x, v.y, v.z], f64::NAN, f64::NAN));
+        }
     }
     Diagnostics {
         overlap_fraction: best.overlap as f64 / known,
@@ -702,6 +762,56 @@ mod tests {
         if let Ok(f) = localize(&reference, &ra, &query, &qa, &trusting) {
             let (dt, _) = crate::geometry::pose_error(&truth, &f.reference_from_query);
             assert!(dt > 0.01, "a wrong compass should hurt: {dt}");
+        }
+    }
+
+    #[test]
+    fn a_corridor_is_ambiguous_along_its_axis_and_a_room_is_not() {
+        let grid = SdemConfig::default();
+        let sensor = SensorConfig::default();
+        let truth = Vec3::new(0.2, 0.05, 0.0);
+        let config = LocalizeConfig {
+            window: SearchWindow::around(&truth, [0.15, 0.06, 0.03]),
+            heading: HeadingWindow::none(),
+            ..Default::default()
+        };
+        let corridor = sim::corridor(30.0).unwrap();
+        let (r, ra) = sdem_at(&corridor, &Pose::identity(), &sensor, &grid, 21);
+        let (q, qa) = sdem_at(
+            &corridor,
+            &pose_from_parts(truth, Attitude::default()),
+            &sensor,
+            &grid,
+            22,
+        );
+        let found = localize(&r, &ra, &q, &qa, &config).unwrap();
+        let d = &found.diagnostics;
+        assert!(d.ambiguous, "{d:?}");
+        let axis = d.weakest_direction.unwrap();
+        assert!(
+            axis[0].abs() > 0.95,
+            "weakest direction {axis:?} is not the corridor's axis"
+        );
+        // Across the corridor the pose is still well fixed.
+        assert!(d.strongest_sigma_m.unwrap() < 0.001, "{d:?}");
+
+        let room = sim::paper_room();
+        let (r, ra) = sdem_at(&room, &Pose::identity(), &sensor, &grid, 23);
+        let (q, qa) = sdem_at(
+            &room,
+            &pose_from_parts(truth, Attitude::default()),
+            &sensor,
+            &grid,
+            24,
+        );
+        let found = localize(&r, &ra, &q, &qa, &config).unwrap();
+        let d = &found.diagnostics;
+        assert!(!d.ambiguous, "{d:?}");
+        assert!(d.runner_up_cost_at_least.unwrap() > found.cost, "{d:?}");
+        assert!(d.overlap_fraction > 0.5 && d.inlier_fraction > 0.5, "{d:?}");
+        let cov = d.covariance.unwrap();
+        for (i, row) in cov.iter().enumerate() {
+            assert!(row[i] > 0.0, "covariance diagonal {i}: {}", row[i]);
         }
     }
 
