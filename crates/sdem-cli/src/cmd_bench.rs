@@ -11,14 +11,13 @@
 
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use sdem::benchmark::{bench_pairs, localize_pair, success_rate, summarize, PairConfig, Stats};
-use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+use sdem::benchmark::{
+    bench_pairs, localize_pair, paper_pair, success_rate, summarize, PairConfig, Stats,
+    PAPER_MOVE_M,
+};
+use sdem::geometry::Vec3;
 use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow};
-use sdem::sdem::{Sdem, SdemConfig};
-use sdem::sensor::SensorConfig;
-use sdem::sim;
+use sdem::sdem::SdemConfig;
 use serde::Serialize;
 use std::time::Instant;
 
@@ -79,32 +78,10 @@ struct Report {
     pairs: PairsReport,
 }
 
-/// The paper's pair: a scan at the origin of its room and one after moving (22, 36, 5) cm.
-fn paper_pair() -> Result<(Sdem, Attitude, Sdem, Attitude)> {
-    let scene = sim::paper_room();
-    let sensor = SensorConfig::default();
-    let grid = SdemConfig::default();
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let mut sdem_at = |pose: &Pose| -> Result<(Sdem, Attitude)> {
-        let sweep = sim::scan(&scene, &sensor, pose, 0.0, &mut rng);
-        let attitude = sweep.mean_attitude();
-        Ok((
-            Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), &grid)?,
-            attitude,
-        ))
-    };
-    let (r, ra) = sdem_at(&Pose::identity())?;
-    let (q, qa) = sdem_at(&pose_from_parts(
-        Vec3::new(0.22, 0.36, 0.05),
-        Attitude::default(),
-    ))?;
-    Ok((r, ra, q, qa))
-}
-
 fn exact_vs_exhaustive(quick: bool, say: &dyn Fn(&str)) -> Result<ExactReport> {
     let (r, ra, q, qa) = paper_pair()?;
     let window = if quick {
-        SearchWindow::around(&Vec3::new(0.22, 0.36, 0.05), [0.15, 0.15, 0.05])
+        SearchWindow::around(&Vec3::from(PAPER_MOVE_M), [0.15, 0.15, 0.05])
     } else {
         SearchWindow::paper()
     };

@@ -3,43 +3,19 @@
 //! Fixed seeds, so every run measures the same problem.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
+use sdem::benchmark::{paper_pair, PAPER_MOVE_M};
 use sdem::cost::Correlator;
-use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+use sdem::geometry::Vec3;
 use sdem::localize::{
     localize, CostConfig, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow,
 };
-use sdem::sdem::{Sdem, SdemConfig};
-use sdem::sensor::SensorConfig;
-use sdem::sim;
 use std::hint::black_box;
 
-fn paper_pair() -> (Sdem, Attitude, Sdem, Attitude) {
-    let scene = sim::paper_room();
-    let sensor = SensorConfig::default();
-    let grid = SdemConfig::default();
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let mut sdem_at = |pose: &Pose| {
-        let sweep = sim::scan(&scene, &sensor, pose, 0.0, &mut rng);
-        let attitude = sweep.mean_attitude();
-        let s = Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), &grid)
-            .expect("valid grid");
-        (s, attitude)
-    };
-    let (reference, ra) = sdem_at(&Pose::identity());
-    let (query, qa) = sdem_at(&pose_from_parts(
-        Vec3::new(0.22, 0.36, 0.05),
-        Attitude::default(),
-    ));
-    (reference, ra, query, qa)
-}
-
 fn benches(c: &mut Criterion) {
-    let (reference, ra, query, qa) = paper_pair();
+    let (reference, ra, query, qa) = paper_pair().expect("the paper's pair");
     let cost = CostConfig::default();
     let mut correlator = Correlator::new(&reference, &query, &cost).expect("same grid");
-    let origin = Vec3::new(0.22, 0.36, 0.05);
+    let origin = Vec3::from(PAPER_MOVE_M);
     c.bench_function("virtual_sdem_evaluation", |b| {
         b.iter(|| black_box(correlator.evaluate(black_box(&origin), 0.0)))
     });

@@ -46,6 +46,34 @@ const MAX_QUERY_DRAWS: usize = 10_000;
 /// Sample directions of the clearance check (as [`sim::collapsed_building_stops`] uses).
 const CLEARANCE_DIRECTIONS: usize = 200;
 
+/// Where the query of [`paper_pair`] stands: the paper's move of (22, 36, 5) cm.
+pub const PAPER_MOVE_M: [f64; 3] = [0.22, 0.36, 0.05];
+
+/// The paper's pair (Sec. V), as S-DEMs with their attitude readings: a scan at the origin of
+/// [`sim::paper_room`] and one after moving [`PAPER_MOVE_M`] with the same attitude, default
+/// sensor and grid, seed 1. The problem `sdem bench` and the criterion benchmark time.
+///
+/// # Errors
+/// None in practice (the default grid is valid); [`Sdem::from_points`]'s errors are passed on.
+pub fn paper_pair() -> Result<(Sdem, Attitude, Sdem, Attitude)> {
+    let scene = sim::paper_room();
+    let sensor = SensorConfig::default();
+    let grid = SdemConfig::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut sdem_at = |pose: &Pose| -> Result<(Sdem, Attitude)> {
+        let sweep = sim::scan(&scene, &sensor, pose, 0.0, &mut rng);
+        let attitude = sweep.mean_attitude();
+        let s = Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), &grid)?;
+        Ok((s, attitude))
+    };
+    let (reference, ra) = sdem_at(&Pose::identity())?;
+    let (query, qa) = sdem_at(&pose_from_parts(
+        Vec3::from(PAPER_MOVE_M),
+        Attitude::default(),
+    ))?;
+    Ok((reference, ra, query, qa))
+}
+
 /// How [`bench_pairs`] draws its pairs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairConfig {

@@ -17,9 +17,10 @@
 //! bounded from a few hundred groups instead of every point: a group's ball covers its members'.
 
 use crate::cost::{yaw_matrix, Correlator, CostConfig};
+use crate::geometry::fast_atan2;
 use crate::geometry::FAST_ATAN2_MAX_ERROR;
+use crate::sdem::floor_i32;
 use crate::sdem::Sdem;
-use crate::sdem::{atan2_select, floor_i32};
 use crate::search::{better, CandidateGrid, Index, Scored};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -210,8 +211,7 @@ struct Group {
 /// The query's points at several groupings: level 0 one point per group; level `m` the points of
 /// a `2^m × 2^m` block of cells whose ranges fall in one `2^m · 2 cm` bin.
 pub(crate) struct QueryGroups {
-    levels: Vec<Vec<Group>>,
-    /// The same groups, one field per array (for the vectorized bound).
+    /// The groups of each level, one field per array (for the vectorized bound).
     balls: Vec<Balls>,
     /// The 75th-percentile group radius of each level, metres.
     typical_radius: Vec<f32>,
@@ -268,7 +268,7 @@ impl QueryGroups {
             out.push(groups);
         }
         let balls = out
-            .iter()
+            .into_iter()
             .map(|groups| Balls {
                 cx: groups.iter().map(|g| g.center[0]).collect(),
                 cy: groups.iter().map(|g| g.center[1]).collect(),
@@ -279,7 +279,6 @@ impl QueryGroups {
             })
             .collect();
         Self {
-            levels: out,
             balls,
             typical_radius: typical,
         }
@@ -393,7 +392,7 @@ impl<'a> BranchAndBound<'a> {
             hi: [c[0] - 1, c[1] - 1, c[2] - 1, c[3] - 1],
         };
         if root.is_leaf() {
-            let (score, _) = self.score_leaf(&root);
+            let (score, _) = self.score_leaf(&mut self.correlator(), &root);
             self.stats.leaves_evaluated += 1;
             return (score.filter(|s| s.0 <= self.cap), self.stats);
         }
@@ -410,9 +409,11 @@ impl<'a> BranchAndBound<'a> {
         bound > limit * (1.0 + 1e-9) + 1e-15
     }
 
-    fn score_leaf(&self, node: &Node) -> (Option<Scored>, f64) {
-        let mut correlator =
-            Correlator::new(self.reference, self.query, self.cost).expect("validated in new()");
+    fn correlator(&self) -> Correlator<'a> {
+        Correlator::new(self.reference, self.query, self.cost).expect("validated in new()")
+    }
+
+    fn score_leaf(&self, correlator: &mut Correlator, node: &Node) -> (Option<Scored>, f64) {
         let idx = node.lo;
         let flat = self.grid.flat(idx);
         if self.grid.excluded(idx) {
@@ -427,17 +428,22 @@ impl<'a> BranchAndBound<'a> {
     fn visit(&mut self, node: Node) {
         let mut children = node.children();
         children.retain(|c| !self.grid.box_excluded(c.lo, c.hi));
+        // One correlator (with its scratch buffers) per worker that meets a leaf, not per leaf.
         let scored: Vec<(Node, f64, f64, Option<Scored>)> = children
             .par_iter()
-            .map(|child| {
-                if child.is_leaf() {
-                    let (score, bound) = self.score_leaf(child);
-                    (*child, bound, bound, score)
-                } else {
-                    let (bound, estimate) = self.bound(child);
-                    (*child, bound, estimate, None)
-                }
-            })
+            .map_init(
+                || None,
+                |correlator: &mut Option<Correlator>, child| {
+                    if child.is_leaf() {
+                        let correlator = correlator.get_or_insert_with(|| self.correlator());
+                        let (score, bound) = self.score_leaf(correlator, child);
+                        (*child, bound, bound, score)
+                    } else {
+                        let (bound, estimate) = self.bound(child);
+                        (*child, bound, estimate, None)
+                    }
+                },
+            )
             .collect();
         let mut pending = Vec::with_capacity(scored.len());
         for (child, bound, estimate, score) in scored {
@@ -479,7 +485,7 @@ impl<'a> BranchAndBound<'a> {
         let chord = 2.0 * (0.25 * (yaw_hi - yaw_lo)).sin();
         // The coarsest grouping whose groups are small against the box.
         let reach = translation_radius + chord;
-        let level = (0..self.groups.levels.len())
+        let level = (0..self.groups.balls.len())
             .rev()
             .find(|&m| self.groups.typical_radius[m] as f64 <= GROUP_REACH_FRACTION * reach)
             .unwrap_or(0);
@@ -526,9 +532,9 @@ impl<'a> BranchAndBound<'a> {
                 let radial = (near + dh).min(radius);
                 // Angular radius: tan(asin(ρ/|u|)) ≥ asin(ρ/|u|), plus the arctangent's error.
                 let alpha = radial / (range * range - radial * radial).sqrt() + margin;
-                let elevation = atan2_select(u2, horizontal);
+                let elevation = fast_atan2(u2, horizontal);
                 let beta = radius / (horizontal * horizontal - radius * radius).sqrt() + margin;
-                let azimuth = atan2_select(u1, u0);
+                let azimuth = fast_atan2(u1, u0);
                 let (el_lo, el_hi) = (elevation - alpha, elevation + alpha);
                 *g = BallGeometry {
                     range,
@@ -695,19 +701,36 @@ fn ball_bound(t: &RangeTables, g: &BallGeometry, truncation_sq: f32) -> (Status,
     }
 }
 
+/// What the search precomputes for one reference/query pair: the reference's range tables and
+/// the query's groups. Built once per localization and shared by its searches (the best and the
+/// runner-up).
+pub(crate) struct Prepared {
+    tables: RangeTables,
+    groups: QueryGroups,
+}
+
+impl Prepared {
+    pub fn new(reference: &Sdem, query: &Sdem) -> Self {
+        Self {
+            tables: RangeTables::new(reference),
+            groups: QueryGroups::new(query, 4),
+        }
+    }
+}
+
 /// Runs the exact search; see the module documentation. With a finite `cap`, only candidates
 /// costing at most `cap` are looked for (the minimum among them, or `None`): a much cheaper
 /// question when the cap is low.
 pub(crate) fn search(
+    prepared: &Prepared,
     reference: &Sdem,
     query: &Sdem,
     cost: &CostConfig,
     grid: &CandidateGrid,
     cap: f64,
 ) -> crate::Result<(Option<Scored>, BranchAndBoundStats)> {
-    let tables = RangeTables::new(reference);
-    let groups = QueryGroups::new(query, 4);
-    let mut bnb = BranchAndBound::new(reference, query, cost, grid, &tables, &groups)?;
+    let (tables, groups) = (&prepared.tables, &prepared.groups);
+    let mut bnb = BranchAndBound::new(reference, query, cost, grid, tables, groups)?;
     bnb.cap = cap;
     Ok(bnb.run())
 }

@@ -249,7 +249,16 @@ pub fn localize(
     let full_turn = (config.heading.half_range_deg - 180.0).abs() < 1e-9;
     let grid = CandidateGrid::new(&config.window, config.step_m, yaws)?;
     let mut evaluator = Evaluator::new(reference, query, &config.cost, &grid)?;
-    let (best, stats) = run_search(&mut evaluator, config, full_turn, f64::INFINITY)?;
+    // Shared by the search for the best candidate and the one for the runner-up.
+    let prepared =
+        (config.mode == SearchMode::BranchAndBound).then(|| bnb::Prepared::new(reference, query));
+    let (best, stats) = run_search(
+        &mut evaluator,
+        prepared.as_ref(),
+        config,
+        full_turn,
+        f64::INFINITY,
+    )?;
     let Some((cost, flat)) = best else {
         return Err(Error::Localize(format!(
             "no candidate in the window shares {} cells with the query S-DEM ({} known); \
@@ -261,7 +270,9 @@ pub fn localize(
     let grid_index = grid.index(flat);
     let grid_offset = grid.offset(grid_index);
     let grid_heading = grid.yaw(grid_index);
-    let at_best = Correlator::new(reference, query, &config.cost)?
+    // Scores the best candidate again here and, for the diagnostics, its neighbours.
+    let mut correlator = Correlator::new(reference, query, &config.cost)?;
+    let at_best = correlator
         .evaluate(&grid_offset, grid_heading)
         .ok_or_else(|| Error::Localize("the best candidate could not be scored again".into()))?;
     let overlap = at_best.overlap;
@@ -317,6 +328,7 @@ pub fn localize(
         // the exact search cheap.
         let (second, _) = run_search(
             &mut e,
+            prepared.as_ref(),
             config,
             full_turn,
             config.ambiguous_cost_ratio * cost,
@@ -328,7 +340,6 @@ pub fn localize(
     } else {
         None
     };
-    let mut correlator = Correlator::new(reference, query, &config.cost)?;
     let mut cost_at = |offset: Vec3| {
         correlator
             .evaluate(&offset, grid_heading)
@@ -385,10 +396,13 @@ fn diagnose(
         }
     }
     let covariance = refinement.and_then(|r| r.information.try_inverse());
-    let mut weakest = None;
-    if let Some(cov) = &covariance {
+    // Principal directions of the translational covariance (the axes without one).
+    let eigen = covariance.as_ref().map(|cov| {
         let translation: nalgebra::Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
-        let eigen = translation.symmetric_eigen();
+        translation.symmetric_eigen()
+    });
+    let mut weakest = None;
+    if let Some(eigen) = &eigen {
         let (mut i_max, mut i_min) = (0, 0);
         for i in 0..3 {
             if eigen.eigenvalues[i] > eigen.eigenvalues[i_max] {
@@ -415,16 +429,11 @@ fn diagnose(
         weakest = Some(([v.x, v.y, v.z], sigma_max, sigma_min));
     }
     // The cost's own shape: how much it rises half the peak radius away from the optimum, along
-    // the covariance's principal directions (the axes without one). Flat along one direction and
-    // steep along another is a corridor.
-    let directions: Vec<Vec3> = match &covariance {
-        Some(cov) => {
-            let translation: nalgebra::Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
-            let eigen = translation.symmetric_eigen();
-            (0..3)
-                .map(|i| eigen.eigenvectors.column(i).into_owned())
-                .collect()
-        }
+    // the principal directions. Flat along one direction and steep along another is a corridor.
+    let directions: Vec<Vec3> = match &eigen {
+        Some(eigen) => (0..3)
+            .map(|i| eigen.eigenvectors.column(i).into_owned())
+            .collect(),
         None => vec![Vec3::x(), Vec3::y(), Vec3::z()],
     };
     let d = 0.5 * config.peak_radius_m;
@@ -483,6 +492,7 @@ fn diagnose(
 /// Runs the configured search over the evaluator's grid.
 fn run_search(
     evaluator: &mut Evaluator,
+    prepared: Option<&bnb::Prepared>,
     config: &LocalizeConfig,
     full_turn: bool,
     cap: f64,
@@ -499,6 +509,7 @@ fn run_search(
         ),
         SearchMode::BranchAndBound => {
             let (best, stats) = bnb::search(
+                prepared.expect("localize prepares the tables for branch-and-bound"),
                 evaluator.reference,
                 evaluator.query,
                 evaluator.cost,
@@ -775,16 +786,13 @@ mod tests {
             heading: HeadingWindow::none(),
             ..Default::default()
         };
-        let corridor = sim::corridor(30.0).unwrap();
-        let (r, ra) = sdem_at(&corridor, &Pose::identity(), &sensor, &grid, 21);
-        let (q, qa) = sdem_at(
-            &corridor,
-            &pose_from_parts(truth, Attitude::default()),
-            &sensor,
-            &grid,
-            22,
-        );
-        let found = localize(&r, &ra, &q, &qa, &config).unwrap();
+        let localize_in = |scene: &sim::Scene, seed: u64| {
+            let (r, ra) = sdem_at(scene, &Pose::identity(), &sensor, &grid, seed);
+            let moved = pose_from_parts(truth, Attitude::default());
+            let (q, qa) = sdem_at(scene, &moved, &sensor, &grid, seed + 1);
+            localize(&r, &ra, &q, &qa, &config).unwrap()
+        };
+        let found = localize_in(&sim::corridor(30.0).unwrap(), 21);
         let d = &found.diagnostics;
         assert!(d.ambiguous, "{d:?}");
         let axis = d.weakest_direction.unwrap();
@@ -795,16 +803,7 @@ mod tests {
         // Across the corridor the pose is still well fixed.
         assert!(d.strongest_sigma_m.unwrap() < 0.001, "{d:?}");
 
-        let room = sim::paper_room();
-        let (r, ra) = sdem_at(&room, &Pose::identity(), &sensor, &grid, 23);
-        let (q, qa) = sdem_at(
-            &room,
-            &pose_from_parts(truth, Attitude::default()),
-            &sensor,
-            &grid,
-            24,
-        );
-        let found = localize(&r, &ra, &q, &qa, &config).unwrap();
+        let found = localize_in(&sim::paper_room(), 23);
         let d = &found.diagnostics;
         assert!(!d.ambiguous, "{d:?}");
         assert!(d.runner_up_cost_at_least.unwrap() > found.cost, "{d:?}");

@@ -210,8 +210,8 @@ impl GridSpec {
                 let range_sq = horizontal_sq + z * z;
                 ok_buf[i] = range_sq > 0.0 && range_sq.is_finite();
                 ranges[start + i] = range_sq.sqrt();
-                let azimuth = atan2_select(y, x);
-                let elevation = atan2_select(z, horizontal_sq.sqrt());
+                let azimuth = fast_atan2(y, x);
+                let elevation = fast_atan2(z, horizontal_sq.sqrt());
                 el_buf[i] = elevation;
                 ia_buf[i] = floor_i32((azimuth - self.azimuth_min) * self.inv_resolution);
                 ie_buf[i] = floor_i32((elevation - self.elevation_min) * self.inv_resolution);
@@ -391,32 +391,6 @@ impl Sdem {
 pub(crate) fn floor_i32(x: f32) -> i32 {
     let i = x as i32;
     i - ((i as f32) > x) as i32
-}
-
-/// [`fast_atan2`] with selects instead of branches (vectorizable); equal to it bit for bit.
-#[inline(always)]
-pub(crate) fn atan2_select(y: f32, x: f32) -> f32 {
-    let (ax, ay) = (x.abs(), y.abs());
-    let big = ax.max(ay);
-    // fast_atan2 returns 0 at the origin; 0/0 would give NaN.
-    let a = if big == 0.0 { 0.0 } else { ax.min(ay) / big };
-    let s = a * a;
-    let r = a
-        * (0.999_977_26
-            + s * (-0.332_623_47
-                + s * (0.193_543_46
-                    + s * (-0.116_432_87 + s * (0.052_653_32 + s * -0.011_721_2)))));
-    let r = if ay > ax {
-        std::f32::consts::FRAC_PI_2 - r
-    } else {
-        r
-    };
-    let r = if x < 0.0 { std::f32::consts::PI - r } else { r };
-    if y < 0.0 {
-        -r
-    } else {
-        r
-    }
 }
 
 #[cfg(test)]
