@@ -16,7 +16,9 @@ use std::time::Instant;
 /// Arguments of `sdem localize`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The dataset folder (scans/, attitude.csv, optional poses_truth.txt).
+    /// The dataset folder (scans/, optional attitude.csv and poses_truth.txt). Without
+    /// attitude.csv both scans take the level attitude (roll = pitch = yaw = 0): widen
+    /// --heading-window when the scans may differ in heading.
     dataset: PathBuf,
     /// Index of the reference scan (the map).
     #[arg(long)]
@@ -195,8 +197,11 @@ pub fn run(args: Args) -> Result<()> {
         runner_up: !args.no_runner_up,
         ..Default::default()
     };
-    let reference_attitude = dataset.attitudes[args.reference];
-    let query_attitude = dataset.attitudes[args.query];
+    // Without attitude.csv: the level attitude (checked in range above).
+    let reference_attitude = dataset
+        .attitude_or_level(args.reference)
+        .unwrap_or_default();
+    let query_attitude = dataset.attitude_or_level(args.query).unwrap_or_default();
     let reference_points = dataset.load_scan(args.reference)?;
     let query_points = dataset.load_scan(args.query)?;
     let start = Instant::now();

@@ -2,6 +2,7 @@
 
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
+use sdem::odometry::{simulate_odometry, OdometryNoise};
 use sdem::sensor::SensorConfig;
 use sdem::sim;
 use serde::Serialize;
@@ -28,8 +29,26 @@ pub struct Args {
     /// Drop returns beyond this range, metres (the paper trusts 3 m).
     #[arg(long)]
     trusted_range: Option<f64>,
-    /// Write into a folder that already holds a dataset: its scans, sweeps, attitudes, truth and
-    /// sensor file are removed first, so no old file mixes into the new dataset.
+    /// Do not write odometry.txt (the dead-reckoned poses, written by default).
+    #[arg(long)]
+    no_odometry: bool,
+    /// Odometry translation noise per step and axis, as a fraction of the step's length
+    /// (0.05: a 35 cm step is off by about 2 cm).
+    #[arg(
+        long,
+        default_value_t = OdometryNoise::default().translation_frac,
+        allow_hyphen_values = true
+    )]
+    odometry_noise: f64,
+    /// Odometry heading (yaw) noise per step, degrees; it accumulates (dead reckoning drifts).
+    #[arg(
+        long,
+        default_value_t = OdometryNoise::default().yaw_deg_per_step,
+        allow_hyphen_values = true
+    )]
+    odometry_yaw_noise_deg: f64,
+    /// Write into a folder that already holds a dataset: its scans, sweeps, attitudes, odometry,
+    /// truth and sensor file are removed first, so no old file mixes into the new dataset.
     #[arg(long)]
     force: bool,
     /// Print one JSON object instead of text.
@@ -43,6 +62,7 @@ struct Summary {
     seed: u64,
     stops: usize,
     points_per_scan: Vec<usize>,
+    odometry: bool,
 }
 
 /// Runs `sdem simulate`.
@@ -70,6 +90,22 @@ pub fn run(args: Args) -> Result<()> {
         sensor.compass_noise_deg = c;
     }
     sensor.validate()?;
+    let odometry_noise = OdometryNoise {
+        translation_frac: args.odometry_noise,
+        yaw_deg_per_step: args.odometry_yaw_noise_deg,
+    };
+    if !(odometry_noise.translation_frac.is_finite() && odometry_noise.translation_frac >= 0.0) {
+        bail!(
+            "--odometry-noise {} must be a finite fraction ≥ 0",
+            args.odometry_noise
+        );
+    }
+    if !(odometry_noise.yaw_deg_per_step.is_finite() && odometry_noise.yaw_deg_per_step >= 0.0) {
+        bail!(
+            "--odometry-yaw-noise-deg {} must be a finite number of degrees ≥ 0",
+            args.odometry_yaw_noise_deg
+        );
+    }
     let scene = sim::collapsed_building(args.seed);
     let stops = sim::collapsed_building_stops(&scene, args.seed, args.stops, &sensor.lift)?;
     let run = sim::simulate_run(&scene, &stops, &sensor, args.seed)?;
@@ -82,12 +118,25 @@ pub fn run(args: Args) -> Result<()> {
         remove_old_dataset(&args.out)?;
     }
     let truth: Vec<_> = run.iter().map(|s| s.world_from_sensor).collect();
-    sdem::io::write_dataset(&args.out, &sensor, &scans, Some(&sweeps), Some(&truth))?;
+    let odometry = if args.no_odometry {
+        None
+    } else {
+        Some(simulate_odometry(&truth, &odometry_noise, args.seed)?)
+    };
+    sdem::io::write_dataset(
+        &args.out,
+        &sensor,
+        &scans,
+        Some(&sweeps),
+        Some(&truth),
+        odometry.as_deref(),
+    )?;
     let summary = Summary {
         out: args.out.clone(),
         seed: args.seed,
         stops: run.len(),
         points_per_scan: scans.iter().map(|s| s.0.len()).collect(),
+        odometry: odometry.is_some(),
     };
     if args.json {
         return print_json(&summary);
@@ -100,33 +149,24 @@ pub fn run(args: Args) -> Result<()> {
     );
     let n = &summary.points_per_scan;
     println!(
-        "  {}..{} returns per scan; truth in poses_truth.txt, raw sweeps in sweeps/",
+        "  {}..{} returns per scan; truth in poses_truth.txt, {}raw sweeps in sweeps/",
         n.iter().min().unwrap_or(&0),
-        n.iter().max().unwrap_or(&0)
+        n.iter().max().unwrap_or(&0),
+        if summary.odometry {
+            "dead-reckoned poses in odometry.txt, "
+        } else {
+            ""
+        }
     );
     Ok(())
 }
 
-/// Removes the files of the dataset in `root` that `simulate` writes (and nothing else).
+/// Removes the files of the dataset in `root` that sdem writes (and nothing else).
 fn remove_old_dataset(root: &Path) -> Result<()> {
-    for dir in ["scans", "sweeps"] {
-        let path = root.join(dir);
-        if path.is_dir() {
-            std::fs::remove_dir_all(&path)
-                .with_context(|| format!("cannot remove {} for --force", path.display()))?;
-        }
-    }
-    for file in [
-        "attitude.csv",
-        "poses_truth.txt",
-        "poses_truth.tum",
-        "sensor.toml",
-    ] {
-        let path = root.join(file);
-        if path.is_file() {
-            std::fs::remove_file(&path)
-                .with_context(|| format!("cannot remove {} for --force", path.display()))?;
-        }
-    }
-    Ok(())
+    sdem::io::clear_dataset(root).with_context(|| {
+        format!(
+            "cannot remove the old dataset in {} for --force",
+            root.display()
+        )
+    })
 }

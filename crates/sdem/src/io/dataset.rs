@@ -1,5 +1,6 @@
-//! Dataset folders (DESIGN.md, "Dataset folder"): `scans/`, optional `sweeps/`, `attitude.csv`,
-//! optional `poses_truth.txt` (+ `.tum`) and optional `sensor.toml`.
+//! Dataset folders (DESIGN.md, "Dataset folder"): `scans/`, optional `sweeps/`, optional
+//! `attitude.csv`, optional `odometry.txt` and `poses_truth.txt` (+ `.tum`), optional
+//! `sensor.toml`.
 
 use super::{
     read_attitude_csv, read_kitti_poses, read_points, read_sensor_toml, read_sweep,
@@ -16,23 +17,38 @@ use std::path::{Path, PathBuf};
 pub const SCANS_DIR: &str = "scans";
 /// The optional folder of raw sweeps, `NNNNNN.sweep` beside `scans/NNNNNN.*`.
 pub const SWEEPS_DIR: &str = "sweeps";
-/// The attitude file.
+/// The optional attitude file (the gyro/compass reading per scan).
 pub const ATTITUDE_FILE: &str = "attitude.csv";
+/// The optional dead-reckoned `world_from_sensor` poses (KITTI; a `.tum` twin is written beside
+/// it). Only the relative motion between consecutive scans is meant to be used.
+pub const ODOMETRY_FILE: &str = "odometry.txt";
+/// The optional slam6D result of an imported 3DTK folder (KITTI; a `.tum` twin beside it): a
+/// reference for comparison, not ground truth.
+pub const SLAM6D_FILE: &str = "poses_slam6d.txt";
 /// The optional ground-truth poses (KITTI; a `.tum` twin is written beside it).
 pub const TRUTH_FILE: &str = "poses_truth.txt";
 /// The optional sensor model.
 pub const SENSOR_FILE: &str = "sensor.toml";
 
-/// A dataset folder, opened: the scan files (not yet read), the attitude of each scan, and the
-/// optional ground truth and sensor model.
+/// A dataset folder, opened: the scan files (not yet read) and, when the folder has them, the
+/// attitude, odometry and true pose of each scan and the sensor model.
 #[derive(Debug, Clone)]
 pub struct Dataset {
     /// The dataset folder.
     pub root: PathBuf,
     /// One point-cloud file per stop, in `scans/`, sorted by file name.
     pub scan_paths: Vec<PathBuf>,
-    /// The gyro/compass attitude of each scan, from `attitude.csv`.
-    pub attitudes: Vec<Attitude>,
+    /// The gyro/compass attitude of each scan, from `attitude.csv`, when present (one per scan).
+    ///
+    /// Without it there is no attitude measurement: a single localization takes the level
+    /// attitude (roll = pitch = yaw = 0, see [`Dataset::attitude_or_level`]), and the SLAM loop
+    /// takes the previous scan's estimated attitude as the prior of the next one and searches
+    /// heading wider, since no compass bounds it.
+    pub attitudes: Option<Vec<Attitude>>,
+    /// The robot's dead-reckoned `world_from_sensor` of each scan, from `odometry.txt`, when
+    /// present (one per scan). Odometry drifts: only the relative motion between consecutive
+    /// scans, `odometry[i - 1].inverse() * odometry[i]`, is meant to be used, as a prior.
+    pub odometry: Option<Vec<Pose>>,
     /// The true `world_from_sensor` of each scan, from `poses_truth.txt`, when present.
     pub truth: Option<Vec<Pose>>,
     /// The sensor model from `sensor.toml`, when present.
@@ -61,22 +77,22 @@ fn point_files(folder: &Path) -> Result<Vec<PathBuf>> {
 }
 
 impl Dataset {
-    /// Opens a dataset folder: lists `scans/` and reads `attitude.csv`, and `poses_truth.txt` and
-    /// `sensor.toml` when present. Point clouds are read later, one at a time, by
-    /// [`Dataset::load_scan`].
+    /// Opens a dataset folder: lists `scans/` and reads `attitude.csv`, `odometry.txt`,
+    /// `poses_truth.txt` and `sensor.toml` when present. Point clouds are read later, one at a
+    /// time, by [`Dataset::load_scan`].
     ///
     /// In `scans/`, files with a point-cloud extension ([`POINT_EXTENSIONS`]) are the scans,
     /// sorted by file name; hidden files and other files are ignored. Errors: no `scans/` folder,
-    /// no scan in it, two scans with the same name stem (`000001.ply` and `000001.pcd`), a
-    /// missing `attitude.csv`, a row count in `attitude.csv` or `poses_truth.txt` different from
-    /// the scan count, and any error reading those files.
+    /// no scan in it, two scans with the same name stem (`000001.ply` and `000001.pcd`), a row
+    /// count in `attitude.csv`, `odometry.txt` or `poses_truth.txt` different from the scan count
+    /// (the message names the file and both counts), and any error reading those files.
     ///
     /// # Example
     /// ```
     /// # let dir = std::env::temp_dir().join(format!("sdem-doc-dataset-{}", std::process::id()));
     /// use sdem::geometry::{Attitude, Vec3};
     /// let scans = vec![(vec![Vec3::new(1.0, 0.0, 0.0)], Attitude::default())];
-    /// sdem::io::write_dataset(&dir, &Default::default(), &scans, None, None).unwrap();
+    /// sdem::io::write_dataset(&dir, &Default::default(), &scans, None, None, None).unwrap();
     /// let dataset = sdem::io::Dataset::open(&dir).unwrap();
     /// assert_eq!(dataset.len(), 1);
     /// assert_eq!(dataset.load_scan(0).unwrap(), scans[0].0);
@@ -119,41 +135,23 @@ impl Dataset {
         }
 
         let attitude_path = root.join(ATTITUDE_FILE);
-        if !attitude_path.is_file() {
-            return Err(Error::Invalid(format!(
-                "{} is missing; a dataset needs it with the header 'index,roll_deg,pitch_deg,yaw_deg' \
-                 and one row per scan in {}",
-                attitude_path.display(),
-                scans_dir.display()
-            )));
-        }
-        let attitudes = read_attitude_csv(&attitude_path)?;
-        if attitudes.len() != scan_paths.len() {
-            return Err(Error::Invalid(format!(
-                "{} has {} rows but {} holds {} scans; they must match one to one",
-                attitude_path.display(),
-                attitudes.len(),
-                scans_dir.display(),
-                scan_paths.len()
-            )));
-        }
-
-        let truth_path = root.join(TRUTH_FILE);
-        let truth = if truth_path.exists() {
-            let truth = read_kitti_poses(&truth_path)?;
-            if truth.len() != scan_paths.len() {
+        let attitudes = if attitude_path.exists() {
+            let attitudes = read_attitude_csv(&attitude_path)?;
+            if attitudes.len() != scan_paths.len() {
                 return Err(Error::Invalid(format!(
-                    "{} has {} poses but {} holds {} scans; they must match one to one",
-                    truth_path.display(),
-                    truth.len(),
+                    "{} has {} rows but {} holds {} scans; they must match one to one",
+                    attitude_path.display(),
+                    attitudes.len(),
                     scans_dir.display(),
                     scan_paths.len()
                 )));
             }
-            Some(truth)
+            Some(attitudes)
         } else {
             None
         };
+        let odometry = read_poses_if_present(&root.join(ODOMETRY_FILE), &scans_dir, &scan_paths)?;
+        let truth = read_poses_if_present(&root.join(TRUTH_FILE), &scans_dir, &scan_paths)?;
 
         let sensor_path = root.join(SENSOR_FILE);
         let sensor = if sensor_path.exists() {
@@ -166,9 +164,24 @@ impl Dataset {
             root: root.to_path_buf(),
             scan_paths,
             attitudes,
+            odometry,
             truth,
             sensor,
         })
+    }
+
+    /// The gyro/compass attitude of scan `index`, or the level attitude (roll = pitch = yaw = 0)
+    /// when the dataset has no `attitude.csv`. `None` when `index` is out of range.
+    pub fn attitude_or_level(&self, index: usize) -> Option<Attitude> {
+        if index >= self.len() {
+            return None;
+        }
+        Some(
+            self.attitudes
+                .as_ref()
+                .and_then(|a| a.get(index).copied())
+                .unwrap_or_default(),
+        )
     }
 
     /// The number of scans.
@@ -214,6 +227,28 @@ impl Dataset {
     }
 }
 
+/// Reads a KITTI pose file of the dataset when it exists, checking one pose per scan.
+fn read_poses_if_present(
+    path: &Path,
+    scans_dir: &Path,
+    scan_paths: &[PathBuf],
+) -> Result<Option<Vec<Pose>>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let poses = read_kitti_poses(path)?;
+    if poses.len() != scan_paths.len() {
+        return Err(Error::Invalid(format!(
+            "{} has {} poses but {} holds {} scans; they must match one to one",
+            path.display(),
+            poses.len(),
+            scans_dir.display(),
+            scan_paths.len()
+        )));
+    }
+    Ok(Some(poses))
+}
+
 /// Refuses to write into a folder whose existing files would silently become part of the new
 /// dataset: point-cloud or sweep files that this write does not replace.
 fn check_no_stale(folder: &Path, keep: &[String], what: &str) -> Result<()> {
@@ -241,9 +276,36 @@ fn check_no_stale(folder: &Path, keep: &[String], what: &str) -> Result<()> {
     Ok(())
 }
 
+/// Refuses to write a dataset without the optional pose file `name` while an old one is left in
+/// `root`: it would silently become part of the new dataset.
+pub(crate) fn check_no_stale_file(root: &Path, name: &str, what: &str) -> Result<()> {
+    let path = root.join(name);
+    if path.exists() {
+        return Err(Error::Invalid(format!(
+            "cannot write dataset {}: {} is left from an earlier dataset and this one has no \
+             {what}; remove it or write into an empty folder",
+            root.display(),
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Checks that an optional per-scan list has one entry per scan.
+fn check_count(root: &Path, what: &str, count: Option<usize>, scans: usize) -> Result<()> {
+    match count {
+        Some(n) if n != scans => Err(Error::Invalid(format!(
+            "cannot write dataset {}: {n} {what} for {scans} scans; they must match one to one",
+            root.display()
+        ))),
+        _ => Ok(()),
+    }
+}
+
 /// Writes a dataset folder: `scans/000000.ply`, … (binary PLY), `attitude.csv`, `sensor.toml`,
-/// and when given `sweeps/000000.sweep`, … and `poses_truth.txt` with `poses_truth.tum`. Folders
-/// are created as needed and every file is written atomically.
+/// and when given `sweeps/000000.sweep`, …, `poses_truth.txt` with `poses_truth.tum` and
+/// `odometry.txt` with `odometry.tum`. Folders are created as needed and every file is written
+/// atomically.
 ///
 /// # Arguments
 /// * `root` — the dataset folder (created if missing).
@@ -251,41 +313,35 @@ fn check_no_stale(folder: &Path, keep: &[String], what: &str) -> Result<()> {
 /// * `scans` — per stop, the points in the sensor frame (metres) and the measured attitude.
 /// * `sweeps` — optional raw sweeps, one per scan.
 /// * `truth` — optional true `world_from_sensor` poses, one per scan.
+/// * `odometry` — optional dead-reckoned `world_from_sensor` poses, one per scan.
 ///
-/// Errors: no scans; `sweeps` or `truth` of another length than `scans`; an empty or non-finite
-/// scan or attitude; and, to keep an old dataset's files from mixing into the new one, a
-/// point-cloud file in `scans/` (or a sweep in `sweeps/`) that this write would not replace, or
-/// a `poses_truth.txt` left over when `truth` is `None` — all checked before anything is written.
+/// Errors: no scans; `sweeps`, `truth` or `odometry` of another length than `scans`; an empty or
+/// non-finite scan or attitude; and, to keep an old dataset's files from mixing into the new one,
+/// a point-cloud file in `scans/` (or a sweep in `sweeps/`) that this write would not replace, or
+/// a `poses_truth.txt` (`odometry.txt`) left over when `truth` (`odometry`) is `None` — all
+/// checked before anything is written.
 pub fn write_dataset(
     root: &Path,
     sensor: &SensorConfig,
     scans: &[(Vec<Vec3>, Attitude)],
     sweeps: Option<&[Sweep]>,
     truth: Option<&[Pose]>,
+    odometry: Option<&[Pose]>,
 ) -> Result<()> {
-    let invalid =
-        |why: String| Error::Invalid(format!("cannot write dataset {}: {why}", root.display()));
     if scans.is_empty() {
-        return Err(invalid("there are no scans".into()));
+        return Err(Error::Invalid(format!(
+            "cannot write dataset {}: there are no scans",
+            root.display()
+        )));
     }
-    if let Some(sweeps) = sweeps {
-        if sweeps.len() != scans.len() {
-            return Err(invalid(format!(
-                "{} sweeps for {} scans; they must match one to one",
-                sweeps.len(),
-                scans.len()
-            )));
-        }
-    }
-    if let Some(truth) = truth {
-        if truth.len() != scans.len() {
-            return Err(invalid(format!(
-                "{} truth poses for {} scans; they must match one to one",
-                truth.len(),
-                scans.len()
-            )));
-        }
-    }
+    check_count(root, "sweeps", sweeps.map(<[_]>::len), scans.len())?;
+    check_count(root, "truth poses", truth.map(<[_]>::len), scans.len())?;
+    check_count(
+        root,
+        "odometry poses",
+        odometry.map(<[_]>::len),
+        scans.len(),
+    )?;
     sensor.validate()?;
 
     let scans_dir = root.join(SCANS_DIR);
@@ -300,13 +356,11 @@ pub fn write_dataset(
     };
     check_no_stale(&scans_dir, &scan_names, "a scan")?;
     check_no_stale(&sweeps_dir, &sweep_names, "a raw sweep")?;
-    let truth_path = root.join(TRUTH_FILE);
-    if truth.is_none() && truth_path.exists() {
-        return Err(invalid(format!(
-            "{} is left from an earlier dataset and this one has no truth; remove it or write into \
-             an empty folder",
-            truth_path.display()
-        )));
+    if truth.is_none() {
+        check_no_stale_file(root, TRUTH_FILE, "truth")?;
+    }
+    if odometry.is_none() {
+        check_no_stale_file(root, ODOMETRY_FILE, "odometry")?;
     }
 
     std::fs::create_dir_all(&scans_dir).map_err(|e| Error::io(&scans_dir, e))?;
@@ -322,9 +376,58 @@ pub fn write_dataset(
     let attitudes: Vec<Attitude> = scans.iter().map(|(_, a)| *a).collect();
     write_attitude_csv(&root.join(ATTITUDE_FILE), &attitudes)?;
     if let Some(truth) = truth {
-        write_poses(&truth_path, truth)?;
+        write_poses(&root.join(TRUTH_FILE), truth)?;
+    }
+    if let Some(odometry) = odometry {
+        write_poses(&root.join(ODOMETRY_FILE), odometry)?;
     }
     write_sensor_toml(&root.join(SENSOR_FILE), sensor)
+}
+
+/// The files and folders of a dataset folder that sdem writes (`scans/`, `sweeps/`,
+/// `attitude.csv`, the pose files with their `.tum` twins, `sensor.toml`).
+pub const DATASET_ENTRIES: &[&str] = &[
+    SCANS_DIR,
+    SWEEPS_DIR,
+    ATTITUDE_FILE,
+    TRUTH_FILE,
+    "poses_truth.tum",
+    ODOMETRY_FILE,
+    "odometry.tum",
+    SLAM6D_FILE,
+    "poses_slam6d.tum",
+    SENSOR_FILE,
+];
+
+/// Removes from `root` the dataset entries listed in [`DATASET_ENTRIES`] (and nothing else), so
+/// that a new dataset can be written there without mixing with the old one. Entries that do not
+/// exist are skipped; a missing `root` is fine.
+///
+/// # Example
+/// ```
+/// # let dir = std::env::temp_dir().join(format!("sdem-doc-clear-{}", std::process::id()));
+/// use sdem::geometry::{Attitude, Vec3};
+/// let scans = vec![(vec![Vec3::new(1.0, 0.0, 0.0)], Attitude::default())];
+/// sdem::io::write_dataset(&dir, &Default::default(), &scans, None, None, None).unwrap();
+/// std::fs::write(dir.join("notes.md"), "mine").unwrap();
+/// sdem::io::clear_dataset(&dir).unwrap();
+/// assert!(!dir.join("scans").exists() && dir.join("notes.md").exists());
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// ```
+pub fn clear_dataset(root: &Path) -> Result<()> {
+    for name in DATASET_ENTRIES {
+        let path = root.join(name);
+        let Ok(meta) = std::fs::symlink_metadata(&path) else {
+            continue;
+        };
+        let removed = if meta.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed.map_err(|e| Error::io(&path, e))?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -373,8 +476,21 @@ mod tests {
             trusted_range_m: Some(3.0),
             ..Default::default()
         };
-        write_dataset(&root, &sensor, &scans, Some(&sweeps), Some(&truth)).unwrap();
+        let odometry: Vec<Pose> = truth
+            .iter()
+            .map(|t| Pose::translation(0.01, 0.0, 0.0) * t)
+            .collect();
+        write_dataset(
+            &root,
+            &sensor,
+            &scans,
+            Some(&sweeps),
+            Some(&truth),
+            Some(&odometry),
+        )
+        .unwrap();
         assert!(root.join("poses_truth.tum").is_file());
+        assert!(root.join("odometry.tum").is_file());
 
         let dataset = Dataset::open(&root).unwrap();
         assert_eq!(dataset.len(), 3);
@@ -383,19 +499,54 @@ mod tests {
         assert_eq!(dataset.sensor, Some(sensor.clone()));
         for (i, (points, attitude)) in scans.iter().enumerate() {
             assert_eq!(&dataset.load_scan(i).unwrap(), points);
-            let a = dataset.attitudes[i];
+            let a = dataset.attitudes.as_ref().unwrap()[i];
+            assert_eq!(dataset.attitude_or_level(i), Some(a));
             assert!((a.yaw - attitude.yaw).abs() < 1e-12 && (a.roll - attitude.roll).abs() < 1e-12);
             let (dt, dr) = pose_error(&truth[i], &dataset.truth.as_ref().unwrap()[i]);
+            assert!(dt < 1e-9 && dr < 1e-9);
+            let (dt, dr) = pose_error(&odometry[i], &dataset.odometry.as_ref().unwrap()[i]);
             assert!(dt < 1e-9 && dr < 1e-9);
             assert_eq!(dataset.load_sweep(i).unwrap().unwrap().lines.len(), 1);
         }
 
         // Writing again over the same dataset is fine; a smaller one without truth is refused
         // (stale scans and truth), before anything is written.
-        write_dataset(&root, &sensor, &scans, Some(&sweeps), Some(&truth)).unwrap();
-        let err = write_dataset(&root, &sensor, &scans[..2], None, None).unwrap_err();
+        write_dataset(
+            &root,
+            &sensor,
+            &scans,
+            Some(&sweeps),
+            Some(&truth),
+            Some(&odometry),
+        )
+        .unwrap();
+        let err = write_dataset(&root, &sensor, &scans[..2], None, None, None).unwrap_err();
         assert!(err.to_string().contains("000002.ply"), "{err}");
         assert_eq!(Dataset::open(&root).unwrap().len(), 3);
+        // Same scans, truth, no odometry: the old odometry.txt is refused.
+        let err = write_dataset(&root, &sensor, &scans, Some(&sweeps), Some(&truth), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("odometry.txt") && err.contains("odometry"),
+            "{err}"
+        );
+        let err = write_dataset(&root, &sensor, &scans, Some(&sweeps), None, Some(&odometry))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("poses_truth.txt"), "{err}");
+
+        // clear_dataset removes every dataset entry and nothing else.
+        std::fs::write(root.join("notes.md"), "mine").unwrap();
+        clear_dataset(&root).unwrap();
+        let left: Vec<_> = std::fs::read_dir(&root)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        assert_eq!(left, vec!["notes.md".to_string()]);
+        write_dataset(&root, &sensor, &scans[..2], None, None, None).unwrap();
+        let dataset = Dataset::open(&root).unwrap();
+        assert!(dataset.odometry.is_none() && dataset.truth.is_none());
     }
 
     #[test]
@@ -447,11 +598,13 @@ mod tests {
         let err = Dataset::open(&root).unwrap_err().to_string();
         assert!(err.contains("no point-cloud file"), "{err}");
 
-        // Missing attitude.csv.
+        // No attitude.csv: fine, the attitude is unknown (level when asked for).
         write_points_ply(&root.join("scans/000000.ply"), &scans(1)[0].0).unwrap();
         write_points_ply(&root.join("scans/000001.ply"), &scans(1)[0].0).unwrap();
-        let err = Dataset::open(&root).unwrap_err().to_string();
-        assert!(err.contains("attitude.csv"), "{err}");
+        let dataset = Dataset::open(&root).unwrap();
+        assert!(dataset.attitudes.is_none() && dataset.odometry.is_none());
+        assert_eq!(dataset.attitude_or_level(1), Some(Attitude::default()));
+        assert_eq!(dataset.attitude_or_level(2), None);
 
         // Count mismatch names both counts and both paths.
         write_attitude_csv(&root.join("attitude.csv"), &[Attitude::default()]).unwrap();
@@ -475,6 +628,26 @@ mod tests {
             "{err}"
         );
         std::fs::remove_file(root.join("poses_truth.txt")).unwrap();
+
+        // Odometry count mismatch, and a malformed odometry line.
+        crate::io::write_kitti_poses(&root.join("odometry.txt"), &[Pose::identity(); 1]).unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(
+            err.contains("1 poses") && err.contains("2 scans") && err.contains("odometry.txt"),
+            "{err}"
+        );
+        std::fs::write(
+            root.join("odometry.txt"),
+            "1 0 0 0 0 1 0 0 0 0 1 0
+1 2 3
+",
+        )
+        .unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(err.contains("odometry.txt:2"), "{err}");
+        crate::io::write_kitti_poses(&root.join("odometry.txt"), &[Pose::identity(); 2]).unwrap();
+        assert_eq!(Dataset::open(&root).unwrap().odometry.unwrap().len(), 2);
+        std::fs::remove_file(root.join("odometry.txt")).unwrap();
 
         // A broken sensor.toml.
         std::fs::write(root.join("sensor.toml"), "bogus = 1\n").unwrap();
@@ -503,9 +676,15 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let sensor = SensorConfig::default();
         let s = scans(2);
-        assert!(write_dataset(dir.path(), &sensor, &[], None, None).is_err());
-        assert!(write_dataset(dir.path(), &sensor, &s, Some(&[sweep()]), None).is_err());
-        assert!(write_dataset(dir.path(), &sensor, &s, None, Some(&[Pose::identity()])).is_err());
+        assert!(write_dataset(dir.path(), &sensor, &[], None, None, None).is_err());
+        assert!(write_dataset(dir.path(), &sensor, &s, Some(&[sweep()]), None, None).is_err());
+        let one = [Pose::identity()];
+        assert!(write_dataset(dir.path(), &sensor, &s, None, Some(&one), None).is_err());
+        let err = write_dataset(dir.path(), &sensor, &s, None, None, Some(&one)).unwrap_err();
+        assert!(
+            err.to_string().contains("1 odometry poses for 2 scans"),
+            "{err}"
+        );
         assert!(!dir.path().join("scans").exists());
     }
 }

@@ -1,0 +1,133 @@
+//! `sdem import`: a 3DTK folder or a KITTI odometry sequence turned into a dataset folder.
+
+use crate::output::print_json;
+use anyhow::{bail, Context, Result};
+use sdem::io::{import_dataset, ImportFormat, ImportOptions};
+use std::path::PathBuf;
+
+/// Arguments of `sdem import`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The folder to import: a 3DTK folder (scanNNN.3d + scanNNN.pose, optionally
+    /// slam6d_frames_2009/ or scanNNN.frames) or a KITTI odometry sequence (velodyne/NNNNNN.bin,
+    /// poses.txt, calib.txt).
+    source: PathBuf,
+    /// The dataset folder to write (scans/ and, for 3DTK, odometry.txt, attitude.csv and
+    /// poses_slam6d.txt; for KITTI, poses_truth.txt).
+    #[arg(long)]
+    out: PathBuf,
+    /// The source's format [default: guessed: velodyne/ means kitti, scanNNN.3d means 3dtk].
+    #[arg(long, value_enum)]
+    format: Option<Format>,
+    /// The first scan number to import (the NNN in the file names).
+    #[arg(long, default_value_t = 0)]
+    first: usize,
+    /// How many scans to import from --first on [default: all].
+    #[arg(long)]
+    count: Option<usize>,
+    /// 3DTK only: the folder of slam6D's scanNNN.frames, written as poses_slam6d.txt (a
+    /// reference, not ground truth) [default: SOURCE/slam6d_frames_2009/, else SOURCE when it
+    /// holds .frames files].
+    #[arg(long)]
+    frames: Option<PathBuf>,
+    /// Write into a folder that is not empty: the dataset files there (scans/, sweeps/,
+    /// attitude.csv, pose files, sensor.toml) are removed first; other files are kept.
+    #[arg(long)]
+    force: bool,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The `--format` values.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Format {
+    /// 3DTK: scanNNN.3d + scanNNN.pose.
+    #[value(name = "3dtk")]
+    Uos3dtk,
+    /// KITTI odometry: velodyne/NNNNNN.bin, poses.txt, calib.txt.
+    Kitti,
+}
+
+/// Runs `sdem import`.
+pub fn run(args: Args) -> Result<()> {
+    if !args.source.exists() {
+        bail!(
+            "{} does not exist; import reads a 3DTK folder or a KITTI sequence folder",
+            args.source.display()
+        );
+    }
+    if args.count == Some(0) {
+        bail!("--count 0 imports nothing; give at least 1 or leave it out for all scans");
+    }
+    if args.out.exists() {
+        if !args.out.is_dir() {
+            bail!(
+                "--out {} is a file, not a folder; choose another --out",
+                args.out.display()
+            );
+        }
+        let not_empty = std::fs::read_dir(&args.out)
+            .with_context(|| format!("cannot list {}", args.out.display()))?
+            .next()
+            .is_some();
+        if not_empty && !args.force {
+            bail!(
+                "{} is not empty; choose another --out or pass --force to replace the dataset there",
+                args.out.display()
+            );
+        }
+    }
+    let format = args.format.map(|f| match f {
+        Format::Uos3dtk => ImportFormat::Uos3dtk,
+        Format::Kitti => ImportFormat::Kitti,
+    });
+    let options = ImportOptions {
+        first: args.first,
+        count: args.count,
+        frames_dir: args.frames.clone(),
+    };
+    let format = match format {
+        Some(f) => f,
+        None => ImportFormat::detect(&args.source)?,
+    };
+    if args.force {
+        sdem::io::clear_dataset(&args.out).with_context(|| {
+            format!(
+                "cannot remove the old dataset in {} for --force",
+                args.out.display()
+            )
+        })?;
+    }
+    let summary = import_dataset(&args.source, &args.out, Some(format), &options)?;
+    if args.json {
+        return print_json(&summary);
+    }
+    let name = match summary.format {
+        ImportFormat::Uos3dtk => "3DTK",
+        ImportFormat::Kitti => "KITTI",
+    };
+    println!(
+        "imported {} {name} scans from {} to {}",
+        summary.scans,
+        args.source.display(),
+        args.out.display()
+    );
+    let n = &summary.points_per_scan;
+    println!(
+        "  {}..{} points per scan",
+        n.iter().min().unwrap_or(&0),
+        n.iter().max().unwrap_or(&0)
+    );
+    if summary.format == ImportFormat::Uos3dtk {
+        println!(
+            "  dropped {} points beyond {} m (no return) and {} nearer than {} m (the robot)",
+            summary.dropped_far,
+            sdem::io::UOS_MAX_RANGE_M,
+            summary.dropped_near,
+            sdem::io::UOS_MIN_RANGE_M
+        );
+    }
+    println!("  wrote {}", summary.written.join(", "));
+    Ok(())
+}
