@@ -5,8 +5,10 @@
 
 mod cmd_bench;
 mod cmd_demo;
+mod cmd_import;
 mod cmd_localize;
 mod cmd_simulate;
+mod cmd_slam;
 mod output;
 
 use clap::{Parser, Subcommand};
@@ -25,12 +27,17 @@ struct Cli {
 enum Command {
     /// Simulate a collapsed-building run, localize it, print the errors against truth.
     Demo(cmd_demo::Args),
-    /// Write a simulated dataset folder (scans, attitude.csv, poses_truth.txt, sensor.toml).
+    /// Write a simulated dataset folder (scans, attitude.csv, odometry.txt, poses_truth.txt,
+    /// sensor.toml).
     Simulate(cmd_simulate::Args),
     /// Localize one scan of a dataset against another and print the pose.
     Localize(cmd_localize::Args),
+    /// Map a dataset: the stop-and-go loop with merging, loop closure and a fused map.
+    Slam(cmd_slam::Args),
     /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs.
     Bench(cmd_bench::Args),
+    /// Turn a 3DTK folder or a KITTI odometry sequence into a dataset folder.
+    Import(cmd_import::Args),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +47,8 @@ fn main() -> ExitCode {
         Command::Simulate(args) => cmd_simulate::run(args),
         Command::Localize(args) => cmd_localize::run(args),
         Command::Bench(args) => cmd_bench::run(args),
+        Command::Import(args) => cmd_import::run(args),
+        Command::Slam(args) => cmd_slam::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

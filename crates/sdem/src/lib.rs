@@ -20,10 +20,15 @@ pub mod experiment;
 pub mod geometry;
 pub mod io;
 pub mod localize;
+pub mod map;
+pub mod odometry;
+pub mod posegraph;
 pub mod refine;
 pub mod sdem;
 pub mod search;
 pub mod sensor;
 pub mod sim;
+pub mod slam;
+pub mod voxel;
 
 pub use error::{Error, Result};

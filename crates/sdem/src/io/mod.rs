@@ -1,4 +1,5 @@
-//! Files: point clouds, attitude and pose files, the sensor model, raw sweeps and dataset folders.
+//! Files: point clouds, attitude and pose files, the sensor model, raw sweeps, voxel maps and
+//! dataset folders.
 //!
 //! This is the only library module that touches the file system (DESIGN.md, "Architecture
 //! sketch"). Every reader returns [`Error::Parse`] naming the file and, for text, the 1-based line
@@ -85,16 +86,76 @@
 //! -44 0.01 -0.02 0.1 1.2411 1.2398 nan …
 //! ```
 //!
-//! # Dataset folders ([`Dataset`], [`write_dataset`])
+//! # Voxel maps: the `.sdemvox` format, version 1 ([`read_voxel_map`], [`write_voxel_map`])
+//!
+//! A [`crate::voxel::VoxelMap`]: the occupancy log-odds of every known voxel, with the
+//! configuration that made them. Binary, little-endian, no padding:
+//!
+//! | offset | type | content |
+//! |---|---|---|
+//! | 0 | 8 bytes | the magic `sdem-vox` (ASCII) |
+//! | 8 | `u32` | the format version, 1 |
+//! | 12 | 6 × `f64` | the [`crate::voxel::VoxelConfig`]: `voxel_m`, `hit_log_odds`, `miss_log_odds`, `min_log_odds`, `max_log_odds`, `max_range_m` |
+//! | 60 | `u64` | `N`, the number of voxel records |
+//! | 68 | `N` × 16 bytes | records `i32 i, i32 j, i32 k, f32 log_odds`, sorted by `(i, j, k)`, no key twice |
+//! | 68 + 16 `N` | `u32` | CRC-32 (IEEE, as zlib, PNG and gzip compute it) of every byte before it |
+//!
+//! Voxel `[i, j, k]` is the cube `[i·s, (i+1)·s) × [j·s, (j+1)·s) × [k·s, (k+1)·s)` in the world
+//! frame, `s = voxel_m` metres; a log-odds above 0 is occupied, at or below 0 free; voxels not
+//! listed are unknown. A reader checks, in this order: the magic, the version (a newer one is
+//! reported as such), that the file is exactly `72 + 16 N` bytes, the checksum, the
+//! configuration, then that each log-odds is finite and within `[min_log_odds, max_log_odds]`.
+//! The checksum is CRC-32 rather than a hash: it catches every burst error up to 32 bits and
+//! every 1- to 3-bit error in files far larger than a map, any zlib can check it, and a map file
+//! needs protection from damage, not from forgery.
+//!
+//! # Dataset folders ([`Dataset`], [`write_dataset`], [`clear_dataset`])
 //!
 //! ```text
 //! DATASET/
 //!   scans/000000.ply     one point cloud per stop, sensor frame, metres (any format above)
 //!   sweeps/000000.sweep  optional: the raw sweep of each stop (the simulator writes them)
-//!   attitude.csv         one row per scan
+//!   attitude.csv         optional: the gyro/compass reading, one row per scan
+//!   odometry.txt         optional: dead-reckoned world_from_sensor poses, KITTI (+ odometry.tum)
 //!   poses_truth.txt      optional: true world_from_sensor poses, KITTI (+ poses_truth.tum)
+//!   poses_slam6d.txt     optional: slam6D's registration of an imported 3DTK folder, KITTI
 //!   sensor.toml          optional: the sensor model
 //! ```
+//!
+//! Every optional per-scan file, when present, has exactly one row (pose) per scan, in the order
+//! of the scan files' names; a different count is an error naming the file and both counts.
+//!
+//! - **`attitude.csv` absent**: the robot had no gyro/compass (KITTI), so there is no attitude
+//!   measurement. `sdem localize` then takes the level attitude (roll = pitch = yaw = 0) for both
+//!   scans; the SLAM loop takes the previous scan's estimated attitude as the prior of the next
+//!   one and searches heading wider, since no compass bounds it.
+//! - **`odometry.txt`**: the robot's dead-reckoned `world_from_sensor` of each scan, in the KITTI
+//!   pose format above ([`read_kitti_poses`]). Dead reckoning drifts without bound, so only the
+//!   relative motion between consecutive scans, `odometry[i-1]⁻¹ · odometry[i]`, is used (as the
+//!   prior of a search window), never the absolute poses. `sdem simulate` writes it with noise
+//!   proportional to each step ([`crate::odometry`]); `sdem import` writes 3DTK's `.pose` files
+//!   there.
+//! - **`poses_truth.txt`**: ground truth, used only to report errors. An imported reference that
+//!   is not ground truth (slam6D's ICP result) goes to `poses_slam6d.txt` instead.
+//!
+//! # Importing other datasets ([`import_dataset`], [`import_3dtk`], [`import_kitti`])
+//!
+//! `sdem import` turns another dataset into the layout above:
+//!
+//! - **3DTK** (`scanNNN.3d` + `scanNNN.pose`, optionally slam6D's `scanNNN.frames`): scans
+//!   converted to sdem's frame as for `.3d` above and written as `scans/NNNNNN.ply`, without the
+//!   points farther than 30 m (3DTK's no-return sentinel, ~32.76 m) or nearer than 0.2 m (the
+//!   robot itself). 3DTK's frame is left-handed, so a pose `M` becomes `C · M · C⁻¹` with the
+//!   axis map `C · (x, y, z) = (z, −x, y)` (a reflection) and the translation in metres; a turn
+//!   by θ about 3DTK's up axis is a yaw of −θ. The `.pose` files (the robot's initial estimate)
+//!   become `odometry.txt` and, through their roll/pitch/yaw, `attitude.csv`; the last line of
+//!   each `.frames` becomes `poses_slam6d.txt` — a reference, not ground truth.
+//! - **KITTI odometry** (`velodyne/NNNNNN.bin`, `poses.txt`, `calib.txt`): the `.bin` scans are
+//!   copied unchanged (the Velodyne frame is sdem's), the camera poses become Velodyne poses
+//!   `Tr⁻¹ · P_i · Tr` re-based on the first imported scan in `poses_truth.txt`, and no
+//!   `attitude.csv` is written (no gyro/compass).
+//!
+//! Scans are renumbered from `000000` in the order of their source numbers.
 
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
@@ -106,22 +167,34 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 mod attitude;
 mod dataset;
+mod import;
+mod mapfile;
 mod pcd;
 mod ply;
 mod points;
 mod poses;
 mod sweep;
+mod voxels;
 
 pub use attitude::{read_attitude_csv, write_attitude_csv, ATTITUDE_HEADER};
 pub use dataset::{
-    write_dataset, Dataset, ATTITUDE_FILE, SCANS_DIR, SENSOR_FILE, SWEEPS_DIR, TRUTH_FILE,
+    clear_dataset, write_dataset, Dataset, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE,
+    SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
 };
+pub use import::{
+    import_3dtk, import_dataset, import_kitti, kitti_velodyne_poses, parse_kitti_calib_tr,
+    read_kitti_calib_tr, read_uos_frames_last, read_uos_pose, uos_matrix_to_world_from_sensor,
+    uos_pose_to_world_from_sensor, ImportFormat, ImportOptions, ImportSummary, UOS_MAX_RANGE_M,
+    UOS_MIN_RANGE_M,
+};
+pub use mapfile::{load_map, save_map, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
 pub use ply::write_points_ply;
 pub use points::{read_points, PointFormat, POINT_EXTENSIONS};
 pub use poses::{
     read_kitti_poses, read_tum_poses, write_kitti_poses, write_poses, write_tum_poses,
 };
 pub use sweep::{read_sweep, write_sweep, SWEEP_MAGIC, SWEEP_VERSION};
+pub use voxels::{read_voxel_map, write_voxel_map, VOXEL_EXTENSION, VOXEL_MAGIC, VOXEL_VERSION};
 
 /// Writes a file atomically: `write` fills a temporary file in the same folder (named
 /// `.NAME.tmp-PID-N`), which is flushed, synced to disk and then renamed over `path`. A crash or

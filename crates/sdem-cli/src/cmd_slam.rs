@@ -1,0 +1,364 @@
+//! `sdem slam`: the stop-and-go loop over a dataset folder, saving the map after every scan.
+
+use crate::output::{elapsed_ms, pose_line, print_json};
+use anyhow::{bail, Context, Result};
+use sdem::geometry::Pose;
+use sdem::io::{
+    load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
+    write_voxel_map, Dataset,
+};
+use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamConfig, TrajectoryErrors};
+use serde::Serialize;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `sdem slam`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The dataset folder (scans/, optional attitude.csv, odometry.txt, poses_truth.txt).
+    dataset: PathBuf,
+    /// The output folder: poses.txt, poses.tum, report.json, map.ply, map.sdemvox, config.toml
+    /// and the saved map in map/.
+    #[arg(long)]
+    out: PathBuf,
+    /// A TOML file with the loop's settings (the fields of config.toml, which every run writes;
+    /// missing keys take the defaults).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Grid step of the search, metres [default: 0.02, or the config file's].
+    #[arg(long, allow_hyphen_values = true)]
+    step: Option<f64>,
+    /// Do not look for loop closures.
+    #[arg(long)]
+    no_loop_closure: bool,
+    /// Continue the run saved in OUT/map (after a crash or a kill), with its configuration.
+    #[arg(long)]
+    resume: bool,
+    /// Replace a map already in OUT.
+    #[arg(long)]
+    force: bool,
+    /// Process at most this many scans (of the dataset, counted from the first).
+    #[arg(long)]
+    max_scans: Option<usize>,
+    /// Compare the result with these poses too (KITTI format, one per scan; e.g. another
+    /// tool's result), besides poses_truth.txt.
+    #[arg(long)]
+    compare: Option<PathBuf>,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct Report {
+    dataset: PathBuf,
+    scans: usize,
+    nodes: usize,
+    resumed_at: Option<usize>,
+    time_ms: f64,
+    step_time_ms_median: f64,
+    localize_time_ms_median: f64,
+    bytes_per_node: f64,
+    loop_closures_accepted: usize,
+    loop_closures_rejected: usize,
+    occupied_voxels: usize,
+    free_voxels: usize,
+    map_points: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    truth: Option<TrajectoryErrors>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    compare: Option<TrajectoryErrors>,
+    steps: Vec<Value>,
+}
+
+const MAP_DIR: &str = "map";
+const REPORT_FILE: &str = "report.json";
+const STEPS_FILE: &str = "steps.json";
+
+/// Runs `sdem slam`.
+pub fn run(args: Args) -> Result<()> {
+    let start = Instant::now();
+    let dataset = Dataset::open(&args.dataset)?;
+    let map_dir = args.out.join(MAP_DIR);
+    let has_map = map_dir.join(sdem::io::MAP_MANIFEST).exists();
+    if has_map && !args.resume && !args.force {
+        bail!(
+            "{} already holds a map; pass --resume to continue it or --force to replace it",
+            args.out.display()
+        );
+    }
+    if args.resume && !has_map {
+        bail!(
+            "--resume: {} holds no saved map ({} is missing); run without --resume",
+            args.out.display(),
+            map_dir.join(sdem::io::MAP_MANIFEST).display()
+        );
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create {}", args.out.display()))?;
+
+    let (mut slam, mut steps, resumed_at) = if args.resume {
+        let saved = load_map(&map_dir)?;
+        if args.config.is_some() || args.step.is_some() || args.no_loop_closure {
+            bail!("--resume continues with the saved map's configuration; drop --config, --step and --no-loop-closure");
+        }
+        let steps = read_steps(&args.out.join(STEPS_FILE), saved.map.nodes.len())?;
+        let next = saved.map.nodes.len();
+        let slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+        (slam, steps, Some(next))
+    } else {
+        let mut config = match &args.config {
+            Some(path) => {
+                let text = std::fs::read_to_string(path)
+                    .with_context(|| format!("cannot read {}", path.display()))?;
+                toml::from_str::<SlamConfig>(&text).with_context(|| {
+                    format!("{}: not a valid sdem slam configuration", path.display())
+                })?
+            }
+            None => SlamConfig::default(),
+        };
+        if let Some(step) = args.step {
+            if !(step.is_finite() && step > 0.0) {
+                bail!("--step {step} must be a positive number of metres");
+            }
+            config.localize.step_m = step;
+        }
+        if args.no_loop_closure {
+            config.loop_closure.enabled = false;
+        }
+        (Slam::new(config)?, Vec::new(), None)
+    };
+    let config_text =
+        toml::to_string_pretty(slam.config()).context("cannot encode the configuration")?;
+    write_atomic(&args.out.join("config.toml"), |w| {
+        w.write_all(config_text.as_bytes())
+    })?;
+
+    let total = args.max_scans.unwrap_or(dataset.len()).min(dataset.len());
+    let first = slam.map.nodes.len();
+    if first > total {
+        bail!("the saved map has {first} nodes but only {total} scans are to be processed");
+    }
+    for index in first..total {
+        let saved_note = || {
+            if index == 0 {
+                "nothing was mapped yet".to_string()
+            } else {
+                format!(
+                    "the map up to scan {} is saved in {}; mend the input and continue with --resume",
+                    index - 1,
+                    map_dir.display()
+                )
+            }
+        };
+        let points = dataset
+            .load_scan(index)
+            .with_context(|| format!("scan {index} cannot be read; {}", saved_note()))?;
+        let attitude = dataset.attitudes.as_ref().map(|a| a[index]);
+        let odometry = match (&dataset.odometry, index) {
+            (Some(odometry), i) if i > 0 => Some((odometry[i], odometry[i - 1])),
+            _ => None,
+        };
+        let step = slam
+            .add_scan(&ScanInput {
+                scan_index: index,
+                points_in_sensor: &points,
+                attitude,
+                odometry,
+            })
+            .with_context(|| {
+                format!(
+                    "scan {index} ({}) could not be mapped; {}",
+                    dataset.scan_paths[index].display(),
+                    saved_note()
+                )
+            })?;
+        if !args.json {
+            let closures: Vec<String> = step
+                .loop_closures
+                .iter()
+                .map(|c| {
+                    if c.accepted {
+                        format!("loop {}→{} accepted", c.from, c.to)
+                    } else {
+                        format!("loop {}→{} rejected ({})", c.from, c.to, c.reason)
+                    }
+                })
+                .collect();
+            eprintln!(
+                "scan {index:4}/{total}: {}  {:6.0} ms  refs {:?}{}{}",
+                pose_line(&Pose::from(&step.pose)),
+                step.time_ms,
+                step.reference_nodes.iter().map(|r| r.0).collect::<Vec<_>>(),
+                if closures.is_empty() {
+                    String::new()
+                } else {
+                    format!("  {}", closures.join(", "))
+                },
+                if step.ambiguity.is_empty() {
+                    String::new()
+                } else {
+                    "  AMBIGUOUS".into()
+                }
+            );
+        }
+        steps.push(serde_json::to_value(&step).context("cannot encode the step")?);
+        // The map first, then the step log: a kill between the two loses one step's log line,
+        // never the map.
+        save_map(
+            &map_dir,
+            slam.config(),
+            &slam.map,
+            &slam.edges,
+            &slam.loop_closures,
+            Some(&args.dataset),
+        )?;
+        let steps_text = serde_json::to_vec(&steps).context("cannot encode the step log")?;
+        write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;
+    }
+
+    // Final outputs.
+    let poses = slam.poses();
+    write_poses(&args.out.join("poses.txt"), &poses)?;
+    let cloud = slam.merged_cloud();
+    write_points_ply(&args.out.join("map.ply"), &cloud)?;
+    write_voxel_map(&args.out.join("map.sdemvox"), &slam.voxels)?;
+    let truth = match &dataset.truth {
+        Some(t) => Some(trajectory_errors(&poses, &t[..poses.len()])?),
+        None => None,
+    };
+    let compare = match &args.compare {
+        Some(path) => {
+            let reference = read_kitti_poses(path)?;
+            if reference.len() < poses.len() {
+                bail!(
+                    "{} holds {} poses, fewer than the {} scans mapped",
+                    path.display(),
+                    reference.len(),
+                    poses.len()
+                );
+            }
+            Some(trajectory_errors(&poses, &reference[..poses.len()])?)
+        }
+        None => None,
+    };
+    let median = |mut v: Vec<f64>| -> f64 {
+        if v.is_empty() {
+            return 0.0;
+        }
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let (occupied_voxels, free_voxels) = slam.voxels.counts();
+    let points_total: usize = slam
+        .map
+        .nodes
+        .iter()
+        .map(|n| n.points_in_sensor.len())
+        .sum();
+    let report = Report {
+        dataset: args.dataset.clone(),
+        scans: total,
+        nodes: slam.map.nodes.len(),
+        resumed_at,
+        time_ms: elapsed_ms(start),
+        step_time_ms_median: median(field(&steps, "time_ms")),
+        localize_time_ms_median: median(field(&steps, "localize_ms")),
+        bytes_per_node: (points_total * 12) as f64 / slam.map.nodes.len().max(1) as f64,
+        loop_closures_accepted: slam.loop_closures.len(),
+        loop_closures_rejected: steps
+            .iter()
+            .filter_map(|s| s["loop_closures"].as_array())
+            .flatten()
+            .filter(|c| c["accepted"] == Value::Bool(false))
+            .count(),
+        occupied_voxels,
+        free_voxels,
+        map_points: cloud.len(),
+        truth,
+        compare,
+        steps,
+    };
+    let report_text = serde_json::to_vec_pretty(&report).context("cannot encode the report")?;
+    write_atomic(&args.out.join(REPORT_FILE), |w| w.write_all(&report_text))?;
+    if args.json {
+        print_json(&summary(&report))?;
+    } else {
+        println!(
+            "mapped {} scans in {:.1} s (median {:.0} ms per scan); {} loop closures accepted, {} rejected",
+            report.nodes,
+            report.time_ms / 1e3,
+            report.step_time_ms_median,
+            report.loop_closures_accepted,
+            report.loop_closures_rejected
+        );
+        if let Some(t) = &report.truth {
+            println!(
+                "against poses_truth.txt: ATE RMSE {:.2} cm (max {:.2} cm), RPE {:.2} cm / {:.3}°",
+                t.ate_rmse_m * 100.0,
+                t.ate_max_m * 100.0,
+                t.rpe_translation_rmse_m * 100.0,
+                t.rpe_rotation_rmse_deg
+            );
+        }
+        if let Some(t) = &report.compare {
+            println!(
+                "against {}: ATE RMSE {:.2} cm (max {:.2} cm), RPE {:.2} cm / {:.3}°",
+                args.compare
+                    .as_deref()
+                    .map(Path::display)
+                    .map(|d| d.to_string())
+                    .unwrap_or_default(),
+                t.ate_rmse_m * 100.0,
+                t.ate_max_m * 100.0,
+                t.rpe_translation_rmse_m * 100.0,
+                t.rpe_rotation_rmse_deg
+            );
+        }
+        println!(
+            "wrote {}: poses.txt, poses.tum, report.json, map.ply ({} points), map.sdemvox ({} occupied voxels), config.toml, map/",
+            args.out.display(),
+            report.map_points,
+            report.occupied_voxels
+        );
+    }
+    Ok(())
+}
+
+/// The report without its per-step list, for `--json` on stdout (report.json has it all).
+fn summary(report: &Report) -> serde_json::Value {
+    let mut value = serde_json::to_value(report).unwrap_or_default();
+    if let Some(object) = value.as_object_mut() {
+        object.remove("steps");
+    }
+    value
+}
+
+/// Reads the step log of a resumed run; it may be one step behind the map (a kill between the
+/// two writes), never ahead.
+fn read_steps(path: &Path, nodes: usize) -> Result<Vec<Value>> {
+    if !path.exists() {
+        return Ok(Vec::new());
+    }
+    let text = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let values: Vec<Value> = serde_json::from_slice(&text)
+        .with_context(|| format!("{}: not a step log", path.display()))?;
+    if values.len() > nodes {
+        bail!(
+            "{} logs {} steps but the map has {nodes} nodes; the folder mixes two runs",
+            path.display(),
+            values.len()
+        );
+    }
+    Ok(values)
+}
+
+/// A numeric field of every step but the first (which only defines the world).
+fn field(steps: &[Value], name: &str) -> Vec<f64> {
+    steps
+        .iter()
+        .filter(|s| s["node_id"].as_u64() != Some(0))
+        .filter_map(|s| s[name].as_f64())
+        .collect()
+}

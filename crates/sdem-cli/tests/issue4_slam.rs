@@ -1,0 +1,218 @@
+//! Issue 4: `sdem slam` end to end — its outputs, a run killed and resumed, and bad datasets.
+//! Every test runs the real binary in its own temporary folder.
+
+use serde_json::Value;
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+use tempfile::TempDir;
+
+fn sdem(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sdem"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("cannot run sdem")
+}
+
+fn ok(dir: &Path, args: &[&str]) -> String {
+    let out = sdem(dir, args);
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    );
+    assert!(
+        out.status.success() && !stderr.contains("panicked"),
+        "sdem {args:?} failed\nstdout:\n{stdout}\nstderr:\n{stderr}"
+    );
+    stdout
+}
+
+/// Runs `args`, expects exit code 1 and no panic, and returns stderr.
+fn fails(dir: &Path, args: &[&str]) -> String {
+    let out = sdem(dir, args);
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(1), "sdem {args:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    stderr
+}
+
+fn simulate(dir: &Path, stops: usize) {
+    ok(
+        dir,
+        &[
+            "simulate",
+            "--out",
+            "data",
+            "--stops",
+            &stops.to_string(),
+            "--compass-noise-deg",
+            "2",
+        ],
+    );
+}
+
+fn lines(path: &Path) -> usize {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .count()
+}
+
+#[test]
+fn slam_maps_a_simulated_run_and_writes_every_output() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), 4);
+    let summary: Value =
+        serde_json::from_str(&ok(dir.path(), &["slam", "data", "--out", "out", "--json"])).unwrap();
+    assert_eq!(summary["nodes"], 4);
+    let ate = summary["truth"]["ate_rmse_m"].as_f64().unwrap();
+    assert!(ate < 0.01, "ATE {ate} m");
+    let out = dir.path().join("out");
+    assert_eq!(lines(&out.join("poses.txt")), 4);
+    assert_eq!(lines(&out.join("poses.tum")), 4);
+    for file in [
+        "map.ply",
+        "map.sdemvox",
+        "config.toml",
+        "map/map.json",
+        "map/nodes/000003.pts",
+    ] {
+        assert!(out.join(file).is_file(), "{file} missing");
+    }
+    let report: Value =
+        serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
+    let steps = report["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 4);
+    for step in &steps[1..] {
+        assert!(step["time_ms"].as_f64().unwrap() > 0.0);
+        assert!(step["cost"].as_f64().is_some());
+        assert!(step["overlap_fraction"].as_f64().unwrap() > 0.3);
+        assert!(step["covariance"].as_array().is_some());
+        assert!(!step["reference_nodes"].as_array().unwrap().is_empty());
+    }
+    // The effective configuration reads back as a configuration.
+    let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(config.contains("step_m"), "{config}");
+    std::fs::write(dir.path().join("mine.toml"), &config).unwrap();
+    ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "again",
+            "--config",
+            "mine.toml",
+            "--max-scans",
+            "2",
+        ],
+    );
+    // A map is never overwritten by accident.
+    let err = fails(dir.path(), &["slam", "data", "--out", "out"]);
+    assert!(err.contains("--resume") && err.contains("--force"), "{err}");
+}
+
+#[test]
+fn a_killed_run_resumes_from_its_saved_map() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), 6);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sdem"))
+        .current_dir(dir.path())
+        .args(["slam", "data", "--out", "out"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it once the map holds three nodes (the manifest is written after every scan).
+    let manifest = dir.path().join("out/map/map.json");
+    let start = Instant::now();
+    loop {
+        let nodes = std::fs::read(&manifest)
+            .ok()
+            .and_then(|b| serde_json::from_slice::<Value>(&b).ok())
+            .and_then(|v| v["body"]["nodes"].as_array().map(Vec::len))
+            .unwrap_or(0);
+        if nodes >= 3 {
+            break;
+        }
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the run ended before it could be killed"
+        );
+        assert!(start.elapsed() < Duration::from_secs(600), "no progress");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert!(
+        !dir.path().join("out/poses.txt").exists(),
+        "killed before the end"
+    );
+
+    let summary: Value = serde_json::from_str(&ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--resume", "--json"],
+    ))
+    .unwrap();
+    let resumed_at = summary["resumed_at"].as_u64().unwrap();
+    assert!((3..6).contains(&resumed_at), "resumed at {resumed_at}");
+    assert_eq!(summary["nodes"], 6);
+    assert_eq!(lines(&dir.path().join("out/poses.txt")), 6);
+    let ate = summary["truth"]["ate_rmse_m"].as_f64().unwrap();
+    assert!(ate < 0.01, "ATE {ate} m after resuming");
+    // Resuming a finished run has nothing left to do, and says the same.
+    let again: Value = serde_json::from_str(&ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--resume", "--json"],
+    ))
+    .unwrap();
+    assert_eq!(again["nodes"], 6);
+}
+
+#[test]
+fn bad_datasets_are_refused_with_the_file_named() {
+    let dir = TempDir::new().unwrap();
+    // No scans/ folder.
+    std::fs::create_dir(dir.path().join("empty")).unwrap();
+    let err = fails(dir.path(), &["slam", "empty", "--out", "o1"]);
+    assert!(err.contains("scans"), "{err}");
+
+    // attitude.csv with a row missing.
+    simulate(dir.path(), 3);
+    let attitude = dir.path().join("data/attitude.csv");
+    let text = std::fs::read_to_string(&attitude).unwrap();
+    let short: Vec<&str> = text.lines().take(3).collect();
+    std::fs::write(&attitude, short.join("\n") + "\n").unwrap();
+    let err = fails(dir.path(), &["slam", "data", "--out", "o2"]);
+    assert!(
+        err.contains("attitude.csv") && err.contains('2') && err.contains('3'),
+        "{err}"
+    );
+    std::fs::write(&attitude, &text).unwrap();
+
+    // An unreadable scan: the error names the file, and the map so far is kept for --resume.
+    let scan = dir.path().join("data/scans/000002.ply");
+    let bytes = std::fs::read(&scan).unwrap();
+    std::fs::write(&scan, &bytes[..bytes.len() / 3]).unwrap();
+    let err = fails(dir.path(), &["slam", "data", "--out", "o3"]);
+    assert!(
+        err.contains("000002.ply") && err.contains("--resume"),
+        "{err}"
+    );
+    assert!(dir.path().join("o3/map/map.json").is_file());
+    // Mend the file and resume.
+    std::fs::write(&scan, &bytes).unwrap();
+    let summary: Value = serde_json::from_str(&ok(
+        dir.path(),
+        &["slam", "data", "--out", "o3", "--resume", "--json"],
+    ))
+    .unwrap();
+    assert_eq!(summary["nodes"], 3);
+
+    // --resume with nothing to resume, and a bad --step.
+    let err = fails(dir.path(), &["slam", "data", "--out", "o4", "--resume"]);
+    assert!(err.contains("no saved map"), "{err}");
+    let err = fails(dir.path(), &["slam", "data", "--out", "o5", "--step", "-1"]);
+    assert!(err.contains("--step"), "{err}");
+}

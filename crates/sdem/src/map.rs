@@ -1,0 +1,445 @@
+//! The global map (Nagatani et al. 2003, Sec. III-A: "a set of S-DEMs with their relative
+//! locations"): nodes, reference selection, the merged virtual S-DEM, place descriptors and the
+//! verification of loop closures.
+//!
+//! A [`Node`] keeps one scan as its S-DEM's boundary points (the nearest return per direction
+//! cell), in the sensor frame, and its current `world_from_sensor` estimate; the pose graph moves
+//! the estimate, the points never change. To localize a new scan the map is **merged** around the
+//! predicted position (the paper's future work): the boundary points of the nodes that overlap the
+//! prediction are carried into the world, re-centred on the predicted origin and binned into one
+//! S-DEM with world axes, nearest return per cell ([`Map::merged_reference`]) — a virtual S-DEM of
+//! several nodes, so surfaces one node saw and another did not are all there, and occlusion is
+//! kept by the z-buffer.
+
+use crate::error::{Error, Result};
+use crate::geometry::{attitude_of, Attitude, Pose, Vec3};
+use crate::localize::{localize, Localization, LocalizeConfig, SearchWindow};
+use crate::sdem::{Sdem, SdemConfig};
+use crate::search::HeadingWindow;
+use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion};
+use serde::{Deserialize, Serialize};
+
+/// One scan in the map.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Node {
+    /// Position in the map's node list.
+    pub node_id: usize,
+    /// Index of the scan in its dataset.
+    pub scan_index: usize,
+    /// The current estimate of the sensor's pose.
+    pub world_from_sensor: Pose,
+    /// The gyro/compass reading when the scan was taken, when there was one.
+    pub attitude_reading: Option<Attitude>,
+    /// The S-DEM's boundary points (nearest return per cell), sensor frame, metres.
+    pub points_in_sensor: Vec<[f32; 3]>,
+}
+
+impl Node {
+    /// Makes a node from a raw scan: the scan is binned into an S-DEM levelled by
+    /// `world_from_sensor`'s rotation and only its boundary points are kept (one per cell).
+    ///
+    /// # Errors
+    /// An invalid `sdem` configuration, or a scan with no usable point.
+    pub fn from_scan(
+        node_id: usize,
+        scan_index: usize,
+        world_from_sensor: Pose,
+        attitude_reading: Option<Attitude>,
+        points_in_sensor: &[Vec3],
+        sdem: &SdemConfig,
+    ) -> Result<Self> {
+        let rotation = world_from_sensor.rotation.to_rotation_matrix();
+        let levelled = Sdem::from_points(points_in_sensor, &rotation, sdem)?;
+        if levelled.known_cells() == 0 {
+            return Err(Error::Invalid(format!(
+                "scan {scan_index} has no point between {} m and the sensor's range",
+                sdem.min_range_m
+            )));
+        }
+        let sensor_from_level = rotation.inverse();
+        let points_in_sensor = levelled
+            .points()
+            .iter()
+            .map(|p| {
+                let q = sensor_from_level * Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                [q.x as f32, q.y as f32, q.z as f32]
+            })
+            .collect();
+        Ok(Self {
+            node_id,
+            scan_index,
+            world_from_sensor,
+            attitude_reading,
+            points_in_sensor,
+        })
+    }
+
+    /// The node's points in the world frame.
+    pub fn points_in_world(&self) -> Vec<Vec3> {
+        self.points_in_sensor
+            .iter()
+            .map(|p| {
+                self.world_from_sensor
+                    * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)
+            })
+            .map(|p| p.coords)
+            .collect()
+    }
+
+    /// The node's points rotated into world axes, relative to its sensor origin (its S-DEM
+    /// levelled by the current estimate), f32.
+    pub fn points_levelled(&self) -> Vec<[f32; 3]> {
+        let r = self.world_from_sensor.rotation;
+        self.points_in_sensor
+            .iter()
+            .map(|p| {
+                let q = r * Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                [q.x as f32, q.y as f32, q.z as f32]
+            })
+            .collect()
+    }
+
+    /// The sensor origin in the world.
+    pub fn position(&self) -> Vec3 {
+        self.world_from_sensor.translation.vector
+    }
+}
+
+/// A place descriptor computed from an S-DEM: the mean range in each of `SECTORS` azimuth
+/// sectors × `BANDS` elevation bands of the levelled sphere (a coarse "what the place looks
+/// like from here", in the spirit of Scan Context, but on the S-DEM's own grid and keeping the
+/// elevation, which a rubble void is all about). Unknown cells are NaN.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Descriptor {
+    /// Mean range per (band, sector), band-major, metres; NaN where nothing was seen.
+    pub mean_range: Vec<f32>,
+}
+
+/// Azimuth sectors of a [`Descriptor`] (30° each).
+pub const SECTORS: usize = 12;
+/// Elevation bands of a [`Descriptor`] (30° each).
+pub const BANDS: usize = 6;
+/// Two descriptors are compared only over at least this many cells both saw.
+pub const MIN_COMMON_CELLS: usize = 12;
+
+impl Descriptor {
+    /// The descriptor of points in a levelled frame (world axes, origin at the sensor).
+    pub fn from_levelled(points: &[[f32; 3]]) -> Self {
+        let mut sum = vec![0.0f64; SECTORS * BANDS];
+        let mut count = vec![0u32; SECTORS * BANDS];
+        for p in points {
+            let (x, y, z) = (p[0] as f64, p[1] as f64, p[2] as f64);
+            let r = (x * x + y * y + z * z).sqrt();
+            if !(r.is_finite() && r > 0.0) {
+                continue;
+            }
+            let azimuth = y.atan2(x); // [-π, π]
+            let elevation = (z / r).clamp(-1.0, 1.0).asin(); // [-π/2, π/2]
+            let s = (((azimuth + std::f64::consts::PI) / std::f64::consts::TAU * SECTORS as f64)
+                as usize)
+                .min(SECTORS - 1);
+            let b = (((elevation + std::f64::consts::FRAC_PI_2) / std::f64::consts::PI
+                * BANDS as f64) as usize)
+                .min(BANDS - 1);
+            sum[b * SECTORS + s] += r;
+            count[b * SECTORS + s] += 1;
+        }
+        let mean_range = sum
+            .iter()
+            .zip(&count)
+            .map(|(&s, &c)| {
+                if c >= 5 {
+                    (s / c as f64) as f32
+                } else {
+                    f32::NAN
+                }
+            })
+            .collect();
+        Self { mean_range }
+    }
+
+    /// Dissimilarity of two places: the mean absolute log-ratio of ranges over the cells both
+    /// saw, minimized over azimuth shifts of up to `max_shift` sectors (a compass error); `None`
+    /// when they share fewer than [`MIN_COMMON_CELLS`] cells (the paper's sensor sweeps a half
+    /// sphere, so about half the cells are known).
+    pub fn distance(&self, other: &Descriptor, max_shift: usize) -> Option<f64> {
+        let mut best: Option<f64> = None;
+        let shift_range = max_shift.min(SECTORS / 2) as isize;
+        for shift in -shift_range..=shift_range {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for b in 0..BANDS {
+                for s in 0..SECTORS {
+                    let t = (s as isize + shift).rem_euclid(SECTORS as isize) as usize;
+                    let (ra, rb) = (
+                        self.mean_range[b * SECTORS + s],
+                        other.mean_range[b * SECTORS + t],
+                    );
+                    if ra.is_finite() && rb.is_finite() && ra > 0.0 && rb > 0.0 {
+                        sum += (ra as f64 / rb as f64).ln().abs();
+                        n += 1;
+                    }
+                }
+            }
+            if n >= MIN_COMMON_CELLS {
+                let d = sum / n as f64;
+                best = Some(best.map_or(d, |b: f64| b.min(d)));
+            }
+        }
+        best
+    }
+}
+
+/// The nodes of the map, in the order they were added.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Map {
+    /// The nodes; `nodes[i].node_id == i`.
+    pub nodes: Vec<Node>,
+}
+
+impl Map {
+    /// How many cells of the query S-DEM (levelled, origin at `origin`) each node's points land
+    /// in within `tolerance_m` of the query's range: the nodes that see what the query sees.
+    ///
+    /// # Returns
+    /// `(node_id, matching cells)` for the nodes whose origin lies within `radius_m` of
+    /// `origin`, most overlapping first.
+    pub fn overlaps(
+        &self,
+        query_levelled: &Sdem,
+        origin: &Vec3,
+        radius_m: f64,
+        tolerance_m: f64,
+    ) -> Vec<(usize, usize)> {
+        let spec = query_levelled.grid();
+        let ranges = query_levelled.ranges();
+        let mut scored: Vec<(usize, usize)> = self
+            .nodes
+            .iter()
+            .filter(|n| (n.position() - origin).norm() <= radius_m)
+            .map(|n| {
+                let mut seen = vec![false; ranges.len()];
+                let mut matching = 0usize;
+                for p in n.points_in_world() {
+                    let q = p - origin;
+                    if let Some((cell, r)) = spec.cell_of([q.x as f32, q.y as f32, q.z as f32]) {
+                        let c = cell as usize;
+                        let rq = ranges[c];
+                        if !seen[c] && rq.is_finite() && (rq - r).abs() <= tolerance_m as f32 {
+                            seen[c] = true;
+                            matching += 1;
+                        }
+                    }
+                }
+                (n.node_id, matching)
+            })
+            .collect();
+        scored.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+        scored
+    }
+
+    /// The merged virtual S-DEM of `node_ids` seen from `origin` (world frame), with world axes:
+    /// every node's boundary points carried into the world and binned around `origin`, nearest
+    /// per cell (paper Sec. III-C's virtual S-DEM, over several nodes).
+    ///
+    /// # Errors
+    /// An unknown node id, or an invalid S-DEM configuration.
+    pub fn merged_reference(
+        &self,
+        node_ids: &[usize],
+        origin: &Vec3,
+        sdem: &SdemConfig,
+    ) -> Result<Sdem> {
+        let mut points = Vec::new();
+        for &id in node_ids {
+            let node = self.nodes.get(id).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "node {id} is not in the map ({} nodes)",
+                    self.nodes.len()
+                ))
+            })?;
+            points.extend(node.points_in_world().into_iter().map(|p| p - origin));
+        }
+        Sdem::from_points(&points, &nalgebra::Rotation3::identity(), sdem)
+    }
+}
+
+/// Settings of loop-closure proposal and verification.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LoopClosureConfig {
+    /// Look for loop closures at all.
+    pub enabled: bool,
+    /// A revisit must be at least this many nodes back (nearer ones are the odometry chain).
+    pub min_node_separation: usize,
+    /// Candidates lie within this of the new node's estimated position, metres (the drift the
+    /// map may have accumulated).
+    pub search_radius_m: f64,
+    /// Candidates' descriptors must lie within this dissimilarity (mean |ln r₁/r₂|).
+    pub max_descriptor_distance: f64,
+    /// At most this many candidates are verified per new node, most similar first.
+    pub max_candidates: usize,
+    /// Half-size of the verification window around the predicted relative position, metres.
+    pub window_half_m: [f64; 3],
+    /// Heading searched around the predicted relative heading, ± degrees.
+    pub heading_half_deg: f64,
+    /// Grid step of the verification search, metres.
+    pub step_m: f64,
+    /// A closure is accepted only when at least this fraction of the query's cells match.
+    pub min_inlier_fraction: f64,
+    /// … and it moves the node by no more than this from its current estimate, metres.
+    pub max_correction_m: f64,
+}
+
+impl Default for LoopClosureConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            min_node_separation: 10,
+            search_radius_m: 1.5,
+            max_descriptor_distance: 0.2,
+            max_candidates: 2,
+            window_half_m: [0.3, 0.3, 0.1],
+            heading_half_deg: 4.0,
+            step_m: 0.02,
+            min_inlier_fraction: 0.6,
+            max_correction_m: 0.5,
+        }
+    }
+}
+
+/// A checked loop-closure hypothesis.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LoopClosure {
+    /// The earlier node.
+    pub from: usize,
+    /// The new node.
+    pub to: usize,
+    /// Descriptor dissimilarity that proposed it (`None` when proposed by hand).
+    pub descriptor_distance: Option<f64>,
+    /// Accepted as a pose-graph edge.
+    pub accepted: bool,
+    /// Why it was rejected, in words (empty when accepted).
+    pub reason: String,
+    /// Cost of the match, m² (`None` when the search failed).
+    pub cost: Option<f64>,
+    /// Inlier fraction of the match.
+    pub inlier_fraction: Option<f64>,
+    /// How far the match moves the new node from its estimate, metres.
+    pub correction_m: Option<f64>,
+    /// The measured `from_from_to` (KITTI row-major 3×4) when accepted.
+    #[serde(skip)]
+    pub from_from_to: Option<Pose>,
+    /// Covariance of the match (`[x, y, z, roll, pitch, yaw]`, world axes), when accepted.
+    #[serde(skip)]
+    pub covariance: Option<Matrix6<f64>>,
+}
+
+/// Verifies that the scan of node `to`, placed at `world_from_to_prior`, sees the place of node
+/// `from`: the exact search over a window around the prior, then the match's diagnostics decide.
+///
+/// The result's `descriptor_distance` is `None`; the caller that proposed the closure by
+/// descriptor fills it in.
+///
+/// Rejected when the search fails (nothing matches), the match is ambiguous, the optimum lies on
+/// the window's edge, too few cells match, or the correction is implausibly large.
+pub fn verify_loop_closure(
+    map: &Map,
+    from: usize,
+    to: usize,
+    world_from_to_prior: &Pose,
+    sdem: &SdemConfig,
+    localize_base: &LocalizeConfig,
+    config: &LoopClosureConfig,
+) -> Result<LoopClosure> {
+    let (Some(from_node), Some(to_node)) = (map.nodes.get(from), map.nodes.get(to)) else {
+        return Err(Error::Invalid(format!(
+            "loop closure {from}→{to}: node not in the map ({} nodes)",
+            map.nodes.len()
+        )));
+    };
+    let origin = from_node.position();
+    let reference = map.merged_reference(&[from], &origin, sdem)?;
+    let to_points: Vec<Vec3> = to_node
+        .points_in_sensor
+        .iter()
+        .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+        .collect();
+    let prior_rotation = world_from_to_prior.rotation.to_rotation_matrix();
+    let query = Sdem::from_points(&to_points, &prior_rotation, sdem)?;
+    let prior_offset = world_from_to_prior.translation.vector - origin;
+    let localize_config = LocalizeConfig {
+        window: SearchWindow::around(&prior_offset, config.window_half_m),
+        step_m: config.step_m,
+        heading: HeadingWindow {
+            half_range_deg: config.heading_half_deg,
+            step_deg: None,
+        },
+        ..localize_base.clone()
+    };
+    let mut closure = LoopClosure {
+        from,
+        to,
+        descriptor_distance: None,
+        accepted: false,
+        reason: String::new(),
+        cost: None,
+        inlier_fraction: None,
+        correction_m: None,
+        from_from_to: None,
+        covariance: None,
+    };
+    let found = match localize(
+        &reference,
+        &Attitude::default(),
+        &query,
+        &attitude_of(world_from_to_prior),
+        &localize_config,
+    ) {
+        Ok(found) => found,
+        Err(Error::Localize(why)) => {
+            closure.reason = why;
+            return Ok(closure);
+        }
+        Err(e) => return Err(e),
+    };
+    let world_from_to = world_from_query(&origin, &found);
+    let correction =
+        (world_from_to.translation.vector - world_from_to_prior.translation.vector).norm();
+    closure.cost = Some(found.cost);
+    closure.inlier_fraction = Some(found.diagnostics.inlier_fraction);
+    closure.correction_m = Some(correction);
+    let d = &found.diagnostics;
+    closure.reason = if d.ambiguous {
+        format!("ambiguous: {}", d.ambiguity.join("; "))
+    } else if found.on_window_edge {
+        "the best match lies on the search window's edge".into()
+    } else if d.inlier_fraction < config.min_inlier_fraction {
+        format!(
+            "only {:.0} % of the cells match (need {:.0} %)",
+            d.inlier_fraction * 100.0,
+            config.min_inlier_fraction * 100.0
+        )
+    } else if correction > config.max_correction_m {
+        format!(
+            "it would move the node {:.2} m (at most {:.2} m)",
+            correction, config.max_correction_m
+        )
+    } else if d.covariance.is_none() {
+        "the 6-DoF refinement failed, no covariance".into()
+    } else {
+        String::new()
+    };
+    if closure.reason.is_empty() {
+        closure.accepted = true;
+        closure.from_from_to = Some(from_node.world_from_sensor.inverse() * world_from_to);
+        closure.covariance = d.covariance.map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+    }
+    Ok(closure)
+}
+
+/// The query's `world_from_sensor` from a localization against a reference S-DEM with world axes
+/// centred on `origin`.
+pub fn world_from_query(origin: &Vec3, found: &Localization) -> Pose {
+    Isometry3::from_parts(Translation3::from(*origin), UnitQuaternion::identity())
+        * found.reference_from_query
+}

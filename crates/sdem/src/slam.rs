@@ -1,0 +1,958 @@
+//! The stop-and-go loop (Nagatani et al. 2003, Sec. III, Fig. 2): move, sense, build the local
+//! S-DEM, compare it with the global map, localize, add it to the map, repeat — with what the
+//! paper left open: merging (the merged virtual S-DEM, [`crate::map`], and the occupancy voxel
+//! map, [`crate::voxel`]), and loop closure over a robust pose graph ([`crate::posegraph`]).
+//!
+//! [`Slam::add_scan`] takes one scan at a time as plain values (points, attitude reading,
+//! odometry), so the same loop runs on a dataset folder, a saved map being resumed, or a robot.
+//!
+//! Per scan:
+//! 1. **Predict** the pose: the last node's pose times the odometry's relative motion when there
+//!    is odometry, else the last node's position; roll and pitch from the gyro reading when there
+//!    is one; heading from the odometry, else the compass, else the last node — and the heading
+//!    window widens with the weaker prior.
+//! 2. **Pick reference nodes** among the recent ones (the local map) by position and overlap:
+//!    how many of the new scan's cells each node's points land on.
+//! 3. **Localize** with the exact search against their merged virtual S-DEM, then the 6-DoF
+//!    refinement; the match's covariance weighs the new pose-graph edges.
+//! 4. **Loop closure**: older nodes near the new one whose place descriptor is similar are
+//!    verified with the exact search; an accepted closure becomes an edge and the pose graph is
+//!    optimized (robust Cauchy kernel), and the fused map is rebuilt on the new poses.
+
+use crate::error::{Error, Result};
+use crate::geometry::{attitude_of, pose_from_parts, Attitude, Pose, Vec3};
+use crate::localize::{localize, LocalizeConfig, SearchWindow};
+use crate::map::{
+    verify_loop_closure, world_from_query, Descriptor, LoopClosure, LoopClosureConfig, Map, Node,
+};
+use crate::posegraph::{optimize, Edge, EdgeKind, OptimizeConfig, PoseGraph};
+use crate::sdem::{Sdem, SdemConfig};
+use crate::search::HeadingWindow;
+use crate::voxel::{VoxelConfig, VoxelMap};
+use nalgebra::{Matrix3, Matrix6};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Everything the loop needs; written beside the results as `config.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SlamConfig {
+    /// The S-DEM grid.
+    pub sdem: SdemConfig,
+    /// The search and refinement (the window and heading are set per scan from the fields below).
+    pub localize: LocalizeConfig,
+    /// Half-size of the window around an odometry prediction, metres.
+    pub window_half_m: [f64; 3],
+    /// Half-size of the window when there is no odometry (the robot may have moved anywhere
+    /// nearby), metres.
+    pub window_half_no_odometry_m: [f64; 3],
+    /// Heading searched around an odometry prediction, ± degrees.
+    pub heading_half_deg: f64,
+    /// Heading searched around a compass reading when there is no odometry, ± degrees.
+    pub heading_half_compass_deg: f64,
+    /// Heading searched around the last node's heading with neither, ± degrees.
+    pub heading_half_no_prior_deg: f64,
+    /// Reference nodes lie within this of the predicted position, metres.
+    pub reference_radius_m: f64,
+    /// At most this many reference nodes are merged.
+    pub max_reference_nodes: usize,
+    /// A node is a reference only when at least this many of the new scan's cells see it.
+    pub min_reference_overlap_cells: usize,
+    /// Floor on the standard deviation of an edge's translation, metres: the matcher's
+    /// covariance assumes independent residuals and is optimistic.
+    pub edge_sigma_floor_m: f64,
+    /// Floor on the standard deviation of an edge's rotation, degrees.
+    pub edge_sigma_floor_deg: f64,
+    /// Loop closure.
+    pub loop_closure: LoopClosureConfig,
+    /// The pose-graph optimizer.
+    pub optimize: OptimizeConfig,
+    /// The fused occupancy map.
+    pub voxel: VoxelConfig,
+}
+
+impl Default for SlamConfig {
+    fn default() -> Self {
+        Self {
+            sdem: SdemConfig::default(),
+            // A 2 cm grid finds the basin and the 6-DoF refinement the bottom (sub-millimetre on
+            // the seeded pairs of `sdem bench`), at an eighth of the 1 cm grid's candidates.
+            localize: LocalizeConfig {
+                step_m: 0.02,
+                runner_up: false,
+                ..Default::default()
+            },
+            window_half_m: [0.15, 0.15, 0.08],
+            window_half_no_odometry_m: [0.5, 0.5, 0.15],
+            heading_half_deg: 3.0,
+            heading_half_compass_deg: 8.0,
+            heading_half_no_prior_deg: 15.0,
+            reference_radius_m: 4.0,
+            max_reference_nodes: 3,
+            min_reference_overlap_cells: 300,
+            edge_sigma_floor_m: 0.005,
+            edge_sigma_floor_deg: 0.1,
+            loop_closure: LoopClosureConfig::default(),
+            optimize: OptimizeConfig::default(),
+            voxel: VoxelConfig::default(),
+        }
+    }
+}
+
+impl SlamConfig {
+    /// Checks the values the loop itself uses (the search, S-DEM and voxel settings check
+    /// themselves when used).
+    pub fn validate(&self) -> Result<()> {
+        self.sdem.validate()?;
+        self.voxel.validate()?;
+        let halves = self
+            .window_half_m
+            .iter()
+            .chain(&self.window_half_no_odometry_m)
+            .chain(&self.loop_closure.window_half_m);
+        for &h in halves {
+            if !(h.is_finite() && h >= 0.0) {
+                return Err(Error::Invalid(format!(
+                    "window half-size {h} m must be a finite number >= 0"
+                )));
+            }
+        }
+        for (name, v) in [
+            ("heading_half_deg", self.heading_half_deg),
+            ("heading_half_compass_deg", self.heading_half_compass_deg),
+            ("heading_half_no_prior_deg", self.heading_half_no_prior_deg),
+        ] {
+            if !(v.is_finite() && (0.0..=180.0).contains(&v)) {
+                return Err(Error::Invalid(format!(
+                    "{name} = {v} must lie in 0..=180 degrees"
+                )));
+            }
+        }
+        if !(self.reference_radius_m.is_finite() && self.reference_radius_m > 0.0) {
+            return Err(Error::Invalid(format!(
+                "reference_radius_m = {} must be a positive distance",
+                self.reference_radius_m
+            )));
+        }
+        if self.max_reference_nodes == 0 {
+            return Err(Error::Invalid(
+                "max_reference_nodes must be at least 1".into(),
+            ));
+        }
+        if !(self.edge_sigma_floor_m.is_finite()
+            && self.edge_sigma_floor_m > 0.0
+            && self.edge_sigma_floor_deg.is_finite()
+            && self.edge_sigma_floor_deg > 0.0)
+        {
+            return Err(Error::Invalid(
+                "edge_sigma_floor_m and edge_sigma_floor_deg must be positive".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One scan as the loop receives it.
+#[derive(Debug, Clone)]
+pub struct ScanInput<'a> {
+    /// Index of the scan in its dataset.
+    pub scan_index: usize,
+    /// The scan, sensor frame, metres.
+    pub points_in_sensor: &'a [Vec3],
+    /// The gyro/compass reading, when there is one.
+    pub attitude: Option<Attitude>,
+    /// The odometry's `world_from_sensor` at this scan and at the previous one (only their
+    /// relative motion is used), when there is odometry.
+    pub odometry: Option<(Pose, Pose)>,
+}
+
+/// Where the heading prior came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadingPrior {
+    /// The first scan: its compass reading (or 0) defines the world's heading.
+    First,
+    /// The odometry's relative motion from the last node.
+    Odometry,
+    /// The compass reading.
+    Compass,
+    /// The last node's heading.
+    LastNode,
+}
+
+/// What happened to one scan.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepReport {
+    /// Index of the scan in its dataset.
+    pub scan_index: usize,
+    /// The node it became.
+    pub node_id: usize,
+    /// Wall time of the whole step (localization, loop closure, optimization, map update), ms.
+    pub time_ms: f64,
+    /// Wall time of the localization alone, ms.
+    pub localize_ms: f64,
+    /// The estimated `world_from_sensor` when the step ended, as `{x, y, z, roll_deg, …}`.
+    pub pose: crate::geometry::PoseRecord,
+    /// The prediction the search started from.
+    pub predicted: crate::geometry::PoseRecord,
+    /// Where the heading prior came from.
+    pub heading_prior: HeadingPrior,
+    /// Reference nodes merged, with the query cells each one saw.
+    pub reference_nodes: Vec<(usize, usize)>,
+    /// Eq. (1) at the best grid candidate, m² (`None` for the first scan).
+    pub cost: Option<f64>,
+    /// Overlap fraction of the match.
+    pub overlap_fraction: Option<f64>,
+    /// Inlier fraction of the match.
+    pub inlier_fraction: Option<f64>,
+    /// Covariance of `[x, y, z, roll, pitch, yaw]` from the match (world axes).
+    pub covariance: Option<[[f64; 6]; 6]>,
+    /// The match's ambiguity warnings, if any.
+    pub ambiguity: Vec<String>,
+    /// Loop closures checked at this scan, accepted or not.
+    pub loop_closures: Vec<LoopClosure>,
+    /// Pose-graph optimization run at this scan: iterations and time, ms.
+    pub optimization: Option<OptimizationSummary>,
+}
+
+/// One pose-graph optimization, summarized.
+#[derive(Debug, Clone, Serialize)]
+pub struct OptimizationSummary {
+    /// Iterations run.
+    pub iterations: usize,
+    /// Robust cost before and after.
+    pub initial_cost: f64,
+    /// Robust cost after.
+    pub final_cost: f64,
+    /// Wall time, ms.
+    pub time_ms: f64,
+    /// The largest move of a node, metres.
+    pub max_node_shift_m: f64,
+}
+
+/// The loop's state: the map, the pose graph's edges and the fused voxel map.
+#[derive(Debug, Clone)]
+pub struct Slam {
+    config: SlamConfig,
+    /// The nodes.
+    pub map: Map,
+    /// The pose graph's edges (matches to reference nodes and loop closures).
+    pub edges: Vec<Edge>,
+    /// Accepted loop closures.
+    pub loop_closures: Vec<LoopClosure>,
+    /// The fused occupancy map on the current poses.
+    pub voxels: VoxelMap,
+}
+
+impl Slam {
+    /// An empty map.
+    ///
+    /// # Errors
+    /// An invalid configuration.
+    pub fn new(config: SlamConfig) -> Result<Self> {
+        config.validate()?;
+        let voxels = VoxelMap::new(config.voxel)?;
+        Ok(Self {
+            config,
+            map: Map::default(),
+            edges: Vec::new(),
+            loop_closures: Vec::new(),
+            voxels,
+        })
+    }
+
+    /// Restores a loop from saved nodes and edges (a resumed run); the voxel map is rebuilt.
+    ///
+    /// # Errors
+    /// An invalid configuration, or edges naming nodes that are not there.
+    pub fn restore(
+        config: SlamConfig,
+        map: Map,
+        edges: Vec<Edge>,
+        loop_closures: Vec<LoopClosure>,
+    ) -> Result<Self> {
+        let n = map.nodes.len();
+        if let Some(e) = edges.iter().find(|e| e.from >= n || e.to >= n) {
+            return Err(Error::Invalid(format!(
+                "a saved edge joins nodes {} and {} but the map has {n} nodes",
+                e.from, e.to
+            )));
+        }
+        let mut slam = Self::new(config)?;
+        slam.map = map;
+        slam.edges = edges;
+        slam.loop_closures = loop_closures;
+        slam.rebuild_voxels();
+        Ok(slam)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SlamConfig {
+        &self.config
+    }
+
+    /// The estimated `world_from_sensor` of every node, in order.
+    pub fn poses(&self) -> Vec<Pose> {
+        self.map.nodes.iter().map(|n| n.world_from_sensor).collect()
+    }
+
+    /// Rebuilds the fused voxel map from every node on the current poses.
+    pub fn rebuild_voxels(&mut self) {
+        let mut voxels = VoxelMap::new(self.config.voxel)
+            .expect("the voxel configuration was validated in Slam::new");
+        for node in &self.map.nodes {
+            voxels.insert_scan(&node.world_from_sensor, &sensor_points(node));
+        }
+        self.voxels = voxels;
+    }
+
+    /// The merged point cloud: every node's points in the world, kept where the fused map is
+    /// occupied now (moved rubble, seen through later, drops out), one per voxel.
+    pub fn merged_cloud(&self) -> Vec<Vec3> {
+        let all: Vec<Vec3> = self
+            .map
+            .nodes
+            .iter()
+            .flat_map(|n| n.points_in_world())
+            .collect();
+        self.voxels.filter_occupied(&all)
+    }
+
+    /// Runs one step of the loop on `scan`.
+    ///
+    /// # Errors
+    /// An empty scan; a scan index that does not follow the last one; no reference node that
+    /// sees the scan; a localization that fails (nothing matches within the window). The map is
+    /// unchanged on error.
+    pub fn add_scan(&mut self, scan: &ScanInput) -> Result<StepReport> {
+        let start = Instant::now();
+        let node_id = self.map.nodes.len();
+        let Some(last) = self.map.nodes.last() else {
+            // The first scan defines the world: origin at its sensor, axes level, heading from
+            // its compass (DESIGN.md, "Units and frames").
+            let attitude = scan.attitude.unwrap_or_default();
+            let world_from_sensor = pose_from_parts(Vec3::zeros(), attitude);
+            let node = Node::from_scan(
+                node_id,
+                scan.scan_index,
+                world_from_sensor,
+                scan.attitude,
+                scan.points_in_sensor,
+                &self.config.sdem,
+            )?;
+            self.voxels
+                .insert_scan(&node.world_from_sensor, &sensor_points(&node));
+            self.map.nodes.push(node);
+            let pose = world_from_sensor;
+            return Ok(StepReport {
+                scan_index: scan.scan_index,
+                node_id,
+                time_ms: ms(start),
+                localize_ms: 0.0,
+                pose: (&pose).into(),
+                predicted: (&pose).into(),
+                heading_prior: HeadingPrior::First,
+                reference_nodes: Vec::new(),
+                cost: None,
+                overlap_fraction: None,
+                inlier_fraction: None,
+                covariance: None,
+                ambiguity: Vec::new(),
+                loop_closures: Vec::new(),
+                optimization: None,
+            });
+        };
+        if scan.scan_index <= last.scan_index {
+            return Err(Error::Invalid(format!(
+                "scan {} comes after scan {} in the map; scans must be added in order",
+                scan.scan_index, last.scan_index
+            )));
+        }
+
+        // 1. Predict.
+        let last_pose = last.world_from_sensor;
+        let last_attitude = attitude_of(&last_pose);
+        let (position, odometry_yaw) = match &scan.odometry {
+            Some((odom_now, odom_last)) => {
+                let predicted = last_pose * (odom_last.inverse() * odom_now);
+                (
+                    predicted.translation.vector,
+                    Some(attitude_of(&predicted).yaw),
+                )
+            }
+            None => (last_pose.translation.vector, None),
+        };
+        let (yaw, heading_prior, heading_half) = match (odometry_yaw, scan.attitude) {
+            (Some(yaw), _) => (yaw, HeadingPrior::Odometry, self.config.heading_half_deg),
+            (None, Some(a)) => (
+                a.yaw,
+                HeadingPrior::Compass,
+                self.config.heading_half_compass_deg,
+            ),
+            (None, None) => (
+                last_attitude.yaw,
+                HeadingPrior::LastNode,
+                self.config.heading_half_no_prior_deg,
+            ),
+        };
+        let (roll, pitch) = match scan.attitude {
+            Some(a) => (a.roll, a.pitch),
+            None => (last_attitude.roll, last_attitude.pitch),
+        };
+        let attitude = Attitude::new(roll, pitch, yaw);
+        let predicted = pose_from_parts(position, attitude);
+        let window_half = if scan.odometry.is_some() {
+            self.config.window_half_m
+        } else {
+            self.config.window_half_no_odometry_m
+        };
+
+        // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
+        let query = Sdem::from_points(
+            scan.points_in_sensor,
+            &attitude.rotation(),
+            &self.config.sdem,
+        )?;
+        if query.known_cells() == 0 {
+            return Err(Error::Invalid(format!(
+                "scan {} has no usable point (all closer than {} m or not finite)",
+                scan.scan_index, self.config.sdem.min_range_m
+            )));
+        }
+        let recent_from = node_id.saturating_sub(self.config.loop_closure.min_node_separation);
+        let mut references: Vec<(usize, usize)> = self
+            .map
+            .overlaps(&query, &position, self.config.reference_radius_m, 0.2)
+            .into_iter()
+            .filter(|&(id, cells)| {
+                id >= recent_from && cells >= self.config.min_reference_overlap_cells
+            })
+            .take(self.config.max_reference_nodes)
+            .collect();
+        if references.is_empty() {
+            // The last node always takes part: with no overlap the search says why.
+            references.push((node_id - 1, 0));
+        }
+        let reference_ids: Vec<usize> = references.iter().map(|r| r.0).collect();
+
+        // 3. Localize against the merged virtual S-DEM around the prediction.
+        let reference = self
+            .map
+            .merged_reference(&reference_ids, &position, &self.config.sdem)?;
+        let localize_config = LocalizeConfig {
+            window: SearchWindow::around(&Vec3::zeros(), window_half),
+            heading: HeadingWindow {
+                half_range_deg: heading_half,
+                step_deg: None,
+            },
+            ..self.config.localize.clone()
+        };
+        let localize_start = Instant::now();
+        let found = localize(
+            &reference,
+            &Attitude::default(),
+            &query,
+            &attitude,
+            &localize_config,
+        )
+        .map_err(|e| match e {
+            Error::Localize(why) => Error::Localize(format!(
+                "scan {} against nodes {reference_ids:?}: {why}",
+                scan.scan_index
+            )),
+            other => other,
+        })?;
+        let localize_ms = ms(localize_start);
+        let world_from_sensor = world_from_query(&position, &found);
+        let node = Node::from_scan(
+            node_id,
+            scan.scan_index,
+            world_from_sensor,
+            scan.attitude,
+            scan.points_in_sensor,
+            &self.config.sdem,
+        )?;
+        let covariance = found
+            .diagnostics
+            .covariance
+            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+        // One edge per reference node; together they carry the match's information once.
+        let share = 1.0 / reference_ids.len() as f64;
+        for &r in &reference_ids {
+            let world_from_r = self.map.nodes[r].world_from_sensor;
+            self.edges.push(Edge {
+                from: r,
+                to: node_id,
+                from_from_to: world_from_r.inverse() * world_from_sensor,
+                information: self.edge_information(covariance.as_ref(), &world_from_sensor, share),
+                kind: EdgeKind::Odometry,
+            });
+        }
+        self.voxels
+            .insert_scan(&node.world_from_sensor, &sensor_points(&node));
+        self.map.nodes.push(node);
+
+        // 4. Loop closure.
+        let mut closures = Vec::new();
+        let mut optimization = None;
+        if self.config.loop_closure.enabled {
+            closures = self.close_loops(node_id)?;
+            if closures.iter().any(|c| c.accepted) {
+                optimization = Some(self.optimize_graph()?);
+            }
+        }
+        let pose = self.map.nodes[node_id].world_from_sensor;
+        Ok(StepReport {
+            scan_index: scan.scan_index,
+            node_id,
+            time_ms: ms(start),
+            localize_ms,
+            pose: (&pose).into(),
+            predicted: (&predicted).into(),
+            heading_prior,
+            reference_nodes: references,
+            cost: Some(found.cost),
+            overlap_fraction: Some(found.diagnostics.overlap_fraction),
+            inlier_fraction: Some(found.diagnostics.inlier_fraction),
+            covariance: found.diagnostics.covariance,
+            ambiguity: found.diagnostics.ambiguity.clone(),
+            loop_closures: closures,
+            optimization,
+        })
+    }
+
+    /// Proposes revisits of older places for node `to` and verifies them; accepted ones become
+    /// pose-graph edges.
+    fn close_loops(&mut self, to: usize) -> Result<Vec<LoopClosure>> {
+        let config = &self.config.loop_closure;
+        let to_node = &self.map.nodes[to];
+        let to_descriptor = Descriptor::from_levelled(&to_node.points_levelled());
+        let mut candidates: Vec<(usize, f64)> = self
+            .map
+            .nodes
+            .iter()
+            .filter(|n| n.node_id + config.min_node_separation <= to)
+            .filter(|n| (n.position() - to_node.position()).norm() <= config.search_radius_m)
+            .filter_map(|n| {
+                let d =
+                    Descriptor::from_levelled(&n.points_levelled()).distance(&to_descriptor, 1)?;
+                (d <= config.max_descriptor_distance).then_some((n.node_id, d))
+            })
+            .collect();
+        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+        candidates.truncate(config.max_candidates);
+        let mut checked = Vec::new();
+        for (from, distance) in candidates {
+            let prior = self.map.nodes[to].world_from_sensor;
+            let mut closure = verify_loop_closure(
+                &self.map,
+                from,
+                to,
+                &prior,
+                &self.config.sdem,
+                &self.config.localize,
+                &self.config.loop_closure,
+            )?;
+            closure.descriptor_distance = Some(distance);
+            if closure.accepted {
+                self.add_loop_closure_edge(&closure);
+            }
+            checked.push(closure);
+        }
+        Ok(checked)
+    }
+
+    /// Adds an accepted loop closure as a pose-graph edge.
+    pub fn add_loop_closure_edge(&mut self, closure: &LoopClosure) {
+        let (Some(from_from_to), true) = (closure.from_from_to, closure.accepted) else {
+            return;
+        };
+        let world_from_to = self.map.nodes[closure.from].world_from_sensor * from_from_to;
+        self.edges.push(Edge {
+            from: closure.from,
+            to: closure.to,
+            from_from_to,
+            information: self.edge_information(closure.covariance.as_ref(), &world_from_to, 1.0),
+            kind: EdgeKind::LoopClosure,
+        });
+        self.loop_closures.push(closure.clone());
+    }
+
+    /// Optimizes the pose graph (node 0 held), moves the nodes and rebuilds the fused map.
+    ///
+    /// # Errors
+    /// The optimizer's errors (invalid edges).
+    pub fn optimize_graph(&mut self) -> Result<OptimizationSummary> {
+        let start = Instant::now();
+        let graph = PoseGraph {
+            world_from_node: self.poses(),
+            edges: self.edges.clone(),
+        };
+        let (poses, report) = optimize(&graph, 0, &self.config.optimize)?;
+        let mut max_shift: f64 = 0.0;
+        for (node, pose) in self.map.nodes.iter_mut().zip(poses) {
+            max_shift = max_shift.max((node.position() - pose.translation.vector).norm());
+            node.world_from_sensor = pose;
+        }
+        self.rebuild_voxels();
+        Ok(OptimizationSummary {
+            iterations: report.iterations,
+            initial_cost: report.initial_cost,
+            final_cost: report.final_cost,
+            time_ms: ms(start),
+            max_node_shift_m: max_shift,
+        })
+    }
+
+    /// The information matrix of an edge ending at `world_from_to`, in the pose graph's residual
+    /// convention (`[t, r]` in the `to` frame), from the match's covariance (world axes) plus the
+    /// configured floor, times `share`.
+    fn edge_information(
+        &self,
+        covariance_world: Option<&Matrix6<f64>>,
+        world_from_to: &Pose,
+        share: f64,
+    ) -> [[f64; 6]; 6] {
+        let floor_t = self.config.edge_sigma_floor_m.powi(2);
+        let floor_r = self.config.edge_sigma_floor_deg.to_radians().powi(2);
+        let to_from_world: Matrix3<f64> = world_from_to
+            .rotation
+            .inverse()
+            .to_rotation_matrix()
+            .into_inner();
+        let mut rotate = Matrix6::zeros();
+        rotate
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&to_from_world);
+        rotate
+            .fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&to_from_world);
+        let mut covariance = covariance_world
+            .map(|c| rotate * c * rotate.transpose())
+            .unwrap_or_else(Matrix6::zeros);
+        for i in 0..3 {
+            covariance[(i, i)] += floor_t;
+            covariance[(i + 3, i + 3)] += floor_r;
+        }
+        let covariance = 0.5 * (covariance + covariance.transpose());
+        let information = covariance.try_inverse().unwrap_or_else(|| {
+            Matrix6::from_diagonal(&nalgebra::Vector6::new(
+                1.0 / floor_t,
+                1.0 / floor_t,
+                1.0 / floor_t,
+                1.0 / floor_r,
+                1.0 / floor_r,
+                1.0 / floor_r,
+            ))
+        }) * share;
+        let information = 0.5 * (information + information.transpose());
+        std::array::from_fn(|i| std::array::from_fn(|j| information[(i, j)]))
+    }
+}
+
+/// A node's points as f64 sensor-frame vectors.
+fn sensor_points(node: &Node) -> Vec<Vec3> {
+    node.points_in_sensor
+        .iter()
+        .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+        .collect()
+}
+
+fn ms(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}
+
+/// Errors of an estimated trajectory against a reference one (the same scans, in order).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrajectoryErrors {
+    /// Poses compared.
+    pub poses: usize,
+    /// Absolute trajectory error, RMSE of the positions after the best rigid alignment
+    /// (Umeyama, no scale, as `evo_ape -a`), metres.
+    pub ate_rmse_m: f64,
+    /// Largest aligned position error, metres.
+    pub ate_max_m: f64,
+    /// Absolute error of the positions with no alignment (both start at the world origin),
+    /// RMSE, metres.
+    pub unaligned_rmse_m: f64,
+    /// Relative pose error between consecutive scans: RMSE of the translation error, metres.
+    pub rpe_translation_rmse_m: f64,
+    /// … and of the rotation error, degrees.
+    pub rpe_rotation_rmse_deg: f64,
+    /// Per pose: aligned position error, metres.
+    pub position_errors_m: Vec<f64>,
+}
+
+/// Compares `estimate` with `reference` (e.g. ground truth).
+///
+/// # Errors
+/// Different lengths or no pose.
+pub fn trajectory_errors(estimate: &[Pose], reference: &[Pose]) -> Result<TrajectoryErrors> {
+    if estimate.len() != reference.len() || estimate.is_empty() {
+        return Err(Error::Invalid(format!(
+            "cannot compare {} estimated poses with {} reference poses",
+            estimate.len(),
+            reference.len()
+        )));
+    }
+    let n = estimate.len();
+    let p: Vec<Vec3> = estimate.iter().map(|t| t.translation.vector).collect();
+    let q: Vec<Vec3> = reference.iter().map(|t| t.translation.vector).collect();
+    let (rotation, translation) = umeyama(&p, &q);
+    let position_errors_m: Vec<f64> = p
+        .iter()
+        .zip(&q)
+        .map(|(a, b)| (rotation * a + translation - b).norm())
+        .collect();
+    let rmse = |v: &mut dyn Iterator<Item = f64>| {
+        let (s, c) = v.fold((0.0, 0usize), |(s, c), e| (s + e * e, c + 1));
+        if c == 0 {
+            0.0
+        } else {
+            (s / c as f64).sqrt()
+        }
+    };
+    let ate_rmse_m = rmse(&mut position_errors_m.iter().copied());
+    let ate_max_m = position_errors_m.iter().copied().fold(0.0, f64::max);
+    let unaligned_rmse_m = rmse(&mut p.iter().zip(&q).map(|(a, b)| (a - b).norm()));
+    let relative: Vec<(f64, f64)> = (1..n)
+        .map(|i| {
+            let de = estimate[i - 1].inverse() * estimate[i];
+            let dr = reference[i - 1].inverse() * reference[i];
+            let e = dr.inverse() * de;
+            (e.translation.vector.norm(), e.rotation.angle().to_degrees())
+        })
+        .collect();
+    Ok(TrajectoryErrors {
+        poses: n,
+        ate_rmse_m,
+        ate_max_m,
+        unaligned_rmse_m,
+        rpe_translation_rmse_m: rmse(&mut relative.iter().map(|r| r.0)),
+        rpe_rotation_rmse_deg: rmse(&mut relative.iter().map(|r| r.1)),
+        position_errors_m,
+    })
+}
+
+/// The rotation and translation that carry `from` onto `to` best in the least-squares sense
+/// (Umeyama 1991, without scale).
+fn umeyama(from: &[Vec3], to: &[Vec3]) -> (Matrix3<f64>, Vec3) {
+    let n = from.len() as f64;
+    let mean_from = from.iter().sum::<Vec3>() / n;
+    let mean_to = to.iter().sum::<Vec3>() / n;
+    if from.len() < 3 {
+        return (Matrix3::identity(), mean_to - mean_from);
+    }
+    let mut h = Matrix3::zeros();
+    for (a, b) in from.iter().zip(to) {
+        h += (b - mean_to) * (a - mean_from).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
+        return (Matrix3::identity(), mean_to - mean_from);
+    };
+    let mut d = Matrix3::identity();
+    if (u * v_t).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let rotation = u * d * v_t;
+    (rotation, mean_to - rotation * mean_from)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::map::verify_loop_closure;
+    use crate::odometry::{simulate_odometry, OdometryNoise};
+    use crate::sensor::SensorConfig;
+    use crate::sim;
+    use std::sync::OnceLock;
+
+    /// The loop of the simulated collapsed building (stops i..=j of the 40-stop route, where
+    /// stop j stands where stop i stood), 5 mm range noise, compass noise 2°, odometry 5 % and
+    /// 0.5° per step, mapped once and shared by the tests below.
+    struct LoopRun {
+        slam: Slam,
+        truth: Vec<Pose>,
+        steps: Vec<StepReport>,
+    }
+
+    fn loop_run() -> &'static LoopRun {
+        static RUN: OnceLock<LoopRun> = OnceLock::new();
+        RUN.get_or_init(|| {
+            let seed = 1;
+            let scene = sim::collapsed_building(seed);
+            let sensor = SensorConfig {
+                compass_noise_deg: 2.0,
+                ..Default::default()
+            };
+            let stops =
+                sim::collapsed_building_stops(&scene, seed, sim::MAX_STOPS, &sensor.lift).unwrap();
+            let (i, j) = scene.loop_closure_stops().unwrap();
+            let run = sim::simulate_run(&scene, &stops[i..=j], &sensor, seed).unwrap();
+            let truth: Vec<Pose> = run.iter().map(|s| s.world_from_sensor).collect();
+            let odometry = simulate_odometry(&truth, &OdometryNoise::default(), seed).unwrap();
+            let mut slam = Slam::new(SlamConfig::default()).unwrap();
+            let steps = run
+                .iter()
+                .enumerate()
+                .map(|(k, stop)| {
+                    let points = stop.sweep.points_in_sensor();
+                    slam.add_scan(&ScanInput {
+                        scan_index: k,
+                        points_in_sensor: &points,
+                        attitude: Some(stop.sweep.mean_attitude()),
+                        odometry: (k > 0).then(|| (odometry[k], odometry[k - 1])),
+                    })
+                    .unwrap()
+                })
+                .collect();
+            LoopRun { slam, truth, steps }
+        })
+    }
+
+    #[test]
+    fn the_simulated_loop_is_closed_and_the_map_stays_within_2_cm() {
+        let run = loop_run();
+        assert!(run.truth.len() >= 20, "a loop of {} stops", run.truth.len());
+        let accepted: Vec<&LoopClosure> = run
+            .steps
+            .iter()
+            .flat_map(|s| &s.loop_closures)
+            .filter(|c| c.accepted)
+            .collect();
+        let last = run.truth.len() - 1;
+        assert!(
+            accepted.iter().any(|c| c.to == last && c.from <= 2),
+            "the return to the loop's start was not closed: {:?}",
+            run.steps
+                .iter()
+                .flat_map(|s| &s.loop_closures)
+                .collect::<Vec<_>>()
+        );
+        assert!(run.steps.iter().any(|s| s.optimization.is_some()));
+        let errors = trajectory_errors(&run.slam.poses(), &run.truth).unwrap();
+        assert!(
+            errors.ate_rmse_m <= 0.02,
+            "ATE RMSE {} m",
+            errors.ate_rmse_m
+        );
+        // Every step's own match is good too.
+        assert!(errors.rpe_translation_rmse_m <= 0.01, "{errors:?}");
+    }
+
+    #[test]
+    fn a_wrong_loop_closure_proposed_on_purpose_is_rejected() {
+        let run = loop_run();
+        let map = &run.slam.map;
+        // Claim that the node on the far side of the loop (about 2 m away) stands where node 0
+        // stood.
+        let far = map.nodes.len() / 2;
+        let claimed = map.nodes[0].world_from_sensor;
+        let closure = verify_loop_closure(
+            map,
+            0,
+            far,
+            &claimed,
+            &run.slam.config().sdem,
+            &run.slam.config().localize,
+            &run.slam.config().loop_closure,
+        )
+        .unwrap();
+        assert!(!closure.accepted, "accepted a wrong closure: {closure:?}");
+        assert!(!closure.reason.is_empty());
+        // The true revisit, with the same prior, is accepted.
+        let last = map.nodes.len() - 1;
+        let closure = verify_loop_closure(
+            map,
+            0,
+            last,
+            &map.nodes[last].world_from_sensor,
+            &run.slam.config().sdem,
+            &run.slam.config().localize,
+            &run.slam.config().loop_closure,
+        )
+        .unwrap();
+        assert!(closure.accepted, "{closure:?}");
+    }
+
+    #[test]
+    fn the_fused_map_holds_the_scene_and_free_space() {
+        let run = loop_run();
+        let (occupied, free) = run.slam.voxels.counts();
+        assert!(
+            occupied > 1000 && free > occupied,
+            "{occupied} occupied, {free} free"
+        );
+        // Every sensor origin stood in free space.
+        for node in &run.slam.map.nodes {
+            assert_eq!(
+                run.slam.voxels.occupancy(&node.position()),
+                crate::voxel::Occupancy::Free,
+                "node {}",
+                node.node_id
+            );
+        }
+        let cloud = run.slam.merged_cloud();
+        assert!(cloud.len() > 1000 && cloud.len() <= occupied);
+    }
+
+    #[test]
+    fn trajectory_errors_ignore_a_rigid_offset_and_see_a_bent_path() {
+        let path: Vec<Pose> = (0..10)
+            .map(|i| {
+                pose_from_parts(
+                    Vec3::new(0.3 * i as f64, 0.05 * i as f64, 0.0),
+                    Attitude::default(),
+                )
+            })
+            .collect();
+        let offset = pose_from_parts(
+            Vec3::new(1.0, -2.0, 0.5),
+            Attitude::from_degrees(0.0, 0.0, 30.0),
+        );
+        let moved: Vec<Pose> = path.iter().map(|p| offset * p).collect();
+        let e = trajectory_errors(&moved, &path).unwrap();
+        assert!(
+            e.ate_rmse_m < 1e-9 && e.rpe_translation_rmse_m < 1e-9,
+            "{e:?}"
+        );
+        assert!(e.unaligned_rmse_m > 1.0);
+        let mut bent = path.clone();
+        bent[9] = pose_from_parts(
+            bent[9].translation.vector + Vec3::new(0.0, 0.1, 0.0),
+            Attitude::default(),
+        );
+        let e = trajectory_errors(&bent, &path).unwrap();
+        assert!(e.ate_max_m > 0.05 && e.ate_max_m < 0.1, "{e:?}");
+        assert!(trajectory_errors(&bent[..3], &path).is_err());
+    }
+
+    #[test]
+    fn scans_out_of_order_and_empty_scans_are_errors() {
+        let mut slam = Slam::new(SlamConfig::default()).unwrap();
+        let points: Vec<Vec3> = (0..2000)
+            .map(|k| {
+                let a = k as f64 * 0.01;
+                Vec3::new(2.0 * a.cos(), 2.0 * a.sin(), -0.3 + 0.0003 * k as f64)
+            })
+            .collect();
+        let scan = |i, p: &'static [Vec3]| ScanInput {
+            scan_index: i,
+            points_in_sensor: p,
+            attitude: None,
+            odometry: None,
+        };
+        let leaked: &'static [Vec3] = Box::leak(points.into_boxed_slice());
+        slam.add_scan(&scan(3, leaked)).unwrap();
+        let err = slam.add_scan(&scan(3, leaked)).unwrap_err().to_string();
+        assert!(err.contains("in order"), "{err}");
+        let err = slam.add_scan(&scan(4, &[])).unwrap_err().to_string();
+        assert!(err.contains("no usable point"), "{err}");
+        assert_eq!(
+            slam.map.nodes.len(),
+            1,
+            "a failed step leaves the map as it was"
+        );
+    }
+}
