@@ -10,6 +10,7 @@
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
 use crate::sdem::Sdem;
+use crate::voxel::{Key, KeyMap};
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -34,6 +35,20 @@ pub struct RefineConfig {
     pub normal_radius_cells: usize,
     /// Fewer associated points than this fails the refinement.
     pub min_inliers: usize,
+    /// How a query point finds its reference point.
+    pub association: Association,
+}
+
+/// How the refinement pairs a query point with a reference point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Association {
+    /// The nearest reference point (with a normal) within `max_correspondence_m`, through a
+    /// spatial hash: robust on real scans, whose 1° cells far away hold unrelated surfaces.
+    Nearest,
+    /// The reference point in the query point's S-DEM cell (the S-DEM *is* a projective
+    /// association; cheaper, and enough on clean simulated scans).
+    Projective,
 }
 
 impl Default for RefineConfig {
@@ -44,9 +59,10 @@ impl Default for RefineConfig {
             max_correspondence_m: 0.10,
             estimate_rotation: true,
             max_rotation_deg: 5.0,
-            max_translation_m: 0.05,
+            max_translation_m: 0.10,
             normal_radius_cells: 2,
             min_inliers: 200,
+            association: Association::Nearest,
         }
     }
 }
@@ -77,6 +93,16 @@ pub struct SurfaceNormals {
     point_of_cell: Vec<u32>,
     /// Per boundary point, its unit normal facing the sensor, or NaN where none fits.
     normals: Vec<[f32; 3]>,
+    /// The boundary points with a normal, hashed by 3D cell of [`NEIGHBOUR_CELL_M`].
+    neighbours: KeyMap<Vec<u32>>,
+}
+
+/// Cell size of the neighbour hash, metres: the nearest point within this distance is found
+/// among the 27 cells around a query point.
+pub const NEIGHBOUR_CELL_M: f32 = 0.10;
+
+fn neighbour_key(p: &[f32; 3]) -> [i32; 3] {
+    p.map(|v| (v / NEIGHBOUR_CELL_M).floor() as i32)
 }
 
 impl SurfaceNormals {
@@ -148,11 +174,46 @@ impl SurfaceNormals {
                 }
                 [n.x as f32, n.y as f32, n.z as f32]
             })
-            .collect();
+            .collect::<Vec<[f32; 3]>>();
+        let mut neighbours: KeyMap<Vec<u32>> = KeyMap::default();
+        for (i, (p, n)) in points.iter().zip(&normals).enumerate() {
+            if !n[0].is_nan() {
+                neighbours
+                    .entry(Key(neighbour_key(p)))
+                    .or_default()
+                    .push(i as u32);
+            }
+        }
         Self {
             point_of_cell,
             normals,
+            neighbours,
         }
+    }
+
+    /// The boundary point with a normal nearest to `x` within `max_distance` (at most
+    /// [`NEIGHBOUR_CELL_M`]), by index into `Sdem::points()`.
+    fn nearest(&self, points: &[[f32; 3]], x: [f32; 3], max_distance: f32) -> Option<u32> {
+        let [i, j, k] = neighbour_key(&x);
+        let mut best = (max_distance.min(NEIGHBOUR_CELL_M).powi(2), None);
+        for di in -1..=1 {
+            for dj in -1..=1 {
+                for dk in -1..=1 {
+                    let Some(bucket) = self.neighbours.get(&Key([i + di, j + dj, k + dk])) else {
+                        continue;
+                    };
+                    for &c in bucket {
+                        let p = points[c as usize];
+                        let d =
+                            (p[0] - x[0]).powi(2) + (p[1] - x[1]).powi(2) + (p[2] - x[2]).powi(2);
+                        if d <= best.0 {
+                            best = (d, Some(c));
+                        }
+                    }
+                }
+            }
+        }
+        best.1
     }
 
     /// Number of boundary points with a normal.
@@ -169,8 +230,9 @@ fn robust_weight(r: f64, s: f64) -> f64 {
     1.0 / (d * d)
 }
 
-/// Refines `initial` (`reference_level_from_query_level`) by robust point-to-plane Gauss-Newton
-/// with projective association through the reference S-DEM.
+/// Refines `initial` (`reference_level_from_query_level`) by robust point-to-plane Gauss-Newton,
+/// each query point paired with the nearest reference point (or, with
+/// [`Association::Projective`], the one in its S-DEM cell).
 ///
 /// # Errors
 /// [`Error::Localize`] when too few points associate, the problem is degenerate, or the
@@ -192,6 +254,7 @@ pub fn refine(
     let mut rotation = initial.rotation.to_rotation_matrix();
     let mut translation = initial.translation.vector;
     let max_corr_sq = config.max_correspondence_m * config.max_correspondence_m;
+    let max_corr = config.max_correspondence_m as f32;
     let mut last = None;
     let mut converged = false;
     let mut iterations = 0;
@@ -218,13 +281,18 @@ pub fn refine(
                     let qv = nalgebra::Vector3::new(q[0], q[1], q[2]);
                     let y = r32 * qv;
                     let x = y + t32;
-                    let Some((cell, _)) = grid.cell_of([x.x, x.y, x.z]) else {
+                    let found = match config.association {
+                        Association::Nearest => {
+                            normals.nearest(ref_points, [x.x, x.y, x.z], max_corr)
+                        }
+                        Association::Projective => grid
+                            .cell_of([x.x, x.y, x.z])
+                            .map(|(cell, _)| normals.point_of_cell[cell as usize])
+                            .filter(|&j| j != u32::MAX),
+                    };
+                    let Some(j) = found else {
                         return acc;
                     };
-                    let j = normals.point_of_cell[cell as usize];
-                    if j == u32::MAX {
-                        return acc;
-                    }
                     let n = normals.normals[j as usize];
                     if n[0].is_nan() {
                         return acc;

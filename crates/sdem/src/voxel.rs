@@ -186,7 +186,7 @@ fn split_key(key: VoxelKey) -> (VoxelKey, usize) {
 /// A key wrapped so that it hashes as one `u64` write (the std array hash writes a length and a
 /// byte slice).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Key(VoxelKey);
+pub(crate) struct Key(pub(crate) VoxelKey);
 
 impl Hash for Key {
     #[inline]
@@ -211,7 +211,7 @@ fn folded_multiply(a: u64, b: u64) -> u64 {
 /// The hasher of the voxel table: the key's hash already mixes all bits, so this only passes it
 /// on.
 #[derive(Default)]
-struct KeyHasher(u64);
+pub(crate) struct KeyHasher(u64);
 
 impl Hasher for KeyHasher {
     #[inline]
@@ -234,7 +234,8 @@ impl Hasher for KeyHasher {
     }
 }
 
-type KeyMap<V> = HashMap<Key, V, BuildHasherDefault<KeyHasher>>;
+/// A hash map keyed by integer voxel coordinates (also used by the refinement's neighbour grid).
+pub(crate) type KeyMap<V> = HashMap<Key, V, BuildHasherDefault<KeyHasher>>;
 
 /// A sparse occupancy voxel map (see the module documentation).
 #[derive(Debug, Clone)]
