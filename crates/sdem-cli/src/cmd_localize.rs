@@ -19,13 +19,29 @@ pub struct Args {
     /// The dataset folder (scans/, optional attitude.csv and poses_truth.txt). Without
     /// attitude.csv both scans take the level attitude (roll = pitch = yaw = 0): widen
     /// --heading-window when the scans may differ in heading.
-    dataset: PathBuf,
+    #[arg(required_unless_present = "map")]
+    dataset: Option<PathBuf>,
     /// Index of the reference scan (the map).
-    #[arg(long)]
-    reference: usize,
+    #[arg(long, required_unless_present = "map")]
+    reference: Option<usize>,
     /// Index of the scan to localize.
-    #[arg(long)]
-    query: usize,
+    #[arg(long, required_unless_present = "map")]
+    query: Option<usize>,
+    /// Relocalize a scan in a saved map instead: the folder `sdem slam` wrote (OUT or OUT/map).
+    /// The search then uses the map's own settings (its config.toml).
+    #[arg(long, conflicts_with_all = ["dataset", "reference", "query"], requires = "scan")]
+    map: Option<PathBuf>,
+    /// With --map: the scan file to relocalize (any point-cloud format sdem reads).
+    #[arg(long, requires = "map")]
+    scan: Option<PathBuf>,
+    /// With --map: the gyro/compass reading of the scan, roll,pitch,yaw in degrees [default:
+    /// level, heading searched ±15°].
+    #[arg(long, requires = "map", allow_hyphen_values = true)]
+    attitude: Option<String>,
+    /// With --map: where the scan was taken, roughly, x,y,z in metres in the map's frame
+    /// [default: the nodes whose place descriptors look most like the scan's].
+    #[arg(long, requires = "map", allow_hyphen_values = true)]
+    near: Option<String>,
     /// Candidate window: query origin minus reference origin on world axes, metres, as
     /// x0:x1,y0:y1,z0:z1 [default: the paper's -0.5:0.5,-0.3:0.6,-0.1:0.1].
     #[arg(long, allow_hyphen_values = true, value_parser = parse_window)]
@@ -137,17 +153,89 @@ struct Report {
     error_deg: Option<f64>,
 }
 
+/// Parses three comma-separated finite numbers.
+fn parse_triple(flag: &str, text: &str) -> Result<[f64; 3]> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .with_context(|| format!("{flag} '{text}': expected three finite numbers a,b,c"))?;
+    match values[..] {
+        [a, b, c] => Ok([a, b, c]),
+        _ => bail!(
+            "{flag} '{text}': expected three numbers a,b,c, got {}",
+            values.len()
+        ),
+    }
+}
+
+/// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.
+fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
+    let folder = if map.join(sdem::io::MAP_MANIFEST).exists() {
+        map.to_path_buf()
+    } else {
+        map.join("map")
+    };
+    let saved = sdem::io::load_map(&folder)?;
+    let scan = args.scan.as_ref().context("--map needs --scan FILE")?;
+    let points = sdem::io::read_points(scan)?;
+    let attitude = match &args.attitude {
+        Some(text) => {
+            let [r, p, y] = parse_triple("--attitude", text)?;
+            Some(sdem::geometry::Attitude::from_degrees(r, p, y))
+        }
+        None => None,
+    };
+    let near = match &args.near {
+        Some(text) => Some(sdem::geometry::Vec3::from(parse_triple("--near", text)?)),
+        None => None,
+    };
+    // The map's own search settings (its config.toml), not this command's --step.
+    let found = sdem::slam::relocalize(&saved.map, &saved.config, &points, attitude, near, 3)
+        .with_context(|| format!("{} in the map {}", scan.display(), folder.display()))?;
+    if args.json {
+        return print_json(&found);
+    }
+    let pose = sdem::geometry::Pose::from(&found.world_from_sensor);
+    println!("{} in the map {}:", scan.display(), folder.display());
+    println!("  estimate  {}", pose_line(&pose));
+    println!(
+        "  matched node {} (cost {:.3e} m², {:.0} % of the cells within the truncation) in {:.0} ms",
+        found.node_id,
+        found.cost,
+        found.diagnostics.inlier_fraction * 100.0,
+        found.time_ms
+    );
+    for (node, why) in &found.tried {
+        println!("  node {node} did not match: {why}");
+    }
+    if found.diagnostics.ambiguous {
+        for why in &found.diagnostics.ambiguity {
+            println!("  AMBIGUOUS: {why}");
+        }
+    }
+    Ok(())
+}
+
 /// Runs `sdem localize`.
 pub fn run(args: Args) -> Result<()> {
+    if let Some(map) = args.map.clone() {
+        return run_map(&args, &map);
+    }
+    let (Some(dataset_path), Some(reference_index), Some(query_index)) =
+        (args.dataset.clone(), args.reference, args.query)
+    else {
+        bail!("give DATASET --reference I --query J, or --map DIR --scan FILE");
+    };
     if !(args.step.is_finite() && args.step > 0.0) {
         bail!("--step {} must be a positive number of metres", args.step);
     }
-    let dataset = Dataset::open(&args.dataset)?;
-    for (flag, index) in [("--reference", args.reference), ("--query", args.query)] {
+    let dataset = Dataset::open(&dataset_path)?;
+    for (flag, index) in [("--reference", reference_index), ("--query", query_index)] {
         if index >= dataset.len() {
             bail!(
                 "{flag} {index} is out of range: {} has scans 0..={}",
-                args.dataset.display(),
+                dataset_path.display(),
                 dataset.len() - 1
             );
         }
@@ -199,11 +287,11 @@ pub fn run(args: Args) -> Result<()> {
     };
     // Without attitude.csv: the level attitude (checked in range above).
     let reference_attitude = dataset
-        .attitude_or_level(args.reference)
+        .attitude_or_level(reference_index)
         .unwrap_or_default();
-    let query_attitude = dataset.attitude_or_level(args.query).unwrap_or_default();
-    let reference_points = dataset.load_scan(args.reference)?;
-    let query_points = dataset.load_scan(args.query)?;
+    let query_attitude = dataset.attitude_or_level(query_index).unwrap_or_default();
+    let reference_points = dataset.load_scan(reference_index)?;
+    let query_points = dataset.load_scan(query_index)?;
     let start = Instant::now();
     let reference = Sdem::from_points(
         &reference_points,
@@ -218,16 +306,16 @@ pub fn run(args: Args) -> Result<()> {
         &query_attitude,
         &config,
     )
-    .with_context(|| format!("scan {} against scan {}", args.query, args.reference))?;
+    .with_context(|| format!("scan {query_index} against scan {reference_index}"))?;
     let time_ms = elapsed_ms(start);
     let truth = dataset
         .truth
         .as_ref()
-        .map(|t| t[args.reference].inverse() * t[args.query]);
+        .map(|t| t[reference_index].inverse() * t[query_index]);
     let errors = truth.map(|t| pose_error(&t, &found.reference_from_query));
     let report = Report {
-        reference: args.reference,
-        query: args.query,
+        reference: reference_index,
+        query: query_index,
         reference_from_query: PoseRecord::from(&found.reference_from_query),
         heading_correction_deg: found.heading_correction.to_degrees(),
         cost: found.cost,
@@ -249,10 +337,7 @@ pub fn run(args: Args) -> Result<()> {
     if args.json {
         return print_json(&report);
     }
-    println!(
-        "scan {} in the frame of scan {}:",
-        args.query, args.reference
-    );
+    println!("scan {query_index} in the frame of scan {reference_index}:");
     println!("  estimate  {}", pose_line(&found.reference_from_query));
     if let Some(t) = &truth {
         println!("  truth     {}", pose_line(t));

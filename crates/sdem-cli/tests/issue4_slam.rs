@@ -91,6 +91,54 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         assert!(step["covariance"].as_array().is_some());
         assert!(!step["reference_nodes"].as_array().unwrap().is_empty());
     }
+    // A scan relocalized in the saved map lands where the map put it.
+    let attitude = std::fs::read_to_string(dir.path().join("data/attitude.csv")).unwrap();
+    let row: Vec<&str> = attitude.lines().nth(3).unwrap().split(',').collect();
+    let mapped = &steps[2]["pose"];
+    let near = format!(
+        "{},{},{}",
+        mapped["x"].as_f64().unwrap() + 0.1,
+        mapped["y"].as_f64().unwrap() - 0.1,
+        mapped["z"].as_f64().unwrap()
+    );
+    let found: Value = serde_json::from_str(&ok(
+        dir.path(),
+        &[
+            "localize",
+            "--map",
+            "out",
+            "--scan",
+            "data/scans/000002.ply",
+            "--attitude",
+            &row[1..].join(","),
+            "--near",
+            &near,
+            "--json",
+        ],
+    ))
+    .unwrap();
+    let pose = &found["world_from_sensor"];
+    let moved = ["x", "y", "z"]
+        .iter()
+        .map(|k| (pose[k].as_f64().unwrap() - mapped[k].as_f64().unwrap()).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(
+        moved < 0.01,
+        "relocalized {moved} m from the mapped pose: {found}"
+    );
+    let err = fails(
+        dir.path(),
+        &[
+            "localize",
+            "--map",
+            "nowhere",
+            "--scan",
+            "data/scans/000002.ply",
+        ],
+    );
+    assert!(err.contains("nowhere"), "{err}");
+
     // The effective configuration reads back as a configuration.
     let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(config.contains("step_m"), "{config}");

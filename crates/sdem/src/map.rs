@@ -4,9 +4,9 @@
 //!
 //! A [`Node`] keeps one scan as its S-DEM's boundary points (the nearest return per direction
 //! cell), in the sensor frame, and its current `world_from_sensor` estimate; the pose graph moves
-//! the estimate, the points never change. To localize a new scan the map is **merged** around the
-//! predicted position (the paper's future work): the boundary points of the nodes that overlap the
-//! prediction are carried into the world, re-centred on the predicted origin and binned into one
+//! the estimate, the points never change. To localize a new scan the map is **merged** (the
+//! paper's future work): the boundary points of the nodes that overlap the prediction are carried
+//! into the world, re-centred on one origin (the node that overlaps most) and binned into one
 //! S-DEM with world axes, nearest return per cell ([`Map::merged_reference`]) — a virtual S-DEM of
 //! several nodes, so surfaces one node saw and another did not are all there, and occlusion is
 //! kept by the z-buffer.
