@@ -9,7 +9,9 @@ mod cmd_import;
 mod cmd_localize;
 mod cmd_simulate;
 mod cmd_slam;
+mod cmd_view;
 mod output;
+mod progress;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -38,6 +40,9 @@ enum Command {
     Bench(cmd_bench::Args),
     /// Turn a 3DTK folder or a KITTI odometry sequence into a dataset folder.
     Import(cmd_import::Args),
+    /// Pictures for people: S-DEM panorama and slice, map plan and section, cost surface, and
+    /// the 3D viewer page.
+    View(cmd_view::Args),
 }
 
 fn main() -> ExitCode {
@@ -49,6 +54,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => cmd_bench::run(args),
         Command::Import(args) => cmd_import::run(args),
         Command::Slam(args) => cmd_slam::run(args),
+        Command::View(args) => cmd_view::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

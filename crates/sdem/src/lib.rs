@@ -29,6 +29,7 @@ pub mod search;
 pub mod sensor;
 pub mod sim;
 pub mod slam;
+pub mod viz;
 pub mod voxel;
 
 pub use error::{Error, Result};

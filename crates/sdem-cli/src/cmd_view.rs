@@ -1,0 +1,415 @@
+//! `sdem view`: pictures of S-DEMs, maps and localizations for people (PNG), and the 3D viewer
+//! page. The pictures are drawn by `sdem::viz`; this module reads the inputs and writes files.
+
+use crate::cmd_localize::parse_window;
+use crate::output::print_json;
+use anyhow::{bail, Context, Result};
+use sdem::geometry::{Pose, Vec3};
+use sdem::io::{load_map, read_points, write_atomic, Dataset, SavedMap};
+use sdem::localize::{localize, LocalizeConfig, SearchWindow};
+use sdem::sdem::{Sdem, SdemConfig};
+use sdem::viz::{
+    cost_surface, encode_png, map_plan, map_section, sample_cost_slice, sdem_panorama,
+    sdem_polar_slice, viewer_html, MapView, RgbImage, Section,
+};
+use std::path::{Path, PathBuf};
+
+/// Arguments of `sdem view`.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    what: What,
+    /// Print one JSON object (the files written) instead of text.
+    #[arg(long, global = true)]
+    json: bool,
+}
+
+#[derive(clap::Subcommand)]
+enum What {
+    /// One scan's S-DEM as a panorama: azimuth × elevation, range colour-mapped, unknown hatched.
+    Panorama(ScanArgs),
+    /// One elevation band of a scan's S-DEM from above (free space, boundary, unknown), like the
+    /// paper's Fig. 10-11.
+    Slice(SliceArgs),
+    /// The pictures of a `sdem slam` output folder: plan.png, section.png, viewer.html (the 3D
+    /// page), and the last node's panorama.png, slice.png and cost.png.
+    Map(MapArgs),
+    /// The cost surface of one localization: eq. (1) over x-y through the optimum.
+    Cost(CostArgs),
+}
+
+/// Which scan, and where the picture goes.
+#[derive(clap::Args)]
+struct ScanArgs {
+    /// A dataset folder (scans/, optional attitude.csv) or one point-cloud file (sensor frame,
+    /// taken as level).
+    input: PathBuf,
+    /// The scan's index in the dataset.
+    #[arg(long, default_value_t = 0)]
+    index: usize,
+    /// The PNG to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// S-DEM cell size, degrees.
+    #[arg(long, default_value_t = 1.0)]
+    resolution: f64,
+}
+
+#[derive(clap::Args)]
+struct SliceArgs {
+    #[command(flatten)]
+    scan: ScanArgs,
+    /// The elevation whose band is drawn, degrees (the paper's figures: -30).
+    #[arg(long, default_value_t = -30.0, allow_hyphen_values = true)]
+    elevation: f64,
+}
+
+#[derive(clap::Args)]
+struct MapArgs {
+    /// The output folder of `sdem slam` (holding map/ and map.ply).
+    slam_out: PathBuf,
+    /// Where the pictures go [default: SLAM_OUT].
+    #[arg(long)]
+    out_dir: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+struct CostArgs {
+    /// The dataset folder.
+    dataset: PathBuf,
+    /// Index of the reference scan.
+    #[arg(long)]
+    reference: usize,
+    /// Index of the scan localized against it.
+    #[arg(long)]
+    query: usize,
+    /// The PNG to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// The localization's candidate window, x0:x1,y0:y1,z0:z1 metres [default: the paper's].
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_window)]
+    window: Option<SearchWindow>,
+    /// Heading searched around the compass, ± degrees.
+    #[arg(long, default_value_t = 10.0)]
+    heading_window: f64,
+    /// Grid step of the localization that finds the optimum, metres (it is refined below the
+    /// grid afterwards).
+    #[arg(long, default_value_t = 0.02)]
+    search_step: f64,
+    /// Half the side of the square drawn around the optimum, metres.
+    #[arg(long, default_value_t = 0.3)]
+    extent: f64,
+    /// Sample spacing of the picture, metres.
+    #[arg(long, default_value_t = 0.01)]
+    step: f64,
+    /// S-DEM cell size, degrees.
+    #[arg(long, default_value_t = 1.0)]
+    resolution: f64,
+}
+
+/// Runs `sdem view`.
+pub fn run(args: Args) -> Result<()> {
+    let written = match args.what {
+        What::Panorama(scan) => {
+            let (sdem, label) = scan_sdem(&scan)?;
+            write_png(&scan.out, &sdem_panorama(&sdem, &label))?;
+            vec![scan.out]
+        }
+        What::Slice(slice) => {
+            if !slice.elevation.is_finite() || slice.elevation.abs() > 90.0 {
+                bail!(
+                    "--elevation {} must lie in -90..=90 degrees",
+                    slice.elevation
+                );
+            }
+            let (sdem, label) = scan_sdem(&slice.scan)?;
+            write_png(
+                &slice.scan.out,
+                &sdem_polar_slice(&sdem, slice.elevation, &label),
+            )?;
+            vec![slice.scan.out]
+        }
+        What::Map(map) => {
+            let map_dir = map.slam_out.join("map");
+            if !map_dir.join(sdem::io::MAP_MANIFEST).exists() {
+                bail!(
+                    "{} is not a `sdem slam` output folder: {} is missing",
+                    map.slam_out.display(),
+                    map_dir.join(sdem::io::MAP_MANIFEST).display()
+                );
+            }
+            let saved = load_map(&map_dir)?;
+            let cloud_path = map.slam_out.join("map.ply");
+            let cloud = if cloud_path.exists() {
+                read_points(&cloud_path)?
+            } else {
+                // A run cut short writes map/ before map.ply: draw the nodes' own points.
+                saved
+                    .map
+                    .nodes
+                    .iter()
+                    .flat_map(|n| n.points_in_world())
+                    .collect()
+            };
+            let out_dir = map.out_dir.unwrap_or(map.slam_out);
+            // One step: the bar shows the elapsed time while the pictures are drawn.
+            let bar = crate::progress::bar(1, args.json, "pictures");
+            let written = write_map_pictures(&out_dir, &saved, &cloud)?;
+            bar.inc(1);
+            bar.finish_and_clear();
+            written
+        }
+        What::Cost(cost) => {
+            write_cost_picture(&cost)?;
+            vec![cost.out]
+        }
+    };
+    if args.json {
+        print_json(&serde_json::json!({ "written": written }))
+    } else {
+        for path in &written {
+            println!("wrote {}", path.display());
+        }
+        Ok(())
+    }
+}
+
+/// Writes every picture of a map into `out_dir` (created if missing): `plan.png`,
+/// `section.png` (a cut along the trajectory), `viewer.html` (the 3D page), and for the last
+/// node `panorama.png` and `slice.png` (elevation −30°), and `cost.png` (the last node against
+/// the one before, through the map's estimate). Returns the paths written.
+///
+/// # Arguments
+/// * `out_dir` — the folder to write into (e.g. the `sdem slam` output folder).
+/// * `saved` — the map (`sdem::io::load_map`, or the parts of a live `Slam` put together).
+/// * `cloud` — the fused map's points, world frame (`Slam::merged_cloud`, or `map.ply`).
+pub fn write_map_pictures(
+    out_dir: &Path,
+    saved: &SavedMap,
+    cloud: &[Vec3],
+) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let nodes = &saved.map.nodes;
+    let world_from_node: Vec<Pose> = nodes.iter().map(|n| n.world_from_sensor).collect();
+    let index_of = |node_id: usize| nodes.iter().position(|n| n.node_id == node_id);
+    let loops: Vec<(usize, usize)> = saved
+        .loop_closures
+        .iter()
+        .filter(|c| c.accepted)
+        .filter_map(|c| Some((index_of(c.from)?, index_of(c.to)?)))
+        .collect();
+    let view = MapView {
+        points_in_world: cloud,
+        world_from_node: &world_from_node,
+        loop_closures: &loops,
+    };
+    let name = saved
+        .dataset
+        .as_deref()
+        .or(Some(out_dir))
+        .and_then(|p| p.file_name())
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "map".into());
+    let mut written = Vec::new();
+    let mut png = |file: &str, image: RgbImage| -> Result<()> {
+        let path = out_dir.join(file);
+        write_png(&path, &image)?;
+        written.push(path);
+        Ok(())
+    };
+    png("plan.png", map_plan(&view, &name))?;
+    png(
+        "section.png",
+        map_section(&view, &Section::through_trajectory(&view, 0.1), &name),
+    )?;
+    let sdem_config = &saved.config.sdem;
+    let node_sdem = |i: usize| -> Result<Sdem> {
+        let node = &nodes[i];
+        let points: Vec<Vec3> = node
+            .points_in_sensor
+            .iter()
+            .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+            .collect();
+        // Levelled by the map's estimate: the S-DEM's axes are the world's.
+        let level_from_sensor = node.world_from_sensor.rotation.to_rotation_matrix();
+        Ok(Sdem::from_points(&points, &level_from_sensor, sdem_config)?)
+    };
+    if let Some(last) = nodes.len().checked_sub(1) {
+        let query = node_sdem(last)?;
+        let label = format!("{name}, node {last}");
+        png("panorama.png", sdem_panorama(&query, &label))?;
+        png("slice.png", sdem_polar_slice(&query, -30.0, &label))?;
+        if last >= 1 {
+            let reference = node_sdem(last - 1)?;
+            let offset = nodes[last].position() - nodes[last - 1].position();
+            let slice = sample_cost_slice(
+                &reference,
+                &query,
+                &saved.config.localize.cost,
+                &offset,
+                0.0,
+                0.3,
+                0.01,
+            )?;
+            png(
+                "cost.png",
+                cost_surface(
+                    &slice,
+                    &format!("{name}, node {last} against node {}", last - 1),
+                ),
+            )?;
+        }
+    }
+    let page = viewer_html(&view, &format!("sdem map: {name}"));
+    let path = out_dir.join("viewer.html");
+    write_atomic(&path, |w| w.write_all(page.as_bytes()))?;
+    written.push(path);
+    Ok(written)
+}
+
+/// Writes `image` as a PNG at `path`, creating its folder.
+fn write_png(path: &Path, image: &RgbImage) -> Result<()> {
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent)
+            .with_context(|| format!("cannot create {}", parent.display()))?;
+    }
+    let bytes = encode_png(image)?;
+    write_atomic(path, |w| w.write_all(&bytes))?;
+    Ok(())
+}
+
+/// The S-DEM of the scan named by `args`, levelled by the dataset's attitude, and a label.
+fn scan_sdem(args: &ScanArgs) -> Result<(Sdem, String)> {
+    let config = SdemConfig {
+        resolution_deg: args.resolution,
+        ..Default::default()
+    };
+    let input = &args.input;
+    let (points, attitude, label) = if input.is_dir() {
+        let dataset = Dataset::open(input)?;
+        if args.index >= dataset.len() {
+            bail!(
+                "--index {} is out of range: {} has scans 0..={}",
+                args.index,
+                input.display(),
+                dataset.len().saturating_sub(1)
+            );
+        }
+        let points = dataset.load_scan(args.index)?;
+        let attitude = dataset.attitude_or_level(args.index).unwrap_or_default();
+        let name = input
+            .canonicalize()
+            .ok()
+            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .unwrap_or_else(|| input.display().to_string());
+        (points, attitude, format!("{name}, scan {}", args.index))
+    } else if input.is_file() {
+        if args.index != 0 {
+            bail!(
+                "--index {}: {} is a single scan; --index applies to dataset folders",
+                args.index,
+                input.display()
+            );
+        }
+        let points = read_points(input)?;
+        let name = input
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        (
+            points,
+            Default::default(),
+            format!("{name} (taken as level)"),
+        )
+    } else {
+        bail!("{}: no such file or dataset folder", input.display());
+    };
+    let sdem = Sdem::from_points(&points, &attitude.rotation(), &config)
+        .with_context(|| format!("cannot build the S-DEM of {}", input.display()))?;
+    if sdem.known_cells() == 0 {
+        bail!("{}: the scan holds no usable point", input.display());
+    }
+    Ok((sdem, label))
+}
+
+/// `sdem view cost`: localizes, then draws the cost around the optimum.
+fn write_cost_picture(args: &CostArgs) -> Result<()> {
+    let dataset = Dataset::open(&args.dataset)?;
+    for (flag, index) in [("--reference", args.reference), ("--query", args.query)] {
+        if index >= dataset.len() {
+            bail!(
+                "{flag} {index} is out of range: {} has scans 0..={}",
+                args.dataset.display(),
+                dataset.len().saturating_sub(1)
+            );
+        }
+    }
+    if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
+        bail!(
+            "--heading-window {} must lie in 0..=180 degrees",
+            args.heading_window
+        );
+    }
+    let sdem_config = SdemConfig {
+        resolution_deg: args.resolution,
+        ..Default::default()
+    };
+    let mut config = LocalizeConfig::default();
+    if let Some(window) = args.window {
+        config.window = window;
+    }
+    config.heading.half_range_deg = args.heading_window;
+    if !(args.search_step.is_finite() && args.search_step > 0.0) {
+        bail!(
+            "--search-step {} must be a positive number of metres",
+            args.search_step
+        );
+    }
+    config.step_m = args.search_step;
+    // The picture needs the optimum only, not the runner-up search.
+    config.runner_up = false;
+    let build = |index: usize| -> Result<(Sdem, sdem::geometry::Attitude)> {
+        let attitude = dataset.attitude_or_level(index).unwrap_or_default();
+        let points = dataset.load_scan(index)?;
+        Ok((
+            Sdem::from_points(&points, &attitude.rotation(), &sdem_config)?,
+            attitude,
+        ))
+    };
+    let (reference, reference_attitude) = build(args.reference)?;
+    let (query, query_attitude) = build(args.query)?;
+    let found = localize(
+        &reference,
+        &reference_attitude,
+        &query,
+        &query_attitude,
+        &config,
+    )
+    .with_context(|| format!("scan {} against scan {}", args.query, args.reference))?;
+    let slice = sample_cost_slice(
+        &reference,
+        &query,
+        &config.cost,
+        &found.offset,
+        found.heading_correction,
+        args.extent,
+        args.step,
+    )?;
+    let name = args
+        .dataset
+        .canonicalize()
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| args.dataset.display().to_string());
+    write_png(
+        &args.out,
+        &cost_surface(
+            &slice,
+            &format!(
+                "{name}, scan {} against scan {}",
+                args.query, args.reference
+            ),
+        ),
+    )
+}
