@@ -151,8 +151,9 @@ fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
     let sdem_config = SdemConfig::default();
     let (mut translation, mut rotation, mut times, mut failures) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let bar = crate::progress::bar(count as u64, args.json, "pairs localized");
     for (i, pair) in pairs.iter().enumerate() {
-        say(&format!("pairs: localizing {} of {count} ...", i + 1));
+        bar.inc(1);
         match localize_pair(pair, &sdem_config, &config) {
             Ok(result) => {
                 translation.push(result.translation_error_m * 1e3);
@@ -173,6 +174,7 @@ fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
             }
         }
     }
+    bar.finish_and_clear();
     let errors_m: Vec<f64> = translation.iter().map(|e| e / 1e3).collect();
     Ok(PairsReport {
         count,

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 /// Arguments of `sdem demo`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Folder for the outputs (report.json, poses, map.ply).
+    /// Folder for the outputs (report.json, poses, map.ply, pictures, viewer.html).
     #[arg(long, default_value = "sdem-demo")]
     out: PathBuf,
     /// Seed of the scenes, the path and the noise.
@@ -124,6 +124,21 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
         .map(|p| p.coords)
         .collect();
     sdem::io::write_points_ply(&out.join("map.ply"), &map)?;
+    // Pictures and the 3D viewer page of the run's map (issue 5).
+    let sdem_config = sdem::sdem::SdemConfig::default();
+    let nodes = stops
+        .iter()
+        .enumerate()
+        .map(|(i, s)| sdem::map::Node::from_scan(i, i, s.estimate, None, &s.points, &sdem_config))
+        .collect::<sdem::Result<Vec<_>>>()?;
+    let saved = sdem::io::SavedMap {
+        config: sdem::slam::SlamConfig::default(),
+        map: sdem::map::Map { nodes },
+        edges: Vec::new(),
+        loop_closures: Vec::new(),
+        dataset: None,
+    };
+    crate::cmd_view::write_map_pictures(out, &saved, &map)?;
     let text = serde_json::to_string_pretty(report)?;
     sdem::io::write_atomic(&out.join("report.json"), |w| w.write_all(text.as_bytes()))?;
     Ok(())
@@ -193,7 +208,8 @@ pub fn run(args: Args) -> Result<()> {
         report.run.final_position_error_m * 100.0
     );
     println!(
-        "   wrote {}/report.json, poses.txt (+ .tum), poses_truth.txt, map.ply",
+        "   wrote {}/report.json, poses.txt (+ .tum), poses_truth.txt, map.ply, plan.png, \
+         section.png, panorama.png, slice.png, cost.png, viewer.html",
         args.out.display()
     );
     Ok(())

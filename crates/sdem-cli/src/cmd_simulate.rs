@@ -108,7 +108,9 @@ pub fn run(args: Args) -> Result<()> {
     }
     let scene = sim::collapsed_building(args.seed);
     let stops = sim::collapsed_building_stops(&scene, args.seed, args.stops, &sensor.lift)?;
+    let bar = crate::progress::bar(1, args.json, "simulating the sweeps");
     let run = sim::simulate_run(&scene, &stops, &sensor, args.seed)?;
+    bar.finish_and_clear();
     let scans: Vec<_> = run
         .iter()
         .map(|s| (s.sweep.points_in_sensor(), s.sweep.mean_attitude()))

@@ -18,8 +18,8 @@ use std::time::Instant;
 pub struct Args {
     /// The dataset folder (scans/, optional attitude.csv, odometry.txt, poses_truth.txt).
     dataset: PathBuf,
-    /// The output folder: poses.txt, poses.tum, report.json, map.ply, map.sdemvox, config.toml
-    /// and the saved map in map/.
+    /// The output folder: poses.txt, poses.tum, report.json, map.ply, map.sdemvox, config.toml,
+    /// the saved map in map/, pictures and viewer.html.
     #[arg(long)]
     out: PathBuf,
     /// A TOML file with the loop's settings (the fields of config.toml, which every run writes;
@@ -45,6 +45,10 @@ pub struct Args {
     /// tool's result), besides poses_truth.txt.
     #[arg(long)]
     compare: Option<PathBuf>,
+    /// Do not write the pictures (plan.png, section.png, panorama.png, slice.png, cost.png) and
+    /// the 3D viewer page (viewer.html).
+    #[arg(long)]
+    no_pictures: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -65,6 +69,7 @@ struct Report {
     occupied_voxels: usize,
     free_voxels: usize,
     map_points: usize,
+    pictures: Vec<PathBuf>,
     #[serde(skip_serializing_if = "Option::is_none")]
     truth: Option<TrajectoryErrors>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -140,6 +145,7 @@ pub fn run(args: Args) -> Result<()> {
     if first > total {
         bail!("the saved map has {first} nodes but only {total} scans are to be processed");
     }
+    let bar = crate::progress::bar((total - first) as u64, args.json, "scans");
     for index in first..total {
         let saved_note = || {
             if index == 0 {
@@ -186,23 +192,26 @@ pub fn run(args: Args) -> Result<()> {
                     }
                 })
                 .collect();
-            eprintln!(
-                "scan {index:4}/{total}: {}  {:6.0} ms  refs {:?}{}{}",
-                pose_line(&Pose::from(&step.pose)),
-                step.time_ms,
-                step.reference_nodes.iter().map(|r| r.0).collect::<Vec<_>>(),
-                if closures.is_empty() {
-                    String::new()
-                } else {
-                    format!("  {}", closures.join(", "))
-                },
-                if step.ambiguity.is_empty() {
-                    String::new()
-                } else {
-                    "  AMBIGUOUS".into()
-                }
-            );
+            bar.suspend(|| {
+                eprintln!(
+                    "scan {index:4}/{total}: {}  {:6.0} ms  refs {:?}{}{}",
+                    pose_line(&Pose::from(&step.pose)),
+                    step.time_ms,
+                    step.reference_nodes.iter().map(|r| r.0).collect::<Vec<_>>(),
+                    if closures.is_empty() {
+                        String::new()
+                    } else {
+                        format!("  {}", closures.join(", "))
+                    },
+                    if step.ambiguity.is_empty() {
+                        String::new()
+                    } else {
+                        "  AMBIGUOUS".into()
+                    }
+                )
+            });
         }
+        bar.inc(1);
         steps.push(serde_json::to_value(&step).context("cannot encode the step")?);
         // The map first, then the step log: a kill between the two loses one step's log line,
         // never the map.
@@ -218,12 +227,20 @@ pub fn run(args: Args) -> Result<()> {
         write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;
     }
 
+    bar.finish_and_clear();
+
     // Final outputs.
     let poses = slam.poses();
     write_poses(&args.out.join("poses.txt"), &poses)?;
     let cloud = slam.merged_cloud();
     write_points_ply(&args.out.join("map.ply"), &cloud)?;
     write_voxel_map(&args.out.join("map.sdemvox"), &slam.voxels)?;
+    let pictures = if args.no_pictures {
+        Vec::new()
+    } else {
+        let saved = load_map(&map_dir)?;
+        crate::cmd_view::write_map_pictures(&args.out, &saved, &cloud)?
+    };
     let truth = match &dataset.truth {
         Some(t) => Some(trajectory_errors(&poses, &t[..poses.len()])?),
         None => None,
@@ -276,6 +293,7 @@ pub fn run(args: Args) -> Result<()> {
         occupied_voxels,
         free_voxels,
         map_points: cloud.len(),
+        pictures,
         truth,
         compare,
         steps,
@@ -317,10 +335,15 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
         println!(
-            "wrote {}: poses.txt, poses.tum, report.json, map.ply ({} points), map.sdemvox ({} occupied voxels), config.toml, map/",
+            "wrote {}: poses.txt, poses.tum, report.json, map.ply ({} points), map.sdemvox ({} occupied voxels), config.toml, map/{}",
             args.out.display(),
             report.map_points,
-            report.occupied_voxels
+            report.occupied_voxels,
+            if report.pictures.is_empty() {
+                ""
+            } else {
+                ", plan.png, section.png, panorama.png, slice.png, cost.png, viewer.html"
+            }
         );
     }
     Ok(())
