@@ -39,7 +39,12 @@ pub struct RefineConfig {
     pub association: Association,
 }
 
-/// How the refinement pairs a query point with a reference point.
+/// How the refinement pairs a query point with a reference point. Nearest is the default: on the
+/// 3DTK scans the projective pairing's refinement of the second scan failed (it fell back to a
+/// translation-only fit 8 cm from slam6D, nearest-neighbour check 2.90 cm) where the nearest
+/// pairing's converged (3.2 cm from slam6D, 2.58 cm); on the 50 clean simulated pairs of `sdem
+/// bench` projective pairing is a little tighter (0.76 mm median, 1.88 mm 95th percentile, against
+/// 0.95 mm and 3.85 mm).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Association {
