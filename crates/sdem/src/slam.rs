@@ -325,8 +325,9 @@ impl Slam {
     ///
     /// # Errors
     /// An empty scan; a scan index that does not follow the last one; no reference node that
-    /// sees the scan; a localization that fails (nothing matches within the window). The map is
-    /// unchanged on error.
+    /// sees the scan; a localization that fails (nothing matches within the window) — the map is
+    /// unchanged by these. An invalid loop-closure or optimizer setting fails after the node was
+    /// added (the node stays, localized).
     pub fn add_scan(&mut self, scan: &ScanInput) -> Result<StepReport> {
         let start = Instant::now();
         let node_id = self.map.nodes.len();
