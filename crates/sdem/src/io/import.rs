@@ -42,6 +42,7 @@
 //! test sequences 11–21) the scans are imported without truth.
 
 use super::dataset::{check_no_stale_file, ODOMETRY_FILE, SLAM6D_FILE};
+use super::poses::{parse_row_major_pose, to_rotation};
 use super::{
     clear_dataset, numbered_lines, parse_finite, read_bytes, read_kitti_poses, read_points,
     read_text, write_atomic, write_attitude_csv, write_points_ply, write_poses, ATTITUDE_FILE,
@@ -60,9 +61,6 @@ pub const UOS_MAX_RANGE_M: f64 = 30.0;
 /// 3DTK points nearer than this (metres) are dropped on import: returns from the robot itself and
 /// invalid ones.
 pub const UOS_MIN_RANGE_M: f64 = 0.2;
-
-/// How far a matrix read from a file may be from a rotation (determinant and `RᵀR − I`).
-const ROTATION_TOLERANCE: f64 = 1e-3;
 
 /// The folder name under which the 3DTK example data keeps slam6D's `.frames` files.
 const DEFAULT_FRAMES_DIR: &str = "slam6d_frames_2009";
@@ -136,6 +134,23 @@ pub struct ImportSummary {
     pub written: Vec<String>,
 }
 
+impl ImportSummary {
+    /// The summary before any scan is written: what is imported from where, nothing counted yet.
+    fn empty<T>(format: ImportFormat, source: &Path, out: &Path, scans: &[(T, PathBuf)]) -> Self {
+        Self {
+            format,
+            source: source.to_path_buf(),
+            out: out.to_path_buf(),
+            scans: scans.len(),
+            source_scans: scans.iter().map(|(_, p)| p.clone()).collect(),
+            points_per_scan: Vec::with_capacity(scans.len()),
+            dropped_far: 0,
+            dropped_near: 0,
+            written: Vec::new(),
+        }
+    }
+}
+
 /// Imports `source` into the dataset folder `out`, guessing the format when `format` is `None`
 /// ([`ImportFormat::detect`]). See [`import_3dtk`] and [`import_kitti`].
 pub fn import_dataset(
@@ -172,28 +187,6 @@ fn sdem_from_uos() -> Matrix3<f64> {
     Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
 }
 
-/// Checks that `r` is near a rotation and returns the nearest one.
-fn checked_rotation(r: &Matrix3<f64>) -> std::result::Result<Rotation3<f64>, String> {
-    let det = r.determinant();
-    if !det.is_finite() || (det - 1.0).abs() > ROTATION_TOLERANCE {
-        return Err(format!("its determinant is {det}, not 1"));
-    }
-    let off = (r.transpose() * r - Matrix3::identity()).abs().max();
-    if off > ROTATION_TOLERANCE {
-        return Err(format!("RᵀR differs from the identity by up to {off}"));
-    }
-    // The nearest rotation (polar decomposition): exact rotations come back to round-off.
-    let svd = r.svd(true, true);
-    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
-        return Err("its singular value decomposition failed".into());
-    };
-    let nearest = u * v_t;
-    if nearest.determinant() < 0.0 {
-        return Err("it is a reflection".into());
-    }
-    Ok(Rotation3::from_matrix_unchecked(nearest))
-}
-
 /// Converts a 3DTK `world_from_scan` (4×4, left-handed frames, centimetres) into sdem's
 /// `world_from_sensor` (right-handed, metres): `C · M · C⁻¹`, translation divided by 100.
 ///
@@ -218,9 +211,9 @@ pub fn uos_matrix_to_world_from_sensor(m: &Matrix4<f64>) -> std::result::Result<
         ));
     }
     let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let rotation = checked_rotation(&r)?;
+    let rotation = to_rotation(&r)?;
     let c = sdem_from_uos();
-    let r_sdem = checked_rotation(&(c * rotation.matrix() * c.transpose()))?;
+    let r_sdem = to_rotation(&(c * rotation.matrix() * c.transpose()))?;
     let t: Vector3<f64> = m.fixed_view::<3, 1>(0, 3).into_owned();
     let t_sdem = c * t / 100.0;
     Ok(Pose::from_parts(
@@ -378,22 +371,7 @@ pub fn parse_kitti_calib_tr(path: &Path, text: &str) -> Result<Pose> {
                 ),
             ));
         }
-        let mut v = [0f64; 12];
-        for (k, (slot, token)) in v.iter_mut().zip(&tokens).enumerate() {
-            *slot = parse_finite(path, line_no, token, &format!("value {} of Tr", k + 1))?;
-        }
-        let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
-        let rotation = checked_rotation(&r).map_err(|why| {
-            Error::parse(
-                path,
-                Some(line_no),
-                format!("the 3×3 block of Tr is not a rotation: {why}"),
-            )
-        })?;
-        return Ok(Pose::from_parts(
-            Translation3::new(v[3], v[7], v[11]),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        ));
+        return parse_row_major_pose(path, line_no, &tokens, "Tr");
     }
     Err(Error::parse(
         path,
@@ -668,17 +646,7 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
     check_out(out)?;
 
     let attitudes: Vec<Attitude> = odometry.iter().map(attitude_of).collect();
-    let mut summary = ImportSummary {
-        format: ImportFormat::Uos3dtk,
-        source: source.to_path_buf(),
-        out: out.to_path_buf(),
-        scans: scans.len(),
-        source_scans: scans.iter().map(|(_, p)| p.clone()).collect(),
-        points_per_scan: Vec::with_capacity(scans.len()),
-        dropped_far: 0,
-        dropped_near: 0,
-        written: Vec::new(),
-    };
+    let mut summary = ImportSummary::empty(ImportFormat::Uos3dtk, source, out, &scans);
     write_or_roll_back(out, || {
         for (index, (_, scan)) in scans.iter().enumerate() {
             let (points, far, near) = filter_uos_points(read_points(scan)?);
@@ -775,17 +743,7 @@ pub fn import_kitti(source: &Path, out: &Path, options: &ImportOptions) -> Resul
         check_no_stale_file(out, TRUTH_FILE, "truth")?;
     }
 
-    let mut summary = ImportSummary {
-        format: ImportFormat::Kitti,
-        source: source.to_path_buf(),
-        out: out.to_path_buf(),
-        scans: scans.len(),
-        source_scans: scans.iter().map(|(_, p)| p.clone()).collect(),
-        points_per_scan: Vec::with_capacity(scans.len()),
-        dropped_far: 0,
-        dropped_near: 0,
-        written: Vec::new(),
-    };
+    let mut summary = ImportSummary::empty(ImportFormat::Kitti, source, out, &scans);
     write_or_roll_back(out, || {
         for (index, (_, scan)) in scans.iter().enumerate() {
             let points = read_points(scan)?.len();

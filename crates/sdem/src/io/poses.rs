@@ -6,8 +6,9 @@ use crate::geometry::Pose;
 use nalgebra::{Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion};
 use std::path::Path;
 
-/// How far from a rotation a KITTI 3×3 block may be before it is rejected (determinant and the
-/// entries of `RᵀR − I`). KITTI's own files carry 7 significant digits, ~1e-6 off.
+/// How far from a rotation a 3×3 block read from a file (KITTI poses and calibration, 3DTK
+/// poses and frames) may be before it is rejected (determinant and the entries of `RᵀR − I`).
+/// KITTI's own files carry 7 significant digits, ~1e-6 off.
 const ROTATION_TOLERANCE: f64 = 1e-3;
 
 /// How far from 1 a TUM quaternion's norm may be before it is rejected.
@@ -69,22 +70,7 @@ pub fn read_kitti_poses(path: &Path) -> Result<Vec<Pose>> {
                 ),
             ));
         }
-        let mut v = [0f64; 12];
-        for (k, (slot, token)) in v.iter_mut().zip(&tokens).enumerate() {
-            *slot = parse_finite(path, line_no, token, &format!("value {}", k + 1))?;
-        }
-        let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
-        let rotation = to_rotation(&r).map_err(|why| {
-            Error::parse(
-                path,
-                Some(line_no),
-                format!("the 3×3 block is not a rotation: {why}"),
-            )
-        })?;
-        poses.push(Pose::from_parts(
-            Translation3::new(v[3], v[7], v[11]),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        ));
+        poses.push(parse_row_major_pose(path, line_no, &tokens, "")?);
     }
     if poses.is_empty() {
         return Err(Error::parse(
@@ -96,10 +82,43 @@ pub fn read_kitti_poses(path: &Path) -> Result<Vec<Pose>> {
     Ok(poses)
 }
 
-/// Checks that `r` is near a rotation and returns the nearest one (polar decomposition).
-fn to_rotation(r: &Matrix3<f64>) -> std::result::Result<Rotation3<f64>, String> {
+/// Parses 12 tokens at `line_no` of `path` as a row-major 3×4 `[R | t]`, checking that the
+/// numbers are finite and that `R` is a rotation (to within [`ROTATION_TOLERANCE`], then
+/// re-orthonormalized). `what` names the matrix in messages (`"Tr"`, or `""` for a pose line).
+pub(super) fn parse_row_major_pose(
+    path: &Path,
+    line_no: usize,
+    tokens: &[&str],
+    what: &str,
+) -> Result<Pose> {
+    let of = if what.is_empty() {
+        String::new()
+    } else {
+        format!(" of {what}")
+    };
+    let mut v = [0f64; 12];
+    for (k, (slot, token)) in v.iter_mut().zip(tokens).enumerate() {
+        *slot = parse_finite(path, line_no, token, &format!("value {}{of}", k + 1))?;
+    }
+    let r = Matrix3::new(v[0], v[1], v[2], v[4], v[5], v[6], v[8], v[9], v[10]);
+    let rotation = to_rotation(&r).map_err(|why| {
+        Error::parse(
+            path,
+            Some(line_no),
+            format!("the 3×3 block{of} is not a rotation: {why}"),
+        )
+    })?;
+    Ok(Pose::from_parts(
+        Translation3::new(v[3], v[7], v[11]),
+        UnitQuaternion::from_rotation_matrix(&rotation),
+    ))
+}
+
+/// Checks that `r` is near a rotation (determinant and `RᵀR − I` within [`ROTATION_TOLERANCE`])
+/// and returns the nearest one (polar decomposition).
+pub(super) fn to_rotation(r: &Matrix3<f64>) -> std::result::Result<Rotation3<f64>, String> {
     let det = r.determinant();
-    if (det - 1.0).abs() > ROTATION_TOLERANCE {
+    if !det.is_finite() || (det - 1.0).abs() > ROTATION_TOLERANCE {
         return Err(format!("its determinant is {det}, not 1"));
     }
     let off = (r.transpose() * r - Matrix3::identity()).abs().max();
