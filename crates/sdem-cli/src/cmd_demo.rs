@@ -131,14 +131,14 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
         .enumerate()
         .map(|(i, s)| sdem::map::Node::from_scan(i, i, s.estimate, None, &s.points, &sdem_config))
         .collect::<sdem::Result<Vec<_>>>()?;
-    let saved = sdem::io::SavedMap {
-        config: sdem::slam::SlamConfig::default(),
-        map: sdem::map::Map { nodes },
-        edges: Vec::new(),
-        loop_closures: Vec::new(),
-        dataset: None,
-    };
-    crate::cmd_view::write_map_pictures(out, &saved, &map)?;
+    crate::cmd_view::write_map_pictures(
+        out,
+        &crate::cmd_view::map_name(None, out),
+        &sdem::map::Map { nodes },
+        &[],
+        &sdem::slam::SlamConfig::default(),
+        &map,
+    )?;
     let text = serde_json::to_string_pretty(report)?;
     sdem::io::write_atomic(&out.join("report.json"), |w| w.write_all(text.as_bytes()))?;
     Ok(())

@@ -238,8 +238,14 @@ pub fn run(args: Args) -> Result<()> {
     let pictures = if args.no_pictures {
         Vec::new()
     } else {
-        let saved = load_map(&map_dir)?;
-        crate::cmd_view::write_map_pictures(&args.out, &saved, &cloud)?
+        crate::cmd_view::write_map_pictures(
+            &args.out,
+            &crate::cmd_view::map_name(Some(&args.dataset), &args.out),
+            &slam.map,
+            &slam.loop_closures,
+            slam.config(),
+            &cloud,
+        )?
     };
     let truth = match &dataset.truth {
         Some(t) => Some(trajectory_errors(&poses, &t[..poses.len()])?),

@@ -5,9 +5,11 @@ use crate::cmd_localize::parse_window;
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
-use sdem::io::{load_map, read_points, write_atomic, Dataset, SavedMap};
+use sdem::io::{load_map, read_points, write_atomic, Dataset};
 use sdem::localize::{localize, LocalizeConfig, SearchWindow};
+use sdem::map::{LoopClosure, Map};
 use sdem::sdem::{Sdem, SdemConfig};
+use sdem::slam::SlamConfig;
 use sdem::viz::{
     cost_surface, encode_png, map_plan, map_section, sample_cost_slice, sdem_panorama,
     sdem_polar_slice, viewer_html, MapView, RgbImage, Section,
@@ -154,7 +156,14 @@ pub fn run(args: Args) -> Result<()> {
             let out_dir = map.out_dir.unwrap_or(map.slam_out);
             // One step: the bar shows the elapsed time while the pictures are drawn.
             let bar = crate::progress::bar(1, args.json, "pictures");
-            let written = write_map_pictures(&out_dir, &saved, &cloud)?;
+            let written = write_map_pictures(
+                &out_dir,
+                &map_name(saved.dataset.as_deref(), &out_dir),
+                &saved.map,
+                &saved.loop_closures,
+                &saved.config,
+                &cloud,
+            )?;
             bar.inc(1);
             bar.finish_and_clear();
             written
@@ -174,6 +183,15 @@ pub fn run(args: Args) -> Result<()> {
     }
 }
 
+/// What the pictures' titles call a map: the dataset folder's name, else the output folder's.
+pub fn map_name(dataset: Option<&Path>, out_dir: &Path) -> String {
+    dataset
+        .or(Some(out_dir))
+        .and_then(|p| p.file_name())
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "map".into())
+}
+
 /// Writes every picture of a map into `out_dir` (created if missing): `plan.png`,
 /// `section.png` (a cut along the trajectory), `viewer.html` (the 3D page), and for the last
 /// node `panorama.png` and `slice.png` (elevation −30°), and `cost.png` (the last node against
@@ -181,20 +199,24 @@ pub fn run(args: Args) -> Result<()> {
 ///
 /// # Arguments
 /// * `out_dir` — the folder to write into (e.g. the `sdem slam` output folder).
-/// * `saved` — the map (`sdem::io::load_map`, or the parts of a live `Slam` put together).
+/// * `name` — what the titles call the map ([`map_name`]).
+/// * `map`, `loop_closures`, `config` — the map, its loop closures and the configuration it
+///   was made with (a live `Slam`'s, or `sdem::io::load_map`'s).
 /// * `cloud` — the fused map's points, world frame (`Slam::merged_cloud`, or `map.ply`).
 pub fn write_map_pictures(
     out_dir: &Path,
-    saved: &SavedMap,
+    name: &str,
+    map: &Map,
+    loop_closures: &[LoopClosure],
+    config: &SlamConfig,
     cloud: &[Vec3],
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
-    let nodes = &saved.map.nodes;
+    let nodes = &map.nodes;
     let world_from_node: Vec<Pose> = nodes.iter().map(|n| n.world_from_sensor).collect();
     let index_of = |node_id: usize| nodes.iter().position(|n| n.node_id == node_id);
-    let loops: Vec<(usize, usize)> = saved
-        .loop_closures
+    let loops: Vec<(usize, usize)> = loop_closures
         .iter()
         .filter(|c| c.accepted)
         .filter_map(|c| Some((index_of(c.from)?, index_of(c.to)?)))
@@ -204,13 +226,6 @@ pub fn write_map_pictures(
         world_from_node: &world_from_node,
         loop_closures: &loops,
     };
-    let name = saved
-        .dataset
-        .as_deref()
-        .or(Some(out_dir))
-        .and_then(|p| p.file_name())
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "map".into());
     let mut written = Vec::new();
     let mut png = |file: &str, image: RgbImage| -> Result<()> {
         let path = out_dir.join(file);
@@ -218,22 +233,21 @@ pub fn write_map_pictures(
         written.push(path);
         Ok(())
     };
-    png("plan.png", map_plan(&view, &name))?;
+    png("plan.png", map_plan(&view, name))?;
     png(
         "section.png",
-        map_section(&view, &Section::through_trajectory(&view, 0.1), &name),
+        map_section(&view, &Section::through_trajectory(&view, 0.1), name),
     )?;
-    let sdem_config = &saved.config.sdem;
+    let sdem_config = &config.sdem;
     let node_sdem = |i: usize| -> Result<Sdem> {
         let node = &nodes[i];
-        let points: Vec<Vec3> = node
-            .points_in_sensor
-            .iter()
-            .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
-            .collect();
         // Levelled by the map's estimate: the S-DEM's axes are the world's.
         let level_from_sensor = node.world_from_sensor.rotation.to_rotation_matrix();
-        Ok(Sdem::from_points(&points, &level_from_sensor, sdem_config)?)
+        Ok(Sdem::from_points(
+            &node.sensor_points(),
+            &level_from_sensor,
+            sdem_config,
+        )?)
     };
     if let Some(last) = nodes.len().checked_sub(1) {
         let query = node_sdem(last)?;
@@ -246,7 +260,7 @@ pub fn write_map_pictures(
             let slice = sample_cost_slice(
                 &reference,
                 &query,
-                &saved.config.localize.cost,
+                &config.localize.cost,
                 &offset,
                 0.0,
                 0.3,

@@ -74,6 +74,14 @@ impl Node {
         })
     }
 
+    /// The node's points in the sensor frame, as `f64` vectors.
+    pub fn sensor_points(&self) -> Vec<Vec3> {
+        self.points_in_sensor
+            .iter()
+            .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+            .collect()
+    }
+
     /// The node's points in the world frame.
     pub fn points_in_world(&self) -> Vec<Vec3> {
         self.points_in_sensor
@@ -359,13 +367,8 @@ pub fn verify_loop_closure(
     };
     let origin = from_node.position();
     let reference = map.merged_reference(&[from], &origin, sdem)?;
-    let to_points: Vec<Vec3> = to_node
-        .points_in_sensor
-        .iter()
-        .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
-        .collect();
     let prior_rotation = world_from_to_prior.rotation.to_rotation_matrix();
-    let query = Sdem::from_points(&to_points, &prior_rotation, sdem)?;
+    let query = Sdem::from_points(&to_node.sensor_points(), &prior_rotation, sdem)?;
     let prior_offset = world_from_to_prior.translation.vector - origin;
     let localize_config = LocalizeConfig {
         window: SearchWindow::around(&prior_offset, config.window_half_m),

@@ -304,7 +304,7 @@ impl Slam {
         let mut voxels = VoxelMap::new(self.config.voxel)
             .expect("the voxel configuration was validated in Slam::new");
         for node in &self.map.nodes {
-            voxels.insert_scan(&node.world_from_sensor, &sensor_points(node));
+            voxels.insert_scan(&node.world_from_sensor, &node.sensor_points());
         }
         self.voxels = voxels;
     }
@@ -345,7 +345,7 @@ impl Slam {
                 &self.config.sdem,
             )?;
             self.voxels
-                .insert_scan(&node.world_from_sensor, &sensor_points(&node));
+                .insert_scan(&node.world_from_sensor, &node.sensor_points());
             self.map.nodes.push(node);
             let pose = world_from_sensor;
             return Ok(StepReport {
@@ -510,7 +510,7 @@ impl Slam {
             });
         }
         self.voxels
-            .insert_scan(&node.world_from_sensor, &sensor_points(&node));
+            .insert_scan(&node.world_from_sensor, &node.sensor_points());
         self.map.nodes.push(node);
 
         // 4. Loop closure.
@@ -799,14 +799,6 @@ pub fn relocalize(
         diagnostics: found.diagnostics,
         time_ms: ms(start),
     })
-}
-
-/// A node's points as f64 sensor-frame vectors.
-fn sensor_points(node: &Node) -> Vec<Vec3> {
-    node.points_in_sensor
-        .iter()
-        .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
-        .collect()
 }
 
 fn ms(start: Instant) -> f64 {
