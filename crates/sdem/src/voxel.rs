@@ -1016,41 +1016,4 @@ mod tests {
             }
         }
     }
-
-    /// A scan like the simulator's: ~15k rays of about 3 m. Run with
-    /// `cargo test --release -p sdem --lib voxel_insert_timing -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn voxel_insert_timing() {
-        let mut points = Vec::new();
-        for ia in 0..180 {
-            for ie in 0..86 {
-                let az = (f64::from(ia) - 90.0).to_radians() * 2.0;
-                let el = (f64::from(ie) - 45.0).to_radians();
-                let range = 2.5 + 0.5 * (f64::from(ia * 7 + ie * 3) * 0.1).sin();
-                points.push(crate::geometry::direction(az, el) * range);
-            }
-        }
-        let mut m = map();
-        let pose = Pose::translation(0.3, -0.2, 0.5);
-        // On-CPU time of this thread (Linux), so that other work on a shared machine does not
-        // count; wall time is printed beside it.
-        let cpu_ns = || {
-            std::fs::read_to_string("/proc/thread-self/schedstat")
-                .ok()
-                .and_then(|t| t.split_whitespace().next()?.parse::<f64>().ok())
-        };
-        for round in 0..12 {
-            let (t, cpu) = (std::time::Instant::now(), cpu_ns());
-            m.insert_scan(&pose, &points);
-            let cpu_ms = cpu_ns().zip(cpu).map(|(b, a)| (b - a) * 1e-6);
-            println!(
-                "scan {round}: {} points, {:.1} ms wall, {:.1} ms on CPU, {} voxels known",
-                points.len(),
-                t.elapsed().as_secs_f64() * 1e3,
-                cpu_ms.unwrap_or(f64::NAN),
-                m.len(),
-            );
-        }
-    }
 }
