@@ -5,7 +5,9 @@
 //! its own folder (cleaned up on drop) instead of sharing one; the costly part is `localize`,
 //! which runs once per checked pair.
 
-use assert_cmd::Command;
+mod common;
+
+use common::{run, run_err, run_json, run_ok};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;
@@ -13,88 +15,6 @@ use tempfile::TempDir;
 // ---------------------------------------------------------------------------------------------
 // Helpers: running the binary
 // ---------------------------------------------------------------------------------------------
-
-/// The `sdem` binary, run in `dir`.
-fn sdem(dir: &Path) -> Command {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_sdem"));
-    cmd.current_dir(dir);
-    cmd
-}
-
-/// What a finished command left behind.
-struct Run {
-    code: Option<i32>,
-    stdout: String,
-    stderr: String,
-}
-
-fn run(dir: &Path, args: &[&str]) -> Run {
-    let out = sdem(dir).args(args).output().expect("cannot run sdem");
-    Run {
-        code: out.status.code(),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-/// Runs `args`, expects success and returns stdout.
-fn run_ok(dir: &Path, args: &[&str]) -> String {
-    let r = run(dir, args);
-    assert_eq!(
-        r.code,
-        Some(0),
-        "sdem {args:?} failed\nstdout:\n{}\nstderr:\n{}",
-        r.stdout,
-        r.stderr
-    );
-    assert!(
-        !r.stderr.contains("panicked"),
-        "sdem {args:?}: {}",
-        r.stderr
-    );
-    r.stdout
-}
-
-/// Runs `args --json`-style: expects success and exactly one JSON object on stdout.
-fn run_json(dir: &Path, args: &[&str]) -> Value {
-    let stdout = run_ok(dir, args);
-    let value: Value = serde_json::from_str(&stdout).unwrap_or_else(|e| {
-        panic!("sdem {args:?}: stdout is not exactly one JSON value ({e}):\n{stdout}")
-    });
-    assert!(value.is_object(), "sdem {args:?}: not an object: {value}");
-    value
-}
-
-/// Runs `args`, expects a failure of the sdem's own (exit code 1, no panic, nothing on stdout,
-/// exactly one non-empty stderr line) and returns that line.
-fn run_err(dir: &Path, args: &[&str]) -> String {
-    let r = run(dir, args);
-    assert!(
-        r.code.is_some_and(|c| c != 0),
-        "sdem {args:?} should fail, got {:?}\nstdout:\n{}",
-        r.code,
-        r.stdout
-    );
-    assert_eq!(r.code, Some(1), "sdem {args:?}: stderr:\n{}", r.stderr);
-    assert!(
-        !r.stderr.contains("panicked"),
-        "sdem {args:?} panicked:\n{}",
-        r.stderr
-    );
-    assert!(
-        r.stdout.trim().is_empty(),
-        "sdem {args:?} failed but printed on stdout:\n{}",
-        r.stdout
-    );
-    let lines: Vec<&str> = r.stderr.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "sdem {args:?}: expected a one-line error, got:\n{}",
-        r.stderr
-    );
-    lines[0].to_string()
-}
 
 /// Runs `args` expecting clap to reject the command line: non-zero exit (clap's 2), no panic,
 /// nothing on stdout; returns stderr.

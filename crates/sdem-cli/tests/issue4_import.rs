@@ -2,71 +2,15 @@
 //! `sdem import` of 3DTK folders and KITTI sequences. Every test runs the real binary in its own
 //! temporary folder on small synthetic inputs (no shared data needed).
 
-use assert_cmd::Command;
-use serde_json::Value;
+mod common;
+
+use common::{run_err, run_json, run_ok};
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;
 
 // ---------------------------------------------------------------------------------------------
 // Helpers: running the binary
 // ---------------------------------------------------------------------------------------------
-
-struct Run {
-    code: Option<i32>,
-    stdout: String,
-    stderr: String,
-}
-
-fn run(dir: &Path, args: &[&str]) -> Run {
-    let out = Command::new(env!("CARGO_BIN_EXE_sdem"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("cannot run sdem");
-    Run {
-        code: out.status.code(),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-fn run_ok(dir: &Path, args: &[&str]) -> String {
-    let r = run(dir, args);
-    assert_eq!(
-        r.code,
-        Some(0),
-        "sdem {args:?} failed\nstdout:\n{}\nstderr:\n{}",
-        r.stdout,
-        r.stderr
-    );
-    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
-    r.stdout
-}
-
-fn run_json(dir: &Path, args: &[&str]) -> Value {
-    let stdout = run_ok(dir, args);
-    let value: Value = serde_json::from_str(&stdout)
-        .unwrap_or_else(|e| panic!("sdem {args:?}: stdout is not one JSON value ({e}):\n{stdout}"));
-    assert!(value.is_object(), "{value}");
-    value
-}
-
-/// Expects exit code 1, no panic, nothing on stdout and a one-line error; returns it.
-fn run_err(dir: &Path, args: &[&str]) -> String {
-    let r = run(dir, args);
-    assert_eq!(
-        r.code,
-        Some(1),
-        "sdem {args:?}: expected exit 1\nstdout:\n{}\nstderr:\n{}",
-        r.stdout,
-        r.stderr
-    );
-    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
-    assert!(r.stdout.trim().is_empty(), "{}", r.stdout);
-    let lines: Vec<&str> = r.stderr.lines().filter(|l| !l.trim().is_empty()).collect();
-    assert_eq!(lines.len(), 1, "expected one line:\n{}", r.stderr);
-    lines[0].to_string()
-}
 
 fn s(path: &Path) -> &str {
     path.to_str().expect("temporary paths are UTF-8")

@@ -1,44 +1,17 @@
 //! Issue 4: `sdem slam` end to end — its outputs, a run killed and resumed, and bad datasets.
 //! Every test runs the real binary in its own temporary folder.
 
+mod common;
+
+use common::{fails, run_ok};
 use serde_json::Value;
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 use tempfile::TempDir;
 
-fn sdem(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sdem"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("cannot run sdem")
-}
-
-fn ok(dir: &Path, args: &[&str]) -> String {
-    let out = sdem(dir, args);
-    let (stdout, stderr) = (
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    );
-    assert!(
-        out.status.success() && !stderr.contains("panicked"),
-        "sdem {args:?} failed\nstdout:\n{stdout}\nstderr:\n{stderr}"
-    );
-    stdout
-}
-
-/// Runs `args`, expects exit code 1 and no panic, and returns stderr.
-fn fails(dir: &Path, args: &[&str]) -> String {
-    let out = sdem(dir, args);
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "sdem {args:?}: {stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    stderr
-}
-
 fn simulate(dir: &Path, stops: usize) {
-    ok(
+    run_ok(
         dir,
         &[
             "simulate",
@@ -63,8 +36,11 @@ fn lines(path: &Path) -> usize {
 fn slam_maps_a_simulated_run_and_writes_every_output() {
     let dir = TempDir::new().unwrap();
     simulate(dir.path(), 4);
-    let summary: Value =
-        serde_json::from_str(&ok(dir.path(), &["slam", "data", "--out", "out", "--json"])).unwrap();
+    let summary: Value = serde_json::from_str(&run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--json"],
+    ))
+    .unwrap();
     assert_eq!(summary["nodes"], 4);
     let ate = summary["truth"]["ate_rmse_m"].as_f64().unwrap();
     assert!(ate < 0.01, "ATE {ate} m");
@@ -101,7 +77,7 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         mapped["y"].as_f64().unwrap() - 0.1,
         mapped["z"].as_f64().unwrap()
     );
-    let found: Value = serde_json::from_str(&ok(
+    let found: Value = serde_json::from_str(&run_ok(
         dir.path(),
         &[
             "localize",
@@ -143,7 +119,7 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
     let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
     assert!(config.contains("step_m"), "{config}");
     std::fs::write(dir.path().join("mine.toml"), &config).unwrap();
-    ok(
+    run_ok(
         dir.path(),
         &[
             "slam",
@@ -198,7 +174,7 @@ fn a_killed_run_resumes_from_its_saved_map() {
         "killed before the end"
     );
 
-    let summary: Value = serde_json::from_str(&ok(
+    let summary: Value = serde_json::from_str(&run_ok(
         dir.path(),
         &["slam", "data", "--out", "out", "--resume", "--json"],
     ))
@@ -210,7 +186,7 @@ fn a_killed_run_resumes_from_its_saved_map() {
     let ate = summary["truth"]["ate_rmse_m"].as_f64().unwrap();
     assert!(ate < 0.01, "ATE {ate} m after resuming");
     // Resuming a finished run has nothing left to do, and says the same.
-    let again: Value = serde_json::from_str(&ok(
+    let again: Value = serde_json::from_str(&run_ok(
         dir.path(),
         &["slam", "data", "--out", "out", "--resume", "--json"],
     ))
@@ -251,7 +227,7 @@ fn bad_datasets_are_refused_with_the_file_named() {
     assert!(dir.path().join("o3/map/map.json").is_file());
     // Mend the file and resume.
     std::fs::write(&scan, &bytes).unwrap();
-    let summary: Value = serde_json::from_str(&ok(
+    let summary: Value = serde_json::from_str(&run_ok(
         dir.path(),
         &["slam", "data", "--out", "o3", "--resume", "--json"],
     ))

@@ -1,39 +1,12 @@
 //! Issue 5: `sdem view` pictures and the 3D viewer page, from a real `sdem slam` run on a small
 //! simulated dataset; the page is rendered in headless Chromium (installed by `.ci/run`).
 
+mod common;
+
+use common::{fails, run_ok};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 use std::sync::OnceLock;
-
-fn sdem(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sdem"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("cannot run sdem")
-}
-
-fn ok(dir: &Path, args: &[&str]) -> String {
-    let out = sdem(dir, args);
-    let (stdout, stderr) = (
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    );
-    assert!(
-        out.status.success() && !stderr.contains("panicked"),
-        "sdem {args:?} failed\nstdout:\n{stdout}\nstderr:\n{stderr}"
-    );
-    stdout
-}
-
-/// Runs `args`, expects exit code 1 and no panic, and returns stderr.
-fn fails(dir: &Path, args: &[&str]) -> String {
-    let out = sdem(dir, args);
-    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "sdem {args:?}: {stderr}");
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    stderr
-}
 
 /// A folder with `data/` (3 simulated stops) and `out/` (`sdem slam` over them), made once for
 /// all tests of this file.
@@ -43,8 +16,8 @@ fn fixture() -> &'static Path {
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue5_view");
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
-        ok(&dir, &["simulate", "--out", "data", "--stops", "3"]);
-        ok(&dir, &["slam", "data", "--out", "out", "--max-scans", "3"]);
+        run_ok(&dir, &["simulate", "--out", "data", "--stops", "3"]);
+        run_ok(&dir, &["slam", "data", "--out", "out", "--max-scans", "3"]);
         dir
     })
 }
@@ -76,7 +49,7 @@ fn check_png(path: &Path, min_colors: usize) -> (u32, u32) {
 #[test]
 fn view_map_writes_every_picture_and_the_page() {
     let dir = fixture();
-    let stdout = ok(
+    let stdout = run_ok(
         dir,
         &["view", "map", "out", "--out-dir", "pictures", "--json"],
     );
@@ -101,7 +74,7 @@ fn view_map_writes_every_picture_and_the_page() {
 #[test]
 fn view_panorama_and_slice_of_a_scan() {
     let dir = fixture();
-    ok(
+    run_ok(
         dir,
         &[
             "view",
@@ -114,7 +87,7 @@ fn view_panorama_and_slice_of_a_scan() {
         ],
     );
     check_png(&dir.join("p/pano.png"), 30);
-    ok(
+    run_ok(
         dir,
         &[
             "view",
@@ -136,14 +109,14 @@ fn view_panorama_and_slice_of_a_scan() {
         .min()
         .unwrap();
     let scan = scan.to_str().unwrap();
-    ok(dir, &["view", "panorama", scan, "--out", "p/file.png"]);
+    run_ok(dir, &["view", "panorama", scan, "--out", "p/file.png"]);
     check_png(&dir.join("p/file.png"), 30);
 }
 
 #[test]
 fn view_cost_of_one_localization() {
     let dir = fixture();
-    ok(
+    run_ok(
         dir,
         &[
             "view",
@@ -266,7 +239,7 @@ fn screenshot(page: &Path, png: &Path, extra: &[&str]) {
 #[test]
 fn viewer_page_renders_the_map_in_headless_chromium() {
     let dir = fixture();
-    ok(dir, &["view", "map", "out", "--out-dir", "page"]);
+    run_ok(dir, &["view", "map", "out", "--out-dir", "page"]);
     let page = dir.join("page/viewer.html");
     // WebGL on the software rasterizer, and the 2D canvas fallback without WebGL.
     for (name, extra) in [

@@ -1,0 +1,97 @@
+//! Helpers shared by the integration tests: run the real `sdem` binary in a folder and check
+//! how it ended. (Each test file uses only some of them.)
+#![allow(dead_code)]
+
+use assert_cmd::Command;
+use serde_json::Value;
+use std::path::Path;
+
+/// The `sdem` binary, run in `dir`.
+pub fn sdem(dir: &Path) -> Command {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_sdem"));
+    cmd.current_dir(dir);
+    cmd
+}
+
+/// What a finished command left behind.
+pub struct Run {
+    pub code: Option<i32>,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+pub fn run(dir: &Path, args: &[&str]) -> Run {
+    let out = sdem(dir).args(args).output().expect("cannot run sdem");
+    Run {
+        code: out.status.code(),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+/// Runs `args`, expects success and returns stdout.
+pub fn run_ok(dir: &Path, args: &[&str]) -> String {
+    let r = run(dir, args);
+    assert_eq!(
+        r.code,
+        Some(0),
+        "sdem {args:?} failed\nstdout:\n{}\nstderr:\n{}",
+        r.stdout,
+        r.stderr
+    );
+    assert!(
+        !r.stderr.contains("panicked"),
+        "sdem {args:?}: {}",
+        r.stderr
+    );
+    r.stdout
+}
+
+/// Runs `args --json`-style: expects success and exactly one JSON object on stdout.
+pub fn run_json(dir: &Path, args: &[&str]) -> Value {
+    let stdout = run_ok(dir, args);
+    let value: Value = serde_json::from_str(&stdout).unwrap_or_else(|e| {
+        panic!("sdem {args:?}: stdout is not exactly one JSON value ({e}):\n{stdout}")
+    });
+    assert!(value.is_object(), "sdem {args:?}: not an object: {value}");
+    value
+}
+
+/// Runs `args`, expects a failure of the sdem's own (exit code 1, no panic, nothing on stdout,
+/// exactly one non-empty stderr line) and returns that line.
+pub fn run_err(dir: &Path, args: &[&str]) -> String {
+    let r = run(dir, args);
+    assert!(
+        r.code.is_some_and(|c| c != 0),
+        "sdem {args:?} should fail, got {:?}\nstdout:\n{}",
+        r.code,
+        r.stdout
+    );
+    assert_eq!(r.code, Some(1), "sdem {args:?}: stderr:\n{}", r.stderr);
+    assert!(
+        !r.stderr.contains("panicked"),
+        "sdem {args:?} panicked:\n{}",
+        r.stderr
+    );
+    assert!(
+        r.stdout.trim().is_empty(),
+        "sdem {args:?} failed but printed on stdout:\n{}",
+        r.stdout
+    );
+    let lines: Vec<&str> = r.stderr.lines().filter(|l| !l.trim().is_empty()).collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "sdem {args:?}: expected a one-line error, got:\n{}",
+        r.stderr
+    );
+    lines[0].to_string()
+}
+
+/// Runs `args`, expects exit code 1 and no panic, and returns stderr (whatever its length).
+pub fn fails(dir: &Path, args: &[&str]) -> String {
+    let r = run(dir, args);
+    assert_eq!(r.code, Some(1), "sdem {args:?}: {}", r.stderr);
+    assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
+    r.stderr
+}
