@@ -192,15 +192,7 @@ impl Canvas {
         anchor: Anchor,
         color: Rgb<u8>,
     ) {
-        let w = text_width(text, scale);
-        let h = GLYPH_H as i64 * scale;
-        let (left, top) = match anchor {
-            Anchor::Left => (x, y - h / 2),
-            Anchor::Right => (x - w, y - h / 2),
-            Anchor::Top => (x - w / 2, y),
-            Anchor::Bottom => (x - w / 2, y - h),
-            Anchor::Center => (x - w / 2, y - h / 2),
-        };
+        let (left, top) = text_origin(x, y, text, scale, anchor);
         for (i, c) in text.chars().enumerate() {
             let gx = left + i as i64 * (GLYPH_W as i64 + 1) * scale;
             let drop = if descends(c) { 2 } else { 0 };
@@ -226,15 +218,8 @@ impl Canvas {
         anchor: Anchor,
         color: Rgb<u8>,
     ) {
-        let w = text_width(text, scale);
-        let h = GLYPH_H as i64 * scale;
-        let (left, top) = match anchor {
-            Anchor::Left => (x, y - h / 2),
-            Anchor::Right => (x - w, y - h / 2),
-            Anchor::Top => (x - w / 2, y),
-            Anchor::Bottom => (x - w / 2, y - h),
-            Anchor::Center => (x - w / 2, y - h / 2),
-        };
+        let (w, h) = (text_width(text, scale), GLYPH_H as i64 * scale);
+        let (left, top) = text_origin(x, y, text, scale, anchor);
         let pad = scale;
         for yy in top - pad..top + h + pad {
             for xx in left - pad..left + w + pad {
@@ -275,6 +260,19 @@ impl Canvas {
         } else {
             UNKNOWN
         }
+    }
+}
+
+/// The top-left corner of `text` drawn at `scale` so that `anchor` falls on `(x, y)`.
+fn text_origin(x: i64, y: i64, text: &str, scale: i64, anchor: Anchor) -> (i64, i64) {
+    let w = text_width(text, scale);
+    let h = GLYPH_H as i64 * scale;
+    match anchor {
+        Anchor::Left => (x, y - h / 2),
+        Anchor::Right => (x - w, y - h / 2),
+        Anchor::Top => (x - w / 2, y),
+        Anchor::Bottom => (x - w / 2, y - h),
+        Anchor::Center => (x - w / 2, y - h / 2),
     }
 }
 
