@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use sdem::geometry::Pose;
 use sdem::io::{
     load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
-    write_voxel_map, Dataset,
+    write_voxel_map, Dataset, NodeFiles,
 };
 use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamConfig, TrajectoryErrors};
 use serde::Serialize;
@@ -103,7 +103,7 @@ pub fn run(args: Args) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
 
-    let (mut slam, mut steps, resumed_at) = if args.resume {
+    let (mut slam, mut steps, resumed_at, mut node_files) = if args.resume {
         let saved = load_map(&map_dir)?;
         if args.config.is_some() || args.step.is_some() || args.no_loop_closure {
             bail!("--resume continues with the saved map's configuration; drop --config, --step and --no-loop-closure");
@@ -111,7 +111,7 @@ pub fn run(args: Args) -> Result<()> {
         let steps = read_steps(&args.out.join(STEPS_FILE), saved.map.nodes.len())?;
         let next = saved.map.nodes.len();
         let slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
-        (slam, steps, Some(next))
+        (slam, steps, Some(next), saved.node_files)
     } else {
         let mut config = match &args.config {
             Some(path) => {
@@ -132,7 +132,7 @@ pub fn run(args: Args) -> Result<()> {
         if args.no_loop_closure {
             config.loop_closure.enabled = false;
         }
-        (Slam::new(config)?, Vec::new(), None)
+        (Slam::new(config)?, Vec::new(), None, NodeFiles::default())
     };
     let config_text =
         toml::to_string_pretty(slam.config()).context("cannot encode the configuration")?;
@@ -217,6 +217,7 @@ pub fn run(args: Args) -> Result<()> {
         // never the map.
         save_map(
             &map_dir,
+            &mut node_files,
             slam.config(),
             &slam.map,
             &slam.edges,

@@ -39,6 +39,13 @@ pub const MAP_VERSION: u32 = 1;
 const POINTS_MAGIC: &[u8; 8] = b"SDEMPTS1";
 const POINTS_VERSION: u32 = 1;
 
+/// The node files a map folder holds, as far as this process knows: the CRC-32 of node `i`'s
+/// file at index `i` (written by [`save_map`], or checked by [`load_map`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NodeFiles {
+    crc32: Vec<u32>,
+}
+
 /// A saved map, as loaded.
 #[derive(Debug, Clone)]
 pub struct SavedMap {
@@ -52,6 +59,8 @@ pub struct SavedMap {
     pub loop_closures: Vec<LoopClosure>,
     /// The dataset the map was made from, as given to `sdem slam`.
     pub dataset: Option<PathBuf>,
+    /// The node files checked on loading; pass them to [`save_map`] to go on with this map.
+    pub node_files: NodeFiles,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -195,13 +204,16 @@ fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f3
     Ok(points)
 }
 
-/// Saves the map into `folder` (created when missing): node files that are not there yet, then
-/// the manifest, each atomically (see the module documentation).
+/// Saves the map into `folder` (created when missing): node files that `node_files` does not
+/// list yet, then the manifest, each atomically (see the module documentation). `node_files`
+/// is updated; start with [`NodeFiles::default`] for a new folder, or take
+/// [`SavedMap::node_files`] from [`load_map`] to go on with a saved one.
 ///
 /// # Errors
 /// The file system's errors, naming the file.
 pub fn save_map(
     folder: &Path,
+    node_files: &mut NodeFiles,
     config: &SlamConfig,
     map: &Map,
     edges: &[Edge],
@@ -213,13 +225,18 @@ pub fn save_map(
     let mut records = Vec::with_capacity(map.nodes.len());
     for node in &map.nodes {
         let name = points_file_name(node.node_id);
-        let path = folder.join(&name);
-        let bytes = encode_points(&node.points_in_sensor);
-        let crc = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().expect("4 bytes"));
-        let current = std::fs::read(&path).ok();
-        if current.as_deref() != Some(bytes.as_slice()) {
-            write_atomic(&path, |w| w.write_all(&bytes))?;
-        }
+        // A node's points never change: only the nodes this folder does not hold yet are
+        // encoded and written (a save used to re-read every node file to compare).
+        let crc = match node_files.crc32.get(node.node_id) {
+            Some(&crc) => crc,
+            None => {
+                let bytes = encode_points(&node.points_in_sensor);
+                let crc = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().expect("4 bytes"));
+                write_atomic(&folder.join(&name), |w| w.write_all(&bytes))?;
+                node_files.crc32.push(crc);
+                crc
+            }
+        };
         records.push(NodeRecord {
             node_id: node.node_id,
             scan_index: node.scan_index,
@@ -414,7 +431,11 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
     body.config
         .validate()
         .map_err(|e| bad(format!("invalid configuration: {e}")))?;
+    let node_files = NodeFiles {
+        crc32: body.nodes.iter().map(|r| r.points_crc32).collect(),
+    };
     Ok(SavedMap {
+        node_files,
         config: body.config,
         map: Map { nodes },
         edges,
@@ -470,8 +491,10 @@ mod tests {
     fn a_saved_map_loads_back_as_it_was() {
         let dir = tempfile::tempdir().unwrap();
         let (config, map, edges, closures) = small_map();
+        let mut files = NodeFiles::default();
         save_map(
             dir.path(),
+            &mut files,
             &config,
             &map,
             &edges,
@@ -502,9 +525,11 @@ mod tests {
         assert_eq!(saved.edges.len(), 1);
         assert_eq!(saved.edges[0].information, edges[0].information);
         assert_eq!(saved.loop_closures.len(), 1);
+        assert_eq!(saved.node_files, files);
         // Saving again rewrites nothing but the manifest, and the result is the same.
         save_map(
             dir.path(),
+            &mut files,
             &config,
             &map,
             &edges,
@@ -520,7 +545,16 @@ mod tests {
         let (config, map, edges, closures) = small_map();
         let fresh = || {
             let dir = tempfile::tempdir().unwrap();
-            save_map(dir.path(), &config, &map, &edges, &closures, None).unwrap();
+            save_map(
+                dir.path(),
+                &mut NodeFiles::default(),
+                &config,
+                &map,
+                &edges,
+                &closures,
+                None,
+            )
+            .unwrap();
             dir
         };
         let err = |dir: &Path| load_map(dir).unwrap_err().to_string();
@@ -587,7 +621,8 @@ mod tests {
         let two = Map {
             nodes: map.nodes[..2].to_vec(),
         };
-        save_map(dir.path(), &config, &two, &[], &[], None).unwrap();
+        let mut files = NodeFiles::default();
+        save_map(dir.path(), &mut files, &config, &two, &[], &[], None).unwrap();
         std::fs::write(
             dir.path().join("nodes/000002.pts"),
             encode_points(&map.nodes[2].points_in_sensor),
@@ -602,7 +637,16 @@ mod tests {
         assert_eq!(saved.map.nodes.len(), 2);
         // And the next save completes the map.
         map.nodes[2].scan_index = 12;
-        save_map(dir.path(), &config, &map, &edges, &closures, None).unwrap();
+        save_map(
+            dir.path(),
+            &mut files,
+            &config,
+            &map,
+            &edges,
+            &closures,
+            None,
+        )
+        .unwrap();
         assert_eq!(load_map(dir.path()).unwrap().map.nodes.len(), 3);
     }
 }

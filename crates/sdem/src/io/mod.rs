@@ -187,7 +187,7 @@ pub use import::{
     uos_pose_to_world_from_sensor, ImportFormat, ImportOptions, ImportSummary, UOS_MAX_RANGE_M,
     UOS_MIN_RANGE_M,
 };
-pub use mapfile::{load_map, save_map, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
+pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
 pub use ply::write_points_ply;
 pub use points::{read_points, PointFormat, POINT_EXTENSIONS};
 pub use poses::{
