@@ -39,6 +39,26 @@ pub struct Args {
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
+    /// Measure localization under the faults of a disaster site instead (compass, gyro drift,
+    /// dust, missing returns, tilt, moved rubble, a walking person, and all together): success
+    /// rate and errors per fault on seeded pairs [pairs per fault: default 100, 10 with --quick].
+    #[arg(long)]
+    faults: bool,
+    /// With --faults: only these cases (none, all, or a fault's name; repeat the flag).
+    #[arg(long = "case", value_name = "CASE", requires = "faults")]
+    cases: Vec<String>,
+}
+
+impl Args {
+    fn fault_args(&self) -> crate::cmd_bench_faults::FaultArgs {
+        crate::cmd_bench_faults::FaultArgs {
+            pairs: self.pairs.unwrap_or(if self.quick { 10 } else { 100 }),
+            seed: self.seed,
+            step: self.step,
+            json: self.json,
+            cases: self.cases.clone(),
+        }
+    }
 }
 
 #[derive(Serialize)]
@@ -210,6 +230,9 @@ pub fn run(args: Args) -> Result<()> {
             eprintln!("  {m}");
         }
     };
+    if args.faults {
+        return crate::cmd_bench_faults::run(&args.fault_args(), &say);
+    }
     let exact = exact_vs_exhaustive(args.quick, &say)?;
     let pairs = accuracy(&args, &say)?;
     say("pose graph: optimizing a 1,000-node loop ...");

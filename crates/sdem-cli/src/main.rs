@@ -4,6 +4,7 @@
 //! `sdem` library. Errors go to stderr as one line, with a non-zero exit code.
 
 mod cmd_bench;
+mod cmd_bench_faults;
 mod cmd_demo;
 mod cmd_import;
 mod cmd_localize;

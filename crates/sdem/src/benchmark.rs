@@ -275,7 +275,7 @@ fn draw_pair(
 
 /// A query sensor pose around `world_from_reference` with enough clearance, or `None` after
 /// [`MAX_QUERY_DRAWS`] draws.
-fn draw_query_pose(
+pub(crate) fn draw_query_pose(
     scene: &sim::Scene,
     world_from_reference: &Pose,
     config: &PairConfig,
@@ -304,12 +304,12 @@ fn draw_query_pose(
 }
 
 /// Uniform in `[-half, half]`; always one draw, so the stream does not depend on `half`.
-fn symmetric(rng: &mut impl Rng, half: f64) -> f64 {
+pub(crate) fn symmetric(rng: &mut impl Rng, half: f64) -> f64 {
     half * rng.random_range(-1.0..=1.0)
 }
 
 /// The angle in [-π, π).
-fn wrap_angle(a: f64) -> f64 {
+pub(crate) fn wrap_angle(a: f64) -> f64 {
     (a + PI).rem_euclid(TAU) - PI
 }
 
@@ -340,7 +340,7 @@ pub fn perturbed(pose: &Pose, translation_m: f64, rotation_deg: f64, rng: &mut i
 }
 
 /// A direction drawn uniformly on the sphere.
-fn random_unit(rng: &mut impl Rng) -> Unit<Vec3> {
+pub(crate) fn random_unit(rng: &mut impl Rng) -> Unit<Vec3> {
     loop {
         let v = Vec3::new(
             rng.sample(StandardNormal),

@@ -17,6 +17,7 @@ pub mod bnb;
 pub mod cost;
 pub mod error;
 pub mod experiment;
+pub mod faults;
 pub mod geometry;
 pub mod io;
 pub mod localize;

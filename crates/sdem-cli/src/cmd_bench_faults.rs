@@ -1,0 +1,202 @@
+//! `sdem bench --faults`: localization under the faults of a disaster site.
+//!
+//! For each case (no fault, each [`Fault`] alone, all together) the same number of seeded pairs
+//! ([`sdem::faults::fault_pairs`]) are localized as the robot would in the field
+//! ([`sdem::faults::localize_config`]: ±0.15 m around the odometry prior, headings within ±25°
+//! of the compass) and scored against the truth: success rate (error < 2 cm), translation and
+//! rotation errors, time.
+
+use crate::output::print_json;
+use anyhow::{bail, Result};
+use sdem::benchmark::{success_rate, summarize, Stats};
+use sdem::faults::{fault_pairs, localize_fault_pair, Fault, FaultConfig};
+use sdem::sdem::SdemConfig;
+use serde::Serialize;
+
+/// What `sdem bench --faults` runs.
+pub struct FaultArgs {
+    /// Pairs per case.
+    pub pairs: usize,
+    /// Seed of the scene and the pairs.
+    pub seed: u64,
+    /// Grid step of the search, metres.
+    pub step: f64,
+    /// One JSON object instead of text.
+    pub json: bool,
+    /// Only these cases (empty: all).
+    pub cases: Vec<String>,
+}
+
+/// One case: a set of faults.
+#[derive(Serialize)]
+struct CaseReport {
+    case: String,
+    what: String,
+    pairs: usize,
+    success_rate_2cm: f64,
+    translation_error_mm: Stats,
+    rotation_error_deg: Stats,
+    time_ms: Stats,
+    failures: Vec<String>,
+}
+
+#[derive(Serialize)]
+struct Report {
+    threads: usize,
+    seed: u64,
+    step_m: f64,
+    window_half_m: [f64; 3],
+    heading_half_range_deg: f64,
+    odometry_error_fraction: f64,
+    cases: Vec<CaseReport>,
+}
+
+/// The cases to run, by name: `none`, each fault, `all`.
+fn cases(selected: &[String]) -> Result<Vec<(String, Vec<Fault>)>> {
+    let mut all: Vec<(String, Vec<Fault>)> = vec![("none".into(), Vec::new())];
+    all.extend(Fault::ALL.iter().map(|f| (f.name().to_string(), vec![*f])));
+    all.push(("all".into(), Fault::ALL.to_vec()));
+    if selected.is_empty() {
+        return Ok(all);
+    }
+    let mut chosen = Vec::new();
+    for name in selected {
+        match all.iter().find(|(n, _)| n == name) {
+            Some(case) => chosen.push(case.clone()),
+            None => {
+                let names: Vec<&str> = all.iter().map(|(n, _)| n.as_str()).collect();
+                bail!(
+                    "--case {name}: no such case; the cases are {}",
+                    names.join(", ")
+                );
+            }
+        }
+    }
+    Ok(chosen)
+}
+
+fn run_case(
+    name: &str,
+    faults: &[Fault],
+    args: &FaultArgs,
+    config: &FaultConfig,
+    say: &dyn Fn(&str),
+) -> Result<CaseReport> {
+    say(&format!("{name}: simulating {} pairs ...", args.pairs));
+    let pairs = fault_pairs(args.seed, args.pairs, faults, config)?;
+    let sdem_config = SdemConfig::default();
+    let (mut translation, mut rotation, mut times, mut failures) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let bar = crate::progress::bar(pairs.len() as u64, args.json, &format!("{name}: localized"));
+    for (i, pair) in pairs.iter().enumerate() {
+        bar.inc(1);
+        match localize_fault_pair(pair, &sdem_config, config) {
+            Ok(result) => {
+                translation.push(result.translation_error_m * 1e3);
+                rotation.push(result.rotation_error_deg);
+                times.push(result.time_ms);
+                if result.translation_error_m >= 0.02 {
+                    failures.push(format!(
+                        "pair {i}: error {:.1} mm, {:.2}° ({:?})",
+                        result.translation_error_m * 1e3,
+                        result.rotation_error_deg,
+                        pair.injected
+                    ));
+                }
+            }
+            Err(e) => {
+                translation.push(f64::NAN);
+                rotation.push(f64::NAN);
+                failures.push(format!("pair {i}: {e}"));
+            }
+        }
+    }
+    bar.finish_and_clear();
+    let errors_m: Vec<f64> = translation.iter().map(|e| e / 1e3).collect();
+    let what = if faults.is_empty() {
+        "no fault".to_string()
+    } else if faults.len() == Fault::ALL.len() {
+        "every fault at once".to_string()
+    } else {
+        faults
+            .iter()
+            .map(|f| f.describe(config))
+            .collect::<Vec<_>>()
+            .join("; ")
+    };
+    Ok(CaseReport {
+        case: name.to_string(),
+        what,
+        pairs: pairs.len(),
+        success_rate_2cm: success_rate(&errors_m, 0.02),
+        translation_error_mm: summarize(&translation),
+        rotation_error_deg: summarize(&rotation),
+        time_ms: summarize(&times),
+        failures,
+    })
+}
+
+/// Runs `sdem bench --faults`.
+pub fn run(args: &FaultArgs, say: &dyn Fn(&str)) -> Result<()> {
+    if args.pairs == 0 {
+        bail!("--pairs must be at least 1");
+    }
+    if !(args.step.is_finite() && args.step > 0.0) {
+        bail!("--step {} must be a positive number of metres", args.step);
+    }
+    let config = FaultConfig {
+        step_m: args.step,
+        ..FaultConfig::default()
+    };
+    let mut reports = Vec::new();
+    for (name, faults) in cases(&args.cases)? {
+        reports.push(run_case(&name, &faults, args, &config, say)?);
+    }
+    let report = Report {
+        threads: rayon::current_num_threads(),
+        seed: args.seed,
+        step_m: config.step_m,
+        window_half_m: config.window_half_m,
+        heading_half_range_deg: config.heading_half_range_deg,
+        odometry_error_fraction: config.odometry_error_fraction,
+        cases: reports,
+    };
+    if args.json {
+        return print_json(&report);
+    }
+    println!(
+        "sdem bench --faults ({} threads, seed {}): window ±{} m around the odometry prior \
+         ({} % error), heading ±{}° around the compass, grid {} cm",
+        report.threads,
+        report.seed,
+        config.window_half_m[0],
+        config.odometry_error_fraction * 100.0,
+        config.heading_half_range_deg,
+        config.step_m * 100.0
+    );
+    println!();
+    println!(
+        "{:<11} {:>5} {:>9} {:>10} {:>10} {:>10} {:>10} {:>9}  what",
+        "case", "pairs", "success", "median mm", "p95 mm", "max mm", "median °", "time ms"
+    );
+    for c in &report.cases {
+        println!(
+            "{:<11} {:>5} {:>8.1}% {:>10.2} {:>10.2} {:>10.1} {:>10.3} {:>9.0}  {}",
+            c.case,
+            c.pairs,
+            c.success_rate_2cm * 100.0,
+            c.translation_error_mm.median,
+            c.translation_error_mm.p95,
+            c.translation_error_mm.max,
+            c.rotation_error_deg.median,
+            c.time_ms.median,
+            c.what
+        );
+    }
+    for c in &report.cases {
+        for f in &c.failures {
+            println!("{} failed: {f}", c.case);
+        }
+    }
+    Ok(())
+}
