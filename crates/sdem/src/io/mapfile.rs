@@ -73,6 +73,13 @@ struct Manifest {
     body: serde_json::Value,
 }
 
+/// The manifest's body alone, read from the manifest's text (the other fields are checked
+/// through [`Manifest`]).
+#[derive(Deserialize)]
+struct BodyOnly {
+    body: Body,
+}
+
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Body {
@@ -160,6 +167,13 @@ fn encode_points(points: &[[f32; 3]]) -> Vec<u8> {
 
 fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f32; 3]>> {
     let bad = |why: String| Error::parse(path, None, why);
+    if bytes.len() < 24 && POINTS_MAGIC.starts_with(&bytes[..bytes.len().min(8)]) {
+        return Err(bad(format!(
+            "truncated: {} bytes, too short for a node file (24 bytes at least); the map is \
+             damaged: re-run sdem slam",
+            bytes.len()
+        )));
+    }
     if bytes.len() < 24 || &bytes[..8] != POINTS_MAGIC {
         return Err(bad(format!(
             "not an sdem node file (it must start with {:?}); the map is damaged: re-run sdem slam",
@@ -193,11 +207,17 @@ fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f3
         )));
     }
     let mut points = Vec::with_capacity(count as usize);
-    for chunk in body[20..].chunks_exact(12) {
+    for (index, chunk) in body[20..].chunks_exact(12).enumerate() {
         let v = |k: usize| f32::from_le_bytes(chunk[k..k + 4].try_into().expect("4 bytes"));
         let p = [v(0), v(4), v(8)];
         if !p.iter().all(|x| x.is_finite()) {
-            return Err(bad("a point has a non-finite coordinate".into()));
+            return Err(bad(format!(
+                "point {index} (byte offset {}) is ({}, {}, {}); coordinates must be finite",
+                20 + 12 * index,
+                p[0],
+                p[1],
+                p[2]
+            )));
         }
         points.push(p);
     }
@@ -326,6 +346,12 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
             manifest.version
         )));
     }
+    if manifest.version != MAP_VERSION {
+        return Err(bad(format!(
+            "map version {} does not exist; this build reads version {MAP_VERSION}",
+            manifest.version
+        )));
+    }
     let canonical = serde_json::to_vec(&manifest.body)
         .map_err(|e| bad(format!("cannot re-encode the body: {e}")))?;
     let computed = crc32(&canonical);
@@ -336,8 +362,16 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
             manifest.checksum
         )));
     }
-    let body: Body = serde_json::from_value(manifest.body)
-        .map_err(|e| bad(format!("malformed map body: {e}")))?;
+    // Parsed again from the text, so that a malformed body is reported with its line.
+    let body: Body = serde_json::from_slice::<BodyOnly>(&bytes)
+        .map_err(|e| {
+            Error::parse(
+                &manifest_path,
+                Some(e.line()),
+                format!("malformed map body: {e}"),
+            )
+        })?
+        .body;
     let mut nodes = Vec::with_capacity(body.nodes.len());
     for (i, record) in body.nodes.iter().enumerate() {
         if record.node_id != i {
@@ -415,6 +449,8 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
         if c.from >= n || c.to >= n {
             return Err(bad(format!("loop closure {k} joins missing nodes")));
         }
+        let from_from_to = pose_from_row_major(&c.from_from_to)
+            .ok_or_else(|| bad(format!("loop closure {k}: not a finite rigid transform")))?;
         loop_closures.push(LoopClosure {
             from: c.from,
             to: c.to,
@@ -424,7 +460,7 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
             cost: c.cost,
             inlier_fraction: c.inlier_fraction,
             correction_m: c.correction_m,
-            from_from_to: pose_from_row_major(&c.from_from_to),
+            from_from_to: Some(from_from_to),
             covariance: None,
         });
     }
