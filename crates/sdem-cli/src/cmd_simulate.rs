@@ -2,6 +2,7 @@
 
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
+use sdem::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected};
 use sdem::odometry::{simulate_odometry, OdometryNoise};
 use sdem::sensor::SensorConfig;
 use sdem::sim;
@@ -51,6 +52,13 @@ pub struct Args {
     /// truth and sensor file are removed first, so no old file mixes into the new dataset.
     #[arg(long)]
     force: bool,
+    /// Inject a fault of a disaster site at every stop (repeat the flag): compass (heading off
+    /// by up to ±20°), gyro-drift (roll and pitch readings drift, up to ±2°), dust (5 % of beams
+    /// return from dust), missing (30 % of returns lost), rubble (a block moved in view before
+    /// each stop), person (someone walks through each sweep). `tilt` is measured by `sdem bench
+    /// --faults`, not injected into a route.
+    #[arg(long = "fault", value_name = "FAULT")]
+    faults: Vec<String>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -63,6 +71,9 @@ struct Summary {
     stops: usize,
     points_per_scan: Vec<usize>,
     odometry: bool,
+    faults: Vec<Fault>,
+    /// Per stop, what the faults did (empty without faults).
+    injected: Vec<Injected>,
 }
 
 /// Runs `sdem simulate`.
@@ -106,10 +117,32 @@ pub fn run(args: Args) -> Result<()> {
             args.odometry_yaw_noise_deg
         );
     }
+    let faults = args
+        .faults
+        .iter()
+        .map(|name| {
+            name.parse::<Fault>()
+                .with_context(|| format!("--fault {name}"))
+        })
+        .collect::<Result<Vec<_>>>()?;
     let scene = sim::collapsed_building(args.seed);
     let stops = sim::collapsed_building_stops(&scene, args.seed, args.stops, &sensor.lift)?;
     let bar = crate::progress::bar(1, args.json, "simulating the sweeps");
-    let run = sim::simulate_run(&scene, &stops, &sensor, args.seed)?;
+    let (run, injected) = if faults.is_empty() {
+        (
+            sim::simulate_run(&scene, &stops, &sensor, args.seed)?,
+            Vec::new(),
+        )
+    } else {
+        simulate_run_with_faults(
+            &scene,
+            &stops,
+            &sensor,
+            args.seed,
+            &faults,
+            &FaultConfig::default(),
+        )?
+    };
     bar.finish_and_clear();
     let scans: Vec<_> = run
         .iter()
@@ -139,6 +172,8 @@ pub fn run(args: Args) -> Result<()> {
         stops: run.len(),
         points_per_scan: scans.iter().map(|s| s.0.len()).collect(),
         odometry: odometry.is_some(),
+        faults,
+        injected,
     };
     if args.json {
         return print_json(&summary);
@@ -160,6 +195,19 @@ pub fn run(args: Args) -> Result<()> {
             ""
         }
     );
+    if !summary.faults.is_empty() {
+        let names: Vec<&str> = summary.faults.iter().map(|f| f.name()).collect();
+        let total = |f: fn(&Injected) -> usize| summary.injected.iter().map(f).sum::<usize>();
+        println!(
+            "  faults {}: {} dust returns, {} returns lost, {} on a person, {} on moved rubble; \
+             the readings carry the compass and gyro errors (see --json)",
+            names.join(", "),
+            total(|i| i.dust_returns),
+            total(|i| i.lost_returns),
+            total(|i| i.person_returns),
+            total(|i| i.rubble_returns)
+        );
+    }
     Ok(())
 }
 

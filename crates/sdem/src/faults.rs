@@ -11,7 +11,7 @@
 //! | [`Fault::Missing`] | 30 % of the returns of both scans are lost, in runs of up to 20 beams (dark, wet or glancing surfaces) |
 //! | [`Fault::Tilt`] | the robot stands on rubble with roll and pitch up to ±30° at the query |
 //! | [`Fault::Rubble`] | three pieces of rubble (0.2–0.6 m blocks) in view were moved 0.2–0.5 m between the two scans |
-//! | [`Fault::Person`] | a person (1.7 m tall) walks 1.5 m through the query's view while it sweeps |
+//! | [`Fault::Person`] | a person (1.7 m tall; crawling where there is no headroom) moves 1.5 m through the query's view while it sweeps |
 //!
 //! [`fault_pairs`] draws seeded pairs like [`crate::benchmark::bench_pairs`] (a reference at a
 //! stop of [`sim::collapsed_building`], a query within ±0.5 m of it, turned up to ±15°) with any
@@ -56,8 +56,11 @@ use std::str::FromStr;
 const FAULT_STREAM_SALT: u64 = 0xfa17_5eed_0000_0006;
 /// Places drawn for a person or a piece of rubble before giving up.
 const MAX_PLACE_DRAWS: usize = 2_000;
-/// A person's semi-axes: shoulders 0.5 m, chest 0.4 m, height 1.7 m.
+/// A standing person's semi-axes: shoulders 0.5 m, chest 0.4 m, height 1.7 m.
 const PERSON_RADII_M: [f64; 3] = [0.25, 0.2, 0.85];
+/// A crawling person's semi-axes (length along the way they crawl, width, height), where there
+/// is no headroom to stand: in the ditch.
+const CRAWLING_RADII_M: [f64; 3] = [0.6, 0.25, 0.2];
 /// People and rubble stay at least this far from either sensor, metres (nobody stands on the
 /// robot; the robot does not stand in rubble).
 const KEEP_CLEAR_M: f64 = 0.35;
@@ -511,6 +514,143 @@ pub fn localize_fault_pair(
     localize_pair(&pair.pair, sdem, &localize_config(config, pair))
 }
 
+/// Simulates a run like [`sim::simulate_run`] (same scene, stops, noise and seed) with `faults`
+/// injected at every stop, for a dataset to map (`sdem simulate --fault ...`):
+///
+/// - [`Fault::Compass`]: each stop's heading reading is off by its own error within
+///   ±[`FaultConfig::compass_error_max_deg`];
+/// - [`Fault::GyroDrift`]: the roll and pitch readings carry a bias that drifts from stop to stop
+///   (a random walk of 0.5° a stop, held within ±[`FaultConfig::gyro_error_max_deg`]);
+/// - [`Fault::Dust`], [`Fault::Missing`], [`Fault::Person`]: in every sweep, as in
+///   [`fault_pairs`];
+/// - [`Fault::Rubble`]: for each stop after the first, one block in its view lies elsewhere in
+///   the earlier sweeps (it was moved just before the stop); blocks keep clear of every stop.
+///
+/// Returns the stops and, per stop, what was injected.
+///
+/// # Errors
+/// [`Error::Invalid`] for [`Fault::Tilt`] (the route decides how the robot stands; `sdem bench
+/// --faults` measures steep tilt), an invalid `config` or `sensor`, or a person with no room.
+pub fn simulate_run_with_faults(
+    scene: &Scene,
+    stops: &[sim::Stop],
+    sensor: &SensorConfig,
+    seed: u64,
+    faults: &[Fault],
+    config: &FaultConfig,
+) -> Result<(Vec<sim::SimStop>, Vec<Injected>)> {
+    config.validate()?;
+    if faults.contains(&Fault::Tilt) {
+        return Err(Error::Invalid(
+            "fault 'tilt' cannot be injected into a run: the route decides how the robot \
+             stands; `sdem bench --faults --case tilt` measures stops tilted up to 30°"
+                .into(),
+        ));
+    }
+    let has = |f: Fault| faults.contains(&f);
+    let poses = stops
+        .iter()
+        .map(|s| s.world_from_sensor(&sensor.lift))
+        .collect::<Result<Vec<Pose>>>()?;
+    let mut run = sim::simulate_run(scene, stops, sensor, seed)?;
+    let mut injected = vec![Injected::default(); run.len()];
+    let stop_rng = |k: usize| {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ FAULT_STREAM_SALT);
+        rng.set_stream(k as u64);
+        rng
+    };
+    if has(Fault::Rubble) && run.len() > 1 {
+        // Block j (placed for stop j) lies at `before` in sweeps 0..j and at `after` from j on.
+        let one = FaultConfig {
+            rubble_pieces: 1,
+            ..config.clone()
+        };
+        let mut blocks: Vec<(usize, OrientedBox, OrientedBox)> = Vec::new();
+        for j in 1..run.len() {
+            let mut rng = stop_rng(j);
+            let previous = poses[j - 1].translation.vector;
+            for _ in 0..20 {
+                let Some(mut piece) =
+                    place_moved_rubble(scene, &previous, &poses[j], &one, &mut rng)
+                else {
+                    break;
+                };
+                let (before, after) = piece.remove(0);
+                let clear_of_route = poses.iter().all(|p| {
+                    let o = p.translation.vector;
+                    // The sensor and the robot's body below it.
+                    [o, o - Vec3::new(0.0, 0.0, 0.3)].iter().all(|q| {
+                        before.distance_to(q) > KEEP_CLEAR_M && after.distance_to(q) > KEEP_CLEAR_M
+                    })
+                });
+                if clear_of_route {
+                    blocks.push((j, before, after));
+                    break;
+                }
+            }
+        }
+        for (k, stop) in run.iter_mut().enumerate() {
+            let mut here = scene.clone();
+            for (j, before, after) in &blocks {
+                here.add_solid(Solid::Box(if *j <= k { after } else { before }.clone()));
+            }
+            // The clean run's noise stream for this stop (see `sim::simulate_run`).
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(k as u64);
+            stop.sweep = sim::scan(&here, sensor, &poses[k], stop.lift_slide_m, &mut rng);
+            let placed = blocks
+                .iter()
+                .map(|(j, before, after)| if *j <= k { after } else { before });
+            injected[k].rubble_returns = returns_on(&stop.sweep, &poses[k], placed);
+        }
+    }
+    let mut bias = [0.0f64; 2];
+    for (k, stop) in run.iter_mut().enumerate() {
+        let mut rng = stop_rng(k);
+        // A stream apart from the rubble's placement, which used stream k's start.
+        rng.set_word_pos(1 << 40);
+        let sweep = &mut stop.sweep;
+        if has(Fault::Person) {
+            // Where nobody fits (a stop deep in the ditch), the sweep goes without.
+            if let Some(person) = place_person(scene, &poses[k], config.person_walk_m, &mut rng) {
+                injected[k].person_returns =
+                    add_walking_person(sweep, &poses[k], &person, sensor, &mut rng);
+            }
+        }
+        if has(Fault::Dust) {
+            injected[k].dust_returns = add_dust(sweep, config.dust_fraction, sensor, &mut rng);
+        }
+        if has(Fault::Missing) {
+            injected[k].lost_returns = drop_returns(
+                sweep,
+                config.missing_fraction,
+                config.missing_run_max,
+                &mut rng,
+            );
+        }
+        if has(Fault::Compass) {
+            injected[k].compass_error_deg = symmetric(&mut rng, config.compass_error_max_deg);
+        }
+        if has(Fault::GyroDrift) {
+            let limit = config.gyro_error_max_deg;
+            for b in &mut bias {
+                let step: f64 = rng.sample(StandardNormal);
+                *b = (*b + 0.5 * step).clamp(-limit, limit);
+            }
+            injected[k].gyro_error_deg = bias;
+        }
+        let i = &injected[k];
+        for line in &mut sweep.lines {
+            line.attitude = Attitude::new(
+                line.attitude.roll + i.gyro_error_deg[0].to_radians(),
+                line.attitude.pitch + i.gyro_error_deg[1].to_radians(),
+                wrap_angle(line.attitude.yaw + i.compass_error_deg.to_radians()),
+            );
+        }
+    }
+    Ok((run, injected))
+}
+
 /// Replaces a `fraction` of the beams of `sweep` (with or without a return) by a return from
 /// dust: a range uniform between the sensor's minimum range and the surface (or the usable
 /// range where the beam saw nothing). Returns the number of dust returns.
@@ -573,14 +713,16 @@ pub fn drop_returns(sweep: &mut Sweep, fraction: f64, run_max: usize, rng: &mut 
     lost
 }
 
-/// A person walking in a straight line while the sensor sweeps: an upright ellipsoid of
-/// [`PERSON_RADII_M`] whose centre goes from `start` to `end` over the sweep's lines.
+/// A person moving in a straight line while the sensor sweeps: an ellipsoid whose centre goes
+/// from `start` to `end` over the sweep's lines, its first axis along the way.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WalkingPerson {
     /// The centre when the first line is taken, world frame, metres.
     pub start: Vec3,
     /// The centre when the last line is taken.
     pub end: Vec3,
+    /// The body's semi-axes: along the way, across it, up; metres.
+    pub radii: Vec3,
 }
 
 impl WalkingPerson {
@@ -595,7 +737,7 @@ impl WalkingPerson {
         let heading = (self.end - self.start).y.atan2((self.end - self.start).x);
         Ellipsoid::new(
             center,
-            Vec3::from(PERSON_RADII_M),
+            self.radii,
             Rotation3::from_axis_angle(&Vec3::z_axis(), heading),
         )
         .expect("finite centre and positive radii")
@@ -675,8 +817,9 @@ fn place_in_view(
     Some((Vec3::new(x, y, floor), floor))
 }
 
-/// A person who walks `walk_m` in a straight line, 0.8–2.5 m in front of the query sensor, on the
-/// floor and in free space all the way, never nearer than [`KEEP_CLEAR_M`] plus their size.
+/// A person who moves `walk_m` in a straight line, 0.8–2.5 m in front of the query sensor, on
+/// the floor and in free space all the way, never nearer than [`KEEP_CLEAR_M`] plus their size:
+/// standing ([`PERSON_RADII_M`]) where there is headroom, else crawling ([`CRAWLING_RADII_M`]).
 fn place_person(
     scene: &Scene,
     world_from_query: &Pose,
@@ -684,21 +827,24 @@ fn place_person(
     rng: &mut impl Rng,
 ) -> Option<WalkingPerson> {
     let origin = world_from_query.translation.vector;
-    let half_height = PERSON_RADII_M[2];
-    for _ in 0..MAX_PLACE_DRAWS {
-        let Some((feet, _)) = place_in_view(scene, world_from_query, 0.8, 2.5, rng) else {
-            continue;
-        };
-        let direction = rng.random_range(0.0..std::f64::consts::TAU);
-        let start = feet + Vec3::new(0.0, 0.0, half_height);
-        let end = start + Vec3::new(direction.cos(), direction.sin(), 0.0) * walk_m;
-        let path_clear = (0..=10).all(|j| {
-            let c = start + (end - start) * (j as f64 / 10.0);
-            let horizontal = (c - origin).xy().norm();
-            scene.is_free(&c) && horizontal > KEEP_CLEAR_M + PERSON_RADII_M[0]
-        });
-        if path_clear {
-            return Some(WalkingPerson { start, end });
+    for radii in [PERSON_RADII_M, CRAWLING_RADII_M] {
+        let radii = Vec3::from(radii);
+        for _ in 0..MAX_PLACE_DRAWS / 2 {
+            let Some((feet, _)) = place_in_view(scene, world_from_query, 0.8, 2.5, rng) else {
+                continue;
+            };
+            let direction = rng.random_range(0.0..std::f64::consts::TAU);
+            let start = feet + Vec3::new(0.0, 0.0, radii.z);
+            let end = start + Vec3::new(direction.cos(), direction.sin(), 0.0) * walk_m;
+            let path_clear = (0..=10).all(|j| {
+                let c = start + (end - start) * (j as f64 / 10.0);
+                let head = c + Vec3::new(0.0, 0.0, 0.8 * radii.z);
+                let horizontal = (c - origin).xy().norm();
+                scene.is_free(&c) && scene.is_free(&head) && horizontal > KEEP_CLEAR_M + radii.x
+            });
+            if path_clear {
+                return Some(WalkingPerson { start, end, radii });
+            }
         }
     }
     None
@@ -907,6 +1053,7 @@ mod tests {
         let person = WalkingPerson {
             start: Vec3::new(2.0, 1.0, 0.35),
             end: Vec3::new(2.0, -1.0, 0.35),
+            radii: Vec3::from(PERSON_RADII_M),
         };
         let hits = add_walking_person(&mut sweep, &pose, &person, &sensor, &mut rng);
         assert!(hits > 10);
@@ -938,6 +1085,43 @@ mod tests {
             first.1 > last.1 + 10.0,
             "seen further right in later lines: {hit_pans:?}"
         );
+    }
+
+    #[test]
+    fn a_run_with_faults_keeps_the_clean_run_where_no_fault_touches_it() {
+        let sensor = quick_config().pairs.sensor;
+        let scene = sim::collapsed_building(2);
+        let stops = sim::collapsed_building_stops(&scene, 2, 4, &sensor.lift).unwrap();
+        let clean = sim::simulate_run(&scene, &stops, &sensor, 2).unwrap();
+        let config = FaultConfig::default();
+        let (none, injected) =
+            simulate_run_with_faults(&scene, &stops, &sensor, 2, &[], &config).unwrap();
+        assert_eq!(none, clean);
+        assert!(injected.iter().all(|i| *i == Injected::default()));
+
+        let faults = [
+            Fault::Compass,
+            Fault::GyroDrift,
+            Fault::Rubble,
+            Fault::Person,
+        ];
+        let (run, injected) =
+            simulate_run_with_faults(&scene, &stops, &sensor, 2, &faults, &config).unwrap();
+        for (k, (stop, i)) in run.iter().zip(&injected).enumerate() {
+            assert_eq!(stop.world_from_sensor, clean[k].world_from_sensor);
+            let yaw_off =
+                wrap_angle(stop.sweep.mean_attitude().yaw - clean[k].sweep.mean_attitude().yaw);
+            assert!((yaw_off.to_degrees() - i.compass_error_deg).abs() < 1e-6);
+            assert!(i.gyro_error_deg.iter().all(|e| e.abs() <= 2.0));
+            assert!(i.person_returns > 0, "stop {k}: {i:?}");
+        }
+        // Rubble was moved in view of some stop after the first.
+        assert!(
+            injected.iter().any(|i| i.rubble_returns > 0),
+            "{injected:?}"
+        );
+        let tilt = simulate_run_with_faults(&scene, &stops, &sensor, 2, &[Fault::Tilt], &config);
+        assert!(tilt.unwrap_err().to_string().contains("bench --faults"));
     }
 
     #[test]
