@@ -185,6 +185,15 @@ fn a_save_killed_at_any_moment_leaves_the_previous_map_intact() {
         };
         save(dir.path(), &mut files, &map_of(NODES));
         assert_eq!(check_intact(dir.path()), NODES);
+        // … and removes the temporary files the killed child left.
+        for folder in [dir.path().to_path_buf(), dir.path().join("nodes")] {
+            let stray: Vec<String> = std::fs::read_dir(&folder)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .filter(|n| n.contains(".tmp-"))
+                .collect();
+            assert!(stray.is_empty(), "left in {}: {stray:?}", folder.display());
+        }
         outcomes.push((delay, finished, loaded));
     }
     // The kills landed during the run, not all before or after it.

@@ -15,10 +15,12 @@
 //! Saving writes the new node files first and the manifest last, each through
 //! [`super::write_atomic`] (temporary file, sync, rename), so a process killed at any moment
 //! leaves the previous manifest — and every node file it names — intact; a node file written
-//! before the kill but not yet named is simply written again. Loading checks the format name, the
+//! before the kill but not yet named is simply written again, and the next save removes the
+//! temporary files the killed process left. Loading checks the format name, the
 //! version (a newer one says so), the manifest's checksum, each node file's size, magic, version
 //! and checksum against the manifest, and every number for finiteness.
 
+use super::poses::to_rotation;
 use super::voxels::crc32;
 use super::write_atomic;
 use crate::error::{Error, Result};
@@ -26,7 +28,7 @@ use crate::geometry::{Attitude, Pose};
 use crate::map::{LoopClosure, Map, Node};
 use crate::posegraph::{Edge, EdgeKind};
 use crate::slam::SlamConfig;
-use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -139,7 +141,9 @@ fn pose_from_row_major(v: &[f64; 12]) -> Option<Pose> {
     if ((r.transpose() * r) - Matrix3::identity()).abs().max() > 1e-6 || r.determinant() < 0.0 {
         return None;
     }
-    let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+    // The nearest rotation: a quaternion taken from a matrix that is a rotation only to within
+    // 1e-6 is not of unit length, and would scale every point it turns.
+    let rotation = UnitQuaternion::from_rotation_matrix(&to_rotation(&r).ok()?);
     Some(Isometry3::from_parts(
         Translation3::from(Vector3::new(v[3], v[7], v[11])),
         rotation,
@@ -224,6 +228,34 @@ fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f3
     Ok(points)
 }
 
+/// Removes the temporary files (`.NAME.tmp-PID-N`, see [`write_atomic`]) that a process killed
+/// mid-save left in `folder`: those of other processes that are no longer running (on Linux; on
+/// other systems, those of every other process). Best effort: a file that cannot be removed is
+/// left, as it does no harm but take room.
+fn remove_stale_temporaries(folder: &Path) {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return;
+    };
+    let own = std::process::id();
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let Some(pid) = name
+            .strip_prefix('.')
+            .and_then(|n| n.rsplit_once(".tmp-"))
+            .and_then(|(_, tail)| tail.split_once('-'))
+            .and_then(|(pid, _)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = pid == own
+            || (cfg!(target_os = "linux") && Path::new("/proc").join(pid.to_string()).exists());
+        if !alive {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
 /// Saves the map into `folder` (created when missing): node files that `node_files` does not
 /// list yet, then the manifest, each atomically (see the module documentation). `node_files`
 /// is updated; start with [`NodeFiles::default`] for a new folder, or take
@@ -242,6 +274,8 @@ pub fn save_map(
 ) -> Result<()> {
     let nodes_dir = folder.join("nodes");
     std::fs::create_dir_all(&nodes_dir).map_err(|e| Error::io(&nodes_dir, e))?;
+    remove_stale_temporaries(folder);
+    remove_stale_temporaries(&nodes_dir);
     let mut records = Vec::with_capacity(map.nodes.len());
     for node in &map.nodes {
         let name = points_file_name(node.node_id);
