@@ -34,6 +34,20 @@ struct PcdHeader {
     height: Option<usize>,
     points: Option<usize>,
     data: Option<String>,
+    /// The 1-based lines of `WIDTH`, `POINTS` and `DATA`, to name in errors.
+    width_line: Option<usize>,
+    points_line: Option<usize>,
+    data_line: Option<usize>,
+}
+
+/// What [`check_header`] returns: the fields, the point count with the line that declares it
+/// (`POINTS`, else `WIDTH`), and the data mode with its line.
+struct Layout {
+    fields: Vec<Field>,
+    point_count: usize,
+    count_line: Option<usize>,
+    data: String,
+    data_line: Option<usize>,
 }
 
 /// Reads the x, y, z of every point of a PCD file (see the module documentation).
@@ -47,24 +61,35 @@ pub(super) fn read_pcd(path: &Path) -> Result<Vec<Vec3>> {
         ));
     }
     let (header, body_start, header_lines) = parse_header(path, &bytes)?;
-    let (fields, point_count, data) = check_header(path, header)?;
-    let layout = axis_layout(path, &fields)?;
-    let body = bytes.get(body_start..).unwrap_or_default();
-    match data.as_str() {
-        "ascii" => read_ascii(path, body, header_lines, &fields, point_count, layout),
-        "binary" => read_binary(path, body, &fields, point_count, layout),
+    let header = check_header(path, header)?;
+    let axes = axis_layout(path, &header.fields)?;
+    let body = Body {
+        bytes: bytes.get(body_start..).unwrap_or_default(),
+        start: body_start,
+        first_line: header_lines + 1,
+    };
+    match header.data.as_str() {
+        "ascii" => read_ascii(path, &body, &header, axes),
+        "binary" => read_binary(path, &body, &header, axes),
         "binary_compressed" => Err(Error::parse(
             path,
-            None,
+            header.data_line,
             "DATA binary_compressed is not supported; convert the file to binary or ascii, e.g. \
              `pcl_convert_pcd_ascii_binary IN.pcd OUT.pcd 1`",
         )),
         other => Err(Error::parse(
             path,
-            None,
+            header.data_line,
             format!("unknown DATA '{other}'; expected ascii, binary or binary_compressed"),
         )),
     }
+}
+
+/// The data after the `DATA` line: its bytes, its byte offset in the file and its first line.
+struct Body<'a> {
+    bytes: &'a [u8],
+    start: usize,
+    first_line: usize,
 }
 
 /// Reads header lines up to and including `DATA`. Returns the header, the byte offset where the
@@ -159,6 +184,7 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usize, usize)> 
                     return Err(duplicate());
                 }
                 header.width = Some(single("WIDTH")?);
+                header.width_line = Some(line_no);
             }
             "HEIGHT" => {
                 if header.height.is_some() {
@@ -171,6 +197,7 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usize, usize)> 
                     return Err(duplicate());
                 }
                 header.points = Some(single("POINTS")?);
+                header.points_line = Some(line_no);
             }
             "DATA" => {
                 let [mode] = values.as_slice() else {
@@ -179,6 +206,7 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usize, usize)> 
                     ));
                 };
                 header.data = Some(mode.to_string());
+                header.data_line = Some(line_no);
                 return Ok((header, start, line_no));
             }
             // VERSION, VIEWPOINT and keys of later PCD versions do not change x, y, z.
@@ -187,13 +215,14 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usize, usize)> 
     }
     Err(Error::parse(
         path,
-        None,
-        "the PCD header has no DATA line; the file is truncated or not a PCD file",
+        Some(line_no.max(1)),
+        "the file ends here, inside the PCD header, which has no DATA line; the file is truncated \
+         or not a PCD file",
     ))
 }
 
 /// Checks the header's consistency; returns the fields, the point count and the data mode.
-fn check_header(path: &Path, header: PcdHeader) -> Result<(Vec<Field>, usize, String)> {
+fn check_header(path: &Path, header: PcdHeader) -> Result<Layout> {
     let bad = |message: String| Error::parse(path, None, message);
     let names = header
         .fields
@@ -232,19 +261,25 @@ fn check_header(path: &Path, header: PcdHeader) -> Result<(Vec<Field>, usize, St
         });
     }
     let from_size = match (header.width, header.height) {
-        (Some(w), Some(h)) => Some(
-            w.checked_mul(h)
-                .ok_or_else(|| bad(format!("WIDTH {w} × HEIGHT {h} overflows")))?,
-        ),
+        (Some(w), Some(h)) => Some(w.checked_mul(h).ok_or_else(|| {
+            Error::parse(
+                path,
+                header.width_line,
+                format!("WIDTH {w} × HEIGHT {h} overflows"),
+            )
+        })?),
         (Some(w), None) => Some(w),
         (None, _) => None,
     };
+    let count_line = header.points_line.or(header.width_line);
     let points =
         match (header.points, from_size) {
             (Some(p), Some(s)) if p != s => {
-                return Err(bad(format!(
-                    "POINTS {p} disagrees with WIDTH × HEIGHT = {s}; fix the header"
-                )))
+                return Err(Error::parse(
+                    path,
+                    count_line,
+                    format!("POINTS {p} disagrees with WIDTH × HEIGHT = {s}; fix the header"),
+                ))
             }
             (Some(p), _) => p,
             (None, Some(s)) => s,
@@ -254,8 +289,13 @@ fn check_header(path: &Path, header: PcdHeader) -> Result<(Vec<Field>, usize, St
                     .into(),
             )),
         };
-    let data = header.data.unwrap_or_default();
-    Ok((fields, points, data))
+    Ok(Layout {
+        fields,
+        point_count: points,
+        count_line,
+        data: header.data.unwrap_or_default(),
+        data_line: header.data_line,
+    })
 }
 
 /// Finds x, y, z among the fields.
@@ -318,30 +358,32 @@ fn check_point(
     Ok(Some(Vec3::new(xyz[0], xyz[1], xyz[2])))
 }
 
-fn read_binary(
-    path: &Path,
-    body: &[u8],
-    fields: &[Field],
-    point_count: usize,
-    layout: AxisLayout,
-) -> Result<Vec<Vec3>> {
+fn read_binary(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) -> Result<Vec<Vec3>> {
+    let point_count = header.point_count;
     // Field sizes are at most 8 and counts at most 2^20, so this sum cannot overflow in practice;
     // checked anyway.
-    let point_bytes = fields
+    let point_bytes = header
+        .fields
         .iter()
         .try_fold(0usize, |acc, f| {
             acc.checked_add(f.size.checked_mul(f.count)?)
         })
         .unwrap_or(usize::MAX);
     let needed = point_count.checked_mul(point_bytes);
+    let body_start = body.start;
+    let body = body.bytes;
     if needed.is_none_or(|n| n > body.len()) {
+        // The first point that does not fit, and where it starts.
+        let cut = body.len() / point_bytes.max(1);
         return Err(Error::parse(
             path,
-            None,
+            header.count_line,
             format!(
-                "the header declares {point_count} points of {point_bytes} bytes, but only {} bytes \
-                 follow the DATA line; the file is truncated or the header is wrong",
-                body.len()
+                "the header declares {point_count} points of {point_bytes} bytes, but the file ends \
+                 at byte offset {}: point {cut} (byte offset {}) is cut off; the file is truncated \
+                 or the header is wrong",
+                body_start + body.len(),
+                body_start + cut * point_bytes
             ),
         ));
     }
@@ -369,20 +411,16 @@ fn read_binary(
     Ok(points)
 }
 
-fn read_ascii(
-    path: &Path,
-    body: &[u8],
-    header_lines: usize,
-    fields: &[Field],
-    point_count: usize,
-    layout: AxisLayout,
-) -> Result<Vec<Vec3>> {
-    let tokens_per_point: usize = fields.iter().map(|f| f.count).sum();
+fn read_ascii(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) -> Result<Vec<Vec3>> {
+    let point_count = header.point_count;
+    let header_lines = body.first_line - 1;
+    let body = body.bytes;
+    let tokens_per_point: usize = header.fields.iter().map(|f| f.count).sum();
     // Every point takes at least a line break; short lines are reported with their line number.
     if point_count > body.len() {
         return Err(Error::parse(
             path,
-            None,
+            header.count_line,
             format!(
                 "the header declares {point_count} points, more than the {} bytes after the DATA \
                  line can hold; the file is truncated or the header is wrong",
@@ -400,8 +438,10 @@ fn read_ascii(
     let mut points =
         Vec::with_capacity(point_count.min(body.len() / (2 * tokens_per_point).max(1)));
     let mut index = 0usize;
+    let mut last_line = header_lines;
     for (i, line) in text.lines().enumerate() {
         let line_no = header_lines + 1 + i;
+        last_line = line_no;
         let line = line.trim();
         if line.is_empty() || line.starts_with('#') {
             continue;
@@ -450,10 +490,10 @@ fn read_ascii(
     if index != point_count {
         return Err(Error::parse(
             path,
-            None,
+            Some(last_line),
             format!(
-                "the header declares {point_count} points but the data has {index}; the file is \
-                 truncated or the header is wrong"
+                "the file ends here, after {index} of the {point_count} points the header declares; \
+                 it is truncated or the header is wrong"
             ),
         ));
     }

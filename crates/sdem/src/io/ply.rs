@@ -12,7 +12,7 @@ use crate::error::{Error, Result};
 use crate::geometry::Vec3;
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{ElementDef, Encoding, Property, PropertyAccess, PropertyType, ScalarType};
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 /// Headers longer than this are rejected (real ones are a few hundred bytes).
@@ -83,19 +83,29 @@ fn min_element_bytes(def: &ElementDef) -> usize {
         .sum()
 }
 
+/// What [`precheck_header`] learns: the byte length of the header (through the `end_header`
+/// line), its line count, and the 1-based line that declares each element.
+struct HeaderLayout {
+    len: usize,
+    lines: usize,
+    element_lines: HashMap<String, usize>,
+}
+
 /// Checks the header's lines for what `ply-rs-bw` does not guard against and finds its end.
-/// Returns the byte length of the header (through the `end_header` line) and its line count.
-fn precheck_header(path: &Path, bytes: &[u8]) -> Result<(usize, usize)> {
+fn precheck_header(path: &Path, bytes: &[u8]) -> Result<HeaderLayout> {
     let mut start = 0usize;
     let mut line_no = 0usize;
-    let mut element_names = HashSet::new();
+    let mut element_lines = HashMap::new();
     let mut property_names: Option<HashSet<String>> = None;
     loop {
         if start >= bytes.len() || start > MAX_HEADER_BYTES {
             return Err(Error::parse(
                 path,
-                None,
-                "the PLY header has no 'end_header' line; the file is truncated or not a PLY file",
+                Some(line_no.max(1)),
+                format!(
+                    "the file ends here (byte offset {start}) inside the PLY header, which has no \
+                     'end_header' line; the file is truncated or not a PLY file"
+                ),
             ));
         }
         let rest = bytes.get(start..).unwrap_or_default();
@@ -157,7 +167,7 @@ fn precheck_header(path: &Path, bytes: &[u8]) -> Result<(usize, usize)> {
                         "element '{name}' count '{count}' is not a whole number below 2^64"
                     )));
                 }
-                if !element_names.insert(name.to_string()) {
+                if element_lines.insert(name.to_string(), line_no).is_some() {
                     return Err(bad(format!("element '{name}' is declared twice")));
                 }
                 property_names = Some(HashSet::new());
@@ -173,7 +183,13 @@ fn precheck_header(path: &Path, bytes: &[u8]) -> Result<(usize, usize)> {
                     }
                 }
             },
-            ["end_header"] => return Ok((end, line_no)),
+            ["end_header"] => {
+                return Ok(HeaderLayout {
+                    len: end,
+                    lines: line_no,
+                    element_lines,
+                })
+            }
             // comment, obj_info, and anything else: ply-rs-bw accepts or rejects it.
             _ => {}
         }
@@ -191,11 +207,19 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
             "the file is empty; expected a PLY file starting with 'ply'",
         ));
     }
-    let (header_len, header_lines) = precheck_header(path, &bytes)?;
+    let layout = precheck_header(path, &bytes)?;
+    let (header_len, header_lines) = (layout.len, layout.lines);
+    let element_line = |name: &str| layout.element_lines.get(name).copied();
     let mut header_bytes = bytes.get(..header_len).unwrap_or_default();
     let header = Parser::<XyzVertex>::new()
         .read_header(&mut header_bytes)
-        .map_err(|e| Error::parse(path, None, format!("malformed PLY header: {e}")))?;
+        .map_err(|e| {
+            Error::parse(
+                path,
+                None,
+                format!("malformed PLY header: {}", one_line(&e)),
+            )
+        })?;
     let body = bytes.get(header_len..).unwrap_or_default();
 
     let vertex = header.elements.get("vertex").ok_or_else(|| {
@@ -234,10 +258,8 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
     for (name, def) in &header.elements {
         // An ASCII element takes at least its line break; a malformed short line is reported
         // with its line number while reading.
-        let element_bytes = match header.encoding {
-            Encoding::Ascii => 1,
-            _ => min_element_bytes(def),
-        };
+        let ascii = matches!(header.encoding, Encoding::Ascii);
+        let element_bytes = if ascii { 1 } else { min_element_bytes(def) };
         let fits = def
             .count
             .checked_mul(element_bytes)
@@ -246,17 +268,28 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
         match fits {
             Some(total) => needed = total,
             None => {
-                return Err(Error::parse(
-                    path,
-                    None,
+                let room = body.len() - needed;
+                let message = if ascii {
                     format!(
-                    "the header declares {} '{name}' elements of at least {element_bytes} bytes \
-                         each, but only {} bytes follow 'end_header'; the file is truncated or the \
-                         header is wrong",
-                    def.count,
-                    body.len()
-                ),
-                ))
+                        "the header declares {} '{name}' elements, one per line, but only {} bytes \
+                         follow 'end_header'; the file is truncated or the header is wrong",
+                        def.count,
+                        body.len()
+                    )
+                } else {
+                    // The first element that does not fit, and where it starts.
+                    let index = room / element_bytes.max(1);
+                    let offset = header_len + needed + index * element_bytes;
+                    format!(
+                        "the header declares {} '{name}' elements of at least {element_bytes} \
+                         bytes each, but the file ends at byte offset {}: '{name}' element {index} \
+                         (byte offset {offset}) is cut off; the file is truncated or the header is \
+                         wrong",
+                        def.count,
+                        bytes.len()
+                    )
+                };
+                return Err(Error::parse(path, element_line(name), message));
             }
         }
         if name == "vertex" {
@@ -268,6 +301,8 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
         Encoding::Ascii => return read_ascii_body(path, body, header_lines, &header.elements),
         Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
             let mut reader = body;
+            // Where the reader stopped, as a byte offset in the file.
+            let at = |reader: &[u8]| bytes.len() - reader.len();
             for (name, def) in &header.elements {
                 if name == "vertex" {
                     break;
@@ -275,12 +310,17 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
                 if !def.properties.is_empty() {
                     Parser::<Skip>::new()
                         .read_payload_for_element(&mut reader, def, &header)
-                        .map_err(|e| truncated(path, name, def.count, &e))?;
+                        .map_err(|e| {
+                            truncated(path, element_line(name), name, def.count, at(reader), &e)
+                        })?;
                 }
             }
             Parser::<XyzVertex>::new()
                 .read_payload_for_element(&mut reader, vertex, &header)
-                .map_err(|e| truncated(path, "vertex", vertex.count, &e))?
+                .map_err(|e| {
+                    let line = element_line("vertex");
+                    truncated(path, line, "vertex", vertex.count, at(reader), &e)
+                })?
         }
     };
     let mut points = Vec::with_capacity(vertices.len());
@@ -292,13 +332,30 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
     Ok(points)
 }
 
-fn truncated(path: &Path, name: &str, count: usize, e: &std::io::Error) -> Error {
+/// A message of `ply-rs-bw` (which spreads some over lines with tabs) on one line.
+fn one_line(e: &impl std::fmt::Display) -> String {
+    e.to_string()
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// The binary body ended (at byte offset `at`) inside the elements declared at `line`.
+fn truncated(
+    path: &Path,
+    line: Option<usize>,
+    name: &str,
+    count: usize,
+    at: usize,
+    e: &std::io::Error,
+) -> Error {
     Error::parse(
         path,
-        None,
+        line,
         format!(
-            "the binary body ends before the {count} '{name}' elements the header declares ({e}); \
-             the file is truncated"
+            "the binary body ends at byte offset {at}, before the {count} '{name}' elements the \
+             header declares ({e}); the file is truncated",
+            e = one_line(e)
         ),
     )
 }
@@ -338,6 +395,7 @@ fn read_ascii_body(
         .split(|&b| b == b'\n')
         .enumerate()
         .map(|(i, raw)| (header_lines + 1 + i, raw));
+    let mut last_line = header_lines;
     let mut points = Vec::new();
     for (name, def) in elements {
         let is_vertex = name == "vertex";
@@ -349,13 +407,15 @@ fn read_ascii_body(
             let Some((line_no, raw)) = lines.next() else {
                 return Err(Error::parse(
                     path,
-                    None,
+                    Some(last_line),
                     format!(
-                        "the file ends after {index} of the {} '{name}' elements the header declares",
+                        "the file ends here, after {index} of the {} '{name}' elements the header \
+                         declares; it is truncated or the header is wrong",
                         def.count
                     ),
                 ));
             };
+            last_line = line_no;
             if !is_vertex {
                 continue;
             }
