@@ -25,6 +25,9 @@
 //! Infinite coordinates are always an error. NaN is skipped only in the binary-capable formats
 //! (PLY, PCD, KITTI `.bin`), where sensors write it for "no return"; in the plain text formats
 //! (`.xyz`, `.txt`, `.3d`) any coordinate that is not a finite number is an error naming the line.
+//! Scans are metres in the sensor frame: a coordinate beyond the range of `f32` (in which sdem
+//! keeps points) is an error, and so is a scan of which half the points lie farther than
+//! [`MAX_MEDIAN_RANGE_M`] (1 km) from the sensor — millimetres, or world coordinates.
 //!
 //! # `attitude.csv` ([`read_attitude_csv`], [`write_attitude_csv`])
 //!
@@ -71,8 +74,10 @@
 //!    `ROLL_DEG PITCH_DEG YAW_DEG` is the gyro/compass reading, degrees.
 //!    `R_k` is the range of beam `k` in metres, or `nan` where the beam had no return.
 //!
-//! Nothing but blank and comment lines may follow the last data line. All angles and `U` must be
-//! finite; a range must be `nan` or a finite number ≥ 0. Ranges are 32-bit floats; the writer
+//! Nothing but blank and comment lines may follow the last data line, and the last line ends with
+//! its line break (a file without one is truncated). All angles and `U` must be finite, roll and
+//! pitch within ±360°; a range must be `nan` or a finite number ≥ 0, and half of the returns must
+//! lie within [`MAX_MEDIAN_RANGE_M`] (else the ranges are not in metres). Ranges are 32-bit floats; the writer
 //! prints the shortest decimal that reads back to the same `f32`, so a sweep round-trips exactly.
 //! Example (the paper's sensor: pan −90°…90° in 1° steps, 86 tilt lines; ranges shortened):
 //!
@@ -189,7 +194,7 @@ pub use import::{
 };
 pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
 pub use ply::write_points_ply;
-pub use points::{read_points, PointFormat, POINT_EXTENSIONS};
+pub use points::{read_points, PointFormat, MAX_MEDIAN_RANGE_M, POINT_EXTENSIONS};
 pub use poses::{
     read_kitti_poses, read_tum_poses, write_kitti_poses, write_poses, write_tum_poses,
 };

@@ -97,7 +97,53 @@ pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
             "the file holds no points (or only points with NaN coordinates); a scan needs points",
         ));
     }
+    check_magnitudes(path, &points)?;
     Ok(points)
+}
+
+/// Scans are in metres in the sensor frame. When half of a scan's points lie farther than this
+/// from the sensor, the file is in another unit (millimetres) or in world (e.g. georeferenced)
+/// coordinates: no range finder a robot carries sees most of its returns beyond a kilometre.
+/// (Centimetres, or millimetres of a scan taken within a metre, cannot be told from metres.)
+pub const MAX_MEDIAN_RANGE_M: f64 = 1000.0;
+
+/// Checks what every format shares: each coordinate fits in `f32` (sdem keeps points as `f32`),
+/// and the median distance from the sensor is at most [`MAX_MEDIAN_RANGE_M`].
+fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
+    let limit = f64::from(f32::MAX);
+    if let Some((i, p)) = points
+        .iter()
+        .enumerate()
+        .find(|(_, p)| p.iter().any(|v| v.abs() > limit))
+    {
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "point {i} is ({}, {}, {}); sdem keeps coordinates as 32-bit floats, and this one \
+                 does not fit (the file is damaged or not in metres)",
+                p.x, p.y, p.z
+            ),
+        ));
+    }
+    let mut ranges: Vec<(f64, usize)> = points.iter().map(|p| p.norm()).zip(0..).collect();
+    let middle = ranges.len() / 2;
+    let (_, &mut (median, i), _) =
+        ranges.select_nth_unstable_by(middle, |a, b| a.0.total_cmp(&b.0));
+    if median > MAX_MEDIAN_RANGE_M {
+        let p = points.get(i).copied().unwrap_or_default();
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "half of the points lie farther than {median:.0} m from the sensor (point {i} is \
+                 at ({}, {}, {})); sdem reads scans in metres in the sensor frame: is the file in \
+                 millimetres, or in world coordinates?",
+                p.x, p.y, p.z
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Splits a data line into fields: on commas when it has any (each field trimmed, empty fields
@@ -213,13 +259,17 @@ fn read_kitti_bin(path: &Path) -> Result<Vec<Vec3>> {
         ));
     }
     if bytes.len() % 16 != 0 {
+        let cut = bytes.len() / 16;
         return Err(Error::parse(
             path,
             None,
             format!(
-                "{} bytes is not a multiple of 16 (x y z intensity as little-endian f32 per point); \
-                 the file is truncated or not a KITTI Velodyne scan",
-                bytes.len()
+                "{} bytes is not a multiple of 16 (x y z intensity as little-endian f32 per point): \
+                 point {cut} (byte offset {}) is cut off after {} of its 16 bytes; the file is \
+                 truncated or not a KITTI Velodyne scan",
+                bytes.len(),
+                cut * 16,
+                bytes.len() % 16
             ),
         ));
     }
