@@ -8,9 +8,31 @@ use std::path::Path;
 /// The header line of `attitude.csv`, exactly.
 pub const ATTITUDE_HEADER: &str = "index,roll_deg,pitch_deg,yaw_deg";
 
+/// The largest roll or pitch magnitude, degrees, that a gyro reading can have. A tilt sensor
+/// reports angles within one turn, so a larger value is in another unit (hundredths of a degree,
+/// raw counts). Yaw is not bounded: a heading integrated from a gyro may be unwrapped. (Radians
+/// where degrees are expected look like small angles and cannot be told apart.)
+pub const MAX_TILT_READING_DEG: f64 = 360.0;
+
+/// The error text for a roll or pitch (degrees) beyond [`MAX_TILT_READING_DEG`], `None` when
+/// both are within it.
+pub(super) fn tilt_reading_problem(roll_deg: f64, pitch_deg: f64) -> Option<String> {
+    [("roll", roll_deg), ("pitch", pitch_deg)]
+        .into_iter()
+        .find(|(_, v)| v.abs() > MAX_TILT_READING_DEG)
+        .map(|(name, v)| {
+            format!(
+                "{name} is {v} degrees, more than a full turn; a gyro reading lies within \
+                 ±{MAX_TILT_READING_DEG}°, so this is not in degrees (hundredths of a degree? raw \
+                 counts?)"
+            )
+        })
+}
+
 /// Writes `attitude.csv`: the header [`ATTITUDE_HEADER`], then `index,roll,pitch,yaw` per scan
 /// with the angles in degrees, written so that they read back to the same degrees bit-for-bit.
-/// A non-finite angle is an [`Error::Invalid`].
+/// A non-finite angle, or a roll or pitch beyond [`MAX_TILT_READING_DEG`], is an
+/// [`Error::Invalid`].
 ///
 /// # Example
 /// ```
@@ -33,6 +55,13 @@ pub fn write_attitude_csv(path: &Path, attitudes: &[Attitude]) -> Result<()> {
                 path.display()
             )));
         }
+        let [roll, pitch, _] = a.to_degrees();
+        if let Some(why) = tilt_reading_problem(roll, pitch) {
+            return Err(Error::Invalid(format!(
+                "refusing to write {}: attitude {i}: {why}",
+                path.display()
+            )));
+        }
     }
     write_atomic(path, |w| {
         writeln!(w, "{ATTITUDE_HEADER}")?;
@@ -51,9 +80,9 @@ pub fn write_attitude_csv(path: &Path, attitudes: &[Attitude]) -> Result<()> {
 }
 
 /// Reads `attitude.csv` (see [`write_attitude_csv`]); angles come back in radians. The header
-/// must be exactly [`ATTITUDE_HEADER`]; each row needs 4 fields, an index counting 0, 1, 2, … and
-/// finite angles; blank lines are skipped. Any violation, and a file without rows, is an error
-/// naming the file and line.
+/// must be exactly [`ATTITUDE_HEADER`]; each row needs 4 fields, an index counting 0, 1, 2, …,
+/// finite angles, and a roll and pitch within [`MAX_TILT_READING_DEG`]; blank lines are skipped.
+/// Any violation, and a file without rows, is an error naming the file and line.
 pub fn read_attitude_csv(path: &Path) -> Result<Vec<Attitude>> {
     let text = read_text(path)?;
     let mut lines = numbered_lines(&text).filter(|(_, l)| !l.trim().is_empty());
@@ -104,11 +133,13 @@ pub fn read_attitude_csv(path: &Path) -> Result<Vec<Attitude>> {
                 ),
             ));
         }
-        attitudes.push(Attitude::from_degrees(
-            parse_finite(path, line_no, roll, "roll_deg")?,
-            parse_finite(path, line_no, pitch, "pitch_deg")?,
-            parse_finite(path, line_no, yaw, "yaw_deg")?,
-        ));
+        let roll = parse_finite(path, line_no, roll, "roll_deg")?;
+        let pitch = parse_finite(path, line_no, pitch, "pitch_deg")?;
+        let yaw = parse_finite(path, line_no, yaw, "yaw_deg")?;
+        if let Some(why) = tilt_reading_problem(roll, pitch) {
+            return Err(Error::parse(path, Some(line_no), why));
+        }
+        attitudes.push(Attitude::from_degrees(roll, pitch, yaw));
     }
     if attitudes.is_empty() {
         return Err(Error::parse(

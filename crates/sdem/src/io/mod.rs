@@ -37,7 +37,9 @@
 //! 1,0.25,-1,92.5
 //! ```
 //! The header exactly as shown, then one row per scan with `index` counting 0, 1, 2, … in order.
-//! Angles in degrees, `R = Rz(yaw) · Ry(pitch) · Rx(roll)`. Blank lines are ignored.
+//! Angles in degrees, `R = Rz(yaw) · Ry(pitch) · Rx(roll)`. Blank lines are ignored. A roll or
+//! pitch beyond ±[`MAX_TILT_READING_DEG`] (360°) is not a reading in degrees and is an error;
+//! yaw is not bounded (a gyro heading may be unwrapped).
 //!
 //! # Pose files ([`read_kitti_poses`], [`read_tum_poses`], [`write_poses`])
 //!
@@ -63,7 +65,8 @@
 //! 1. `sdem-sweep 1` — the magic word and the format version (only version 1 exists).
 //! 2. `pan_deg PAN_MIN PAN_STEP PAN_COUNT` — every scan line holds `PAN_COUNT` (≥ 1) beams;
 //!    beam `k` (0-based) is at pan angle `PAN_MIN + k · PAN_STEP` degrees, counter-clockwise
-//!    from forward inside the scan plane. `PAN_STEP` > 0.
+//!    from forward inside the scan plane. `PAN_STEP` > 0, and every beam's pan angle lies within
+//!    ±360°.
 //! 3. `lift_slide_m U` — the lift's slide `u` during the sweep, metres (see
 //!    [`crate::sensor::LiftConfig`]).
 //! 4. `lines N` — the number of scan lines that follow (≥ 1).
@@ -76,9 +79,10 @@
 //!
 //! Nothing but blank and comment lines may follow the last data line, and the last line ends with
 //! its line break (a file without one is truncated). All angles and `U` must be finite, roll and
-//! pitch within ±360°; a range must be `nan` or a finite number ≥ 0, and half of the returns must
-//! lie within [`MAX_MEDIAN_RANGE_M`] (else the ranges are not in metres). Ranges are 32-bit floats; the writer
-//! prints the shortest decimal that reads back to the same `f32`, so a sweep round-trips exactly.
+//! pitch within ±[`MAX_TILT_READING_DEG`]; a range must be `nan` or a finite number ≥ 0, and half
+//! of the returns must lie within [`MAX_MEDIAN_RANGE_M`] (else the ranges are not in metres).
+//! Ranges are 32-bit floats; the writer prints the shortest decimal that reads back to the same
+//! `f32`, so a sweep round-trips exactly.
 //! Example (the paper's sensor: pan −90°…90° in 1° steps, 86 tilt lines; ranges shortened):
 //!
 //! ```text
@@ -181,7 +185,7 @@ mod poses;
 mod sweep;
 mod voxels;
 
-pub use attitude::{read_attitude_csv, write_attitude_csv, ATTITUDE_HEADER};
+pub use attitude::{read_attitude_csv, write_attitude_csv, ATTITUDE_HEADER, MAX_TILT_READING_DEG};
 pub use dataset::{
     clear_dataset, write_dataset, Dataset, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE,
     SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,

@@ -1,7 +1,10 @@
 //! The `.sweep` raw tilting-LRF format, version 1 (specified in the module documentation of
 //! [`crate::io`]).
 
-use super::{fmt_f64, numbered_lines, parse_count, parse_finite, read_text, write_atomic};
+use super::attitude::tilt_reading_problem;
+use super::{
+    fmt_f64, numbered_lines, parse_count, parse_finite, read_text, write_atomic, MAX_MEDIAN_RANGE_M,
+};
 use crate::error::{Error, Result};
 use crate::geometry::Attitude;
 use crate::sensor::{Sweep, SweepLine};
@@ -15,6 +18,54 @@ pub const SWEEP_VERSION: u32 = 1;
 
 /// More beams per line than this is taken for a damaged header (a 0.01° step over 360° is 36,000).
 const MAX_PAN_COUNT: usize = 1_000_000;
+
+/// Every beam's pan angle lies within ± this, degrees: a scan line covers at most a turn on each
+/// side of forward (larger angles are a damaged header, and overflow to non-finite points).
+const MAX_PAN_DEG: f64 = 360.0;
+
+/// `Some(message)` when the pan angles `PAN_MIN`, …, `PAN_MIN + (PAN_COUNT − 1) · PAN_STEP`
+/// leave ±[`MAX_PAN_DEG`].
+fn pan_problem(pan_min_deg: f64, pan_step_deg: f64, pan_count: usize) -> Option<String> {
+    let last = pan_min_deg + pan_count.saturating_sub(1) as f64 * pan_step_deg;
+    let inside = |v: f64| v.is_finite() && v.abs() <= MAX_PAN_DEG;
+    (!(inside(pan_min_deg) && inside(last))).then(|| {
+        format!(
+            "the beams' pan angles run from {pan_min_deg}° to {last}°; they must lie within \
+             ±{MAX_PAN_DEG}° (a scan line covers at most a turn)"
+        )
+    })
+}
+
+/// When half of the sweep's returns (finite ranges > 0) are farther than
+/// [`MAX_MEDIAN_RANGE_M`], the index of a line holding the median range and that range: the
+/// ranges are not in metres (millimetres?).
+fn ranges_problem(sweep: &Sweep) -> Option<(usize, f32)> {
+    let mut returns: Vec<(f32, usize)> = sweep
+        .lines
+        .iter()
+        .enumerate()
+        .flat_map(|(i, line)| {
+            line.ranges
+                .iter()
+                .filter(|r| r.is_finite() && **r > 0.0)
+                .map(move |&r| (r, i))
+        })
+        .collect();
+    if returns.is_empty() {
+        return None;
+    }
+    let middle = returns.len() / 2;
+    let (_, &mut (median, line), _) =
+        returns.select_nth_unstable_by(middle, |a, b| a.0.total_cmp(&b.0));
+    (f64::from(median) > MAX_MEDIAN_RANGE_M).then_some((line, median))
+}
+
+fn ranges_message(median: f32) -> String {
+    format!(
+        "half of the sweep's ranges are {median} m or more (this line holds the median); no range \
+         finder a robot carries sees that far, and ranges are in metres: are they in millimetres?"
+    )
+}
 
 /// A range is NaN (no return) or a finite distance >= 0.
 fn is_valid_range(r: f32) -> bool {
@@ -46,6 +97,9 @@ pub fn write_sweep(path: &Path, sweep: &Sweep) -> Result<()> {
     if sweep.lines.is_empty() || pan_count == 0 {
         return Err(refuse("the sweep has no lines or no beams".into()));
     }
+    if let Some(why) = pan_problem(sweep.pan_min_deg, sweep.pan_step_deg, pan_count) {
+        return Err(refuse(why));
+    }
     for (i, line) in sweep.lines.iter().enumerate() {
         if let Some(k) = line.ranges.iter().position(|r| !is_valid_range(*r)) {
             return Err(refuse(format!(
@@ -53,6 +107,13 @@ pub fn write_sweep(path: &Path, sweep: &Sweep) -> Result<()> {
                 line.ranges.get(k).copied().unwrap_or(f32::NAN)
             )));
         }
+        let [roll, pitch, _] = line.attitude.to_degrees();
+        if let Some(why) = tilt_reading_problem(roll, pitch) {
+            return Err(refuse(format!("line {i}: {why}")));
+        }
+    }
+    if let Some((i, median)) = ranges_problem(sweep) {
+        return Err(refuse(format!("line {i}: {}", ranges_message(median))));
     }
     write_atomic(path, |w| {
         writeln!(w, "{SWEEP_MAGIC} {SWEEP_VERSION}")?;
@@ -92,11 +153,21 @@ pub fn write_sweep(path: &Path, sweep: &Sweep) -> Result<()> {
 /// for the format. The attitude comes back in radians.
 ///
 /// Errors, each naming the file and line: a missing or wrong magic line, another version, a
-/// header line out of order or malformed, a count that the file cannot hold, a data line with
-/// the wrong number of values, a non-finite angle, a range that is negative or infinite, fewer
-/// or more data lines than declared.
+/// header line out of order or malformed, a count that the file cannot hold, pan angles beyond
+/// ±360°, a data line with the wrong number of values, a non-finite angle, a roll or pitch beyond
+/// ±360° (not degrees), a range that is negative or infinite, fewer or more data lines than
+/// declared, a last line without its line break (a truncated file), and ranges whose median lies
+/// beyond [`MAX_MEDIAN_RANGE_M`] (not metres).
 pub fn read_sweep(path: &Path) -> Result<Sweep> {
     let text = read_text(path)?;
+    if text.trim().is_empty() {
+        return Err(Error::parse(
+            path,
+            None,
+            "the file is empty; a sweep starts with the line 'sdem-sweep 1'",
+        ));
+    }
+    let last_line = text.lines().count();
     let mut lines = numbered_lines(&text).filter(|(_, l)| {
         let t = l.trim_start();
         !t.is_empty() && !t.starts_with('#')
@@ -105,8 +176,10 @@ pub fn read_sweep(path: &Path) -> Result<Sweep> {
         let Some((line_no, line)) = lines.next() else {
             return Err(Error::parse(
                 path,
-                None,
-                format!("the file ends before the '{usage}' line; the sweep header is incomplete"),
+                Some(last_line),
+                format!(
+                    "the file ends here, before the '{usage}' line; the sweep header is incomplete"
+                ),
             ));
         };
         let tokens: Vec<&str> = line.split_whitespace().collect();
@@ -174,6 +247,9 @@ pub fn read_sweep(path: &Path) -> Result<Sweep> {
             format!("PAN_COUNT is {pan_count}; it must lie in 1..={MAX_PAN_COUNT}"),
         ));
     }
+    if let Some(why) = pan_problem(pan_min_deg, pan_step_deg, pan_count) {
+        return Err(Error::parse(path, Some(line_no), why));
+    }
 
     let (line_no, tokens) = next_header("lift_slide_m", "lift_slide_m U")?;
     let [_, slide] = tokens.as_slice() else {
@@ -211,6 +287,7 @@ pub fn read_sweep(path: &Path) -> Result<Sweep> {
     }
 
     let mut sweep_lines = Vec::with_capacity(line_count);
+    let mut line_numbers = Vec::with_capacity(line_count);
     for (line_no, line) in lines {
         if sweep_lines.len() == line_count {
             return Err(Error::parse(
@@ -220,16 +297,25 @@ pub fn read_sweep(path: &Path) -> Result<Sweep> {
             ));
         }
         sweep_lines.push(data_line(path, line_no, line, pan_count)?);
+        line_numbers.push(line_no);
     }
     if sweep_lines.len() != line_count {
         return Err(Error::parse(
             path,
-            None,
+            Some(last_line),
             format!(
-                "the file ends after {} of the {line_count} data lines that 'lines' declares; it is \
-                 truncated",
+                "the file ends here, after {} of the {line_count} data lines that 'lines' declares; \
+                 it is truncated",
                 sweep_lines.len()
             ),
+        ));
+    }
+    if !text.ends_with('\n') {
+        return Err(Error::parse(
+            path,
+            Some(last_line),
+            "the last line has no line break: the file is truncated (every line of a sweep ends \
+             with one)",
         ));
     }
     let sweep = Sweep {
@@ -241,6 +327,10 @@ pub fn read_sweep(path: &Path) -> Result<Sweep> {
     sweep
         .validate()
         .map_err(|e| Error::parse(path, None, e.to_string()))?;
+    if let Some((i, median)) = ranges_problem(&sweep) {
+        let line = line_numbers.get(i).copied();
+        return Err(Error::parse(path, line, ranges_message(median)));
+    }
     Ok(sweep)
 }
 
@@ -284,6 +374,9 @@ fn data_line(path: &Path, line_no: usize, line: &str, pan_count: usize) -> Resul
         ranges.push(r);
     }
     let [tilt_deg, roll, pitch, yaw] = angles;
+    if let Some(why) = tilt_reading_problem(roll, pitch) {
+        return Err(Error::parse(path, Some(line_no), why));
+    }
     Ok(SweepLine {
         tilt_deg,
         attitude: Attitude::from_degrees(roll, pitch, yaw),
