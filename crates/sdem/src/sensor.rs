@@ -104,14 +104,19 @@ impl SensorConfig {
                 "sensor: tilt_min_deg/pan_min_deg must not exceed tilt_max_deg/pan_max_deg".into(),
             ));
         }
-        if !(-90.0..=90.0).contains(&self.tilt_min_deg)
-            || !(-90.0..=90.0).contains(&self.tilt_max_deg)
-            || !(-180.0..=180.0).contains(&self.pan_min_deg)
-            || !(-180.0..=180.0).contains(&self.pan_max_deg)
-        {
-            return Err(Error::Invalid(
-                "sensor: tilt must lie in [-90, 90] and pan in [-180, 180] degrees".into(),
-            ));
+        let angles = [
+            ("tilt_min_deg", self.tilt_min_deg, 90.0),
+            ("tilt_max_deg", self.tilt_max_deg, 90.0),
+            ("pan_min_deg", self.pan_min_deg, 180.0),
+            ("pan_max_deg", self.pan_max_deg, 180.0),
+        ];
+        for (name, value, limit) in angles {
+            if value.abs() > limit {
+                return Err(Error::Invalid(format!(
+                    "sensor: {name} is {value}; tilt must lie in [-90, 90] and pan in [-180, 180] \
+                     degrees"
+                )));
+            }
         }
         if self.min_range_m < 0.0 || self.max_range_m <= self.min_range_m {
             return Err(Error::Invalid(
@@ -125,11 +130,17 @@ impl SensorConfig {
                 )));
             }
         }
-        if self.range_noise_m < 0.0
-            || self.tilt_sensor_noise_deg < 0.0
-            || self.compass_noise_deg < 0.0
-        {
-            return Err(Error::Invalid("sensor: noise levels must be >= 0".into()));
+        let noises = [
+            ("range_noise_m", self.range_noise_m),
+            ("tilt_sensor_noise_deg", self.tilt_sensor_noise_deg),
+            ("compass_noise_deg", self.compass_noise_deg),
+        ];
+        for (name, value) in noises {
+            if value < 0.0 {
+                return Err(Error::Invalid(format!(
+                    "sensor: {name} is {value}; noise levels must be >= 0"
+                )));
+            }
         }
         self.lift.validate()
     }

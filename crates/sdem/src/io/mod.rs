@@ -52,7 +52,8 @@
 //! # `sensor.toml` ([`read_sensor_toml`], [`write_sensor_toml`])
 //!
 //! The fields of [`SensorConfig`] (unknown keys are errors, missing keys take the defaults), then
-//! [`SensorConfig::validate`].
+//! [`SensorConfig::validate`]. An empty file is an error (a truncated one: remove the file to use
+//! the defaults).
 //!
 //! # Raw sweeps: the `.sweep` format, version 1 ([`read_sweep`], [`write_sweep`])
 //!
@@ -412,9 +413,19 @@ pub fn write_sensor_toml(path: &Path, config: &SensorConfig) -> Result<()> {
 }
 
 /// Reads `sensor.toml` into a validated [`SensorConfig`]. Unknown keys, wrong types and invalid
-/// values are parse errors naming the file (and the line, where TOML reports one).
+/// values are parse errors naming the file and the line (for an invalid value, the line of the
+/// key the message names, where the file sets it). An empty file is an error too: it is a
+/// truncated one (sdem writes every key); remove the file to use the defaults.
 pub fn read_sensor_toml(path: &Path) -> Result<SensorConfig> {
     let text = read_text(path)?;
+    if text.trim().is_empty() {
+        return Err(Error::parse(
+            path,
+            None,
+            "the file is empty (truncated?); write the sensor model's keys, or remove the file to \
+             use the default sensor model",
+        ));
+    }
     let config: SensorConfig = toml::from_str(&text).map_err(|e| {
         let line = e
             .span()
@@ -428,10 +439,29 @@ pub fn read_sensor_toml(path: &Path) -> Result<SensorConfig> {
             ),
         )
     })?;
-    config
-        .validate()
-        .map_err(|e| Error::parse(path, None, e.to_string()))?;
+    config.validate().map_err(|e| {
+        let message = e.to_string();
+        Error::parse(path, line_of_named_key(&text, &message), message)
+    })?;
     Ok(config)
+}
+
+/// The 1-based line of the first `KEY = value` line of a TOML text whose `KEY` the message
+/// names (as a whole word).
+fn line_of_named_key(text: &str, message: &str) -> Option<usize> {
+    let names = |key: &str| {
+        message.match_indices(key).any(|(at, _)| {
+            let word = |c: char| c.is_alphanumeric() || c == '_';
+            let before = message.get(..at).and_then(|m| m.chars().next_back());
+            let after = message.get(at + key.len()..).and_then(|m| m.chars().next());
+            !before.is_some_and(word) && !after.is_some_and(word)
+        })
+    };
+    numbered_lines(text).find_map(|(line_no, line)| {
+        let (key, _) = line.split_once('=')?;
+        let key = key.trim();
+        (!key.is_empty() && !key.starts_with('#') && names(key)).then_some(line_no)
+    })
 }
 
 #[cfg(test)]
