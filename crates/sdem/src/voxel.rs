@@ -26,7 +26,7 @@ pub type VoxelKey = [i32; 3];
 
 /// Keys beyond this magnitude are not used, so that key arithmetic never overflows (at 5 cm this
 /// is ±50,000 km).
-const MAX_KEY: f64 = 1e9;
+pub(crate) const MAX_KEY: f64 = 1e9;
 
 /// The log-odds `ln(p / (1 − p))` of a probability.
 fn logit(p: f64) -> f64 {

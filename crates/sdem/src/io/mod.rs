@@ -114,7 +114,9 @@
 //! frame, `s = voxel_m` metres; a log-odds above 0 is occupied, at or below 0 free; voxels not
 //! listed are unknown. A reader checks, in this order: the magic, the version (a newer one is
 //! reported as such), that the file is exactly `72 + 16 N` bytes, the checksum, the
-//! configuration, then that each log-odds is finite and within `[min_log_odds, max_log_odds]`.
+//! configuration, then that each record's log-odds is finite and within
+//! `[min_log_odds, max_log_odds]`, its key within ±10⁹ and after the previous record's key (an
+//! error names the record and its byte offset).
 //! The checksum is CRC-32 rather than a hash: it catches every burst error up to 32 bits and
 //! every 1- to 3-bit error in files far larger than a map, any zlib can check it, and a map file
 //! needs protection from damage, not from forgery.

@@ -3,7 +3,7 @@
 
 use super::{read_bytes, write_atomic};
 use crate::error::{Error, Result};
-use crate::voxel::{VoxelConfig, VoxelKey, VoxelMap};
+use crate::voxel::{VoxelConfig, VoxelKey, VoxelMap, MAX_KEY};
 use std::path::Path;
 
 /// The eight bytes that start a `.sdemvox` file.
@@ -163,15 +163,40 @@ fn decode(path: &Path, bytes: &[u8]) -> Result<VoxelMap> {
         max_range_m,
     };
     config.validate().map_err(|e| bad(e.to_string()))?;
-    let mut records = Vec::with_capacity(count as usize);
-    for _ in 0..count {
+    let (lo, hi) = (config.min_log_odds as f32, config.max_log_odds as f32);
+    let mut records: Vec<(VoxelKey, f32)> = Vec::with_capacity(count as usize);
+    for index in 0..records.capacity() {
+        let offset = reader.at;
         // The size check above guarantees the bytes are there.
         let (Some(x), Some(y), Some(z), Some(log_odds)) =
             (reader.i32(), reader.i32(), reader.i32(), reader.f32())
         else {
             return Err(truncated());
         };
-        records.push(([x, y, z], log_odds));
+        let key = [x, y, z];
+        let at = |why: String| bad(format!("record {index} (byte offset {offset}): {why}"));
+        if !(log_odds.is_finite() && lo <= log_odds && log_odds <= hi) {
+            return Err(at(format!(
+                "voxel {key:?} has log-odds {log_odds}; it must be finite and within \
+                 [min_log_odds, max_log_odds] = [{lo}, {hi}]"
+            )));
+        }
+        if key.iter().any(|v| f64::from(v.unsigned_abs()) > MAX_KEY) {
+            return Err(at(format!(
+                "voxel {key:?} is out of range; keys are at most {MAX_KEY} in magnitude"
+            )));
+        }
+        if let Some((previous, _)) = records.last() {
+            if key <= *previous {
+                let why = if key == *previous {
+                    "appears twice"
+                } else {
+                    "comes after a larger key; records are sorted by (i, j, k)"
+                };
+                return Err(at(format!("voxel {key:?} {why}")));
+            }
+        }
+        records.push((key, log_odds));
     }
     VoxelMap::from_voxels(config, records).map_err(|e| bad(e.to_string()))
 }
