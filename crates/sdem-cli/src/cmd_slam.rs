@@ -114,13 +114,7 @@ pub fn run(args: Args) -> Result<()> {
         (slam, steps, Some(next), saved.node_files)
     } else {
         let mut config = match &args.config {
-            Some(path) => {
-                let text = std::fs::read_to_string(path)
-                    .with_context(|| format!("cannot read {}", path.display()))?;
-                toml::from_str::<SlamConfig>(&text).with_context(|| {
-                    format!("{}: not a valid sdem slam configuration", path.display())
-                })?
-            }
+            Some(path) => sdem::io::read_slam_config(path)?,
             None => SlamConfig::default(),
         };
         if let Some(step) = args.step {

@@ -123,6 +123,19 @@ fn slam_names_a_bad_attitude_csv() {
 }
 
 #[test]
+fn slam_names_a_bad_config_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    let out = dir.path().join("out");
+    let config = dir.path().join("slam.toml");
+    let args = ["slam", s(&ds), "--out", s(&out), "--config", s(&config)];
+    std::fs::write(&config, "heading_half_deg = 3.0\nheading_hlaf_deg = 4.0\n").unwrap();
+    error_naming(dir.path(), &args, &["slam.toml:2:", "heading_hlaf_deg"]);
+    std::fs::write(&config, "[voxel]\nvoxel_m = nan\n").unwrap();
+    error_naming(dir.path(), &args, &["slam.toml:2:", "voxel_m"]);
+}
+
+#[test]
 fn slam_names_a_truncated_binary_scan() {
     let dir = tempfile::tempdir().unwrap();
     let ds = dataset(dir.path());

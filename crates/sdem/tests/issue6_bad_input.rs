@@ -76,6 +76,8 @@ enum Reader {
     UosFrames,
     KittiCalib,
     SensorToml,
+    /// `io::read_slam_config`, the file of `sdem slam --config`.
+    SlamConfig,
     VoxelMap,
     /// `io::load_map` on a saved map folder.
     Map,
@@ -162,6 +164,7 @@ fn read(reader: Reader, path: &Path) -> sdem::Result<()> {
         Reader::UosFrames => io::read_uos_frames_last(path).map(drop),
         Reader::KittiCalib => io::read_kitti_calib_tr(path).map(drop),
         Reader::SensorToml => io::read_sensor_toml(path).map(drop),
+        Reader::SlamConfig => io::read_slam_config(path).map(drop),
         Reader::VoxelMap => io::read_voxel_map(path).map(drop),
         Reader::Map => io::load_map(path).map(drop),
         Reader::Dataset => {
@@ -718,6 +721,17 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Range, n, "tilt_step_deg = 1.0\npan_max_deg = 200.0\n", &[Line(2), Has("pan_max_deg")]));
     c.push(file(r, f, Range, n, "[lift]\nlink_length_m = -0.4\n", &[Line(2)]));
 
+    // --- the configuration of `sdem slam --config` (an empty file is all defaults) -------------
+    let (r, f, n) = (SlamConfig, "slam config.toml", "config.toml");
+    c.push(file(r, f, Truncated, n, "heading_half_deg = 3.0\n[localize]\nstep_m = ", &[Line(3)]));
+    c.push(file(r, f, Truncated, n, "heading_half_deg = 3.0\n[locali", &[Line(2)]));
+    c.push(file(r, f, Nan, n, "reference_radius_m = 4.0\nheading_half_deg = nan\n", &[Line(2), Has("heading_half_deg")]));
+    c.push(file(r, f, Inf, n, "[voxel]\nvoxel_m = inf\n", &[Line(2), Has("voxel_m")]));
+    c.push(file(r, f, Header, n, "[slam]\nheading_half_deg = 3.0\n", &[Line(1)]));
+    c.push(file(r, f, Columns, n, "heading_half_deg = \"wide\"\n", &[Line(1)]));
+    c.push(file(r, f, Columns, n, "heading_half_deg = 3.0\nheading_hlaf_deg = 4.0\n", &[Line(2)]));
+    c.push(file(r, f, Range, n, "max_reference_nodes = 3\nheading_half_deg = 720.0\n", &[Line(2)]));
+
     // --- .sdemvox voxel maps ------------------------------------------------------------------
     let (r, f, n) = (VoxelMap, ".sdemvox", "map.sdemvox");
     let good = voxel_bytes();
@@ -1226,6 +1240,14 @@ fn the_valid_inputs_the_table_starts_from_are_read() {
             b"tilt_min_deg = -45.0\nmax_range_m = 8.0\n[lift]\nlink_length_m = 0.4\n".to_vec(),
         ),
         (Reader::VoxelMap, "m.sdemvox", voxel_bytes()),
+        (Reader::SlamConfig, "empty.toml", Vec::new()),
+        (
+            Reader::SlamConfig,
+            "config.toml",
+            toml::to_string_pretty(&SlamConfig::default())
+                .unwrap()
+                .into_bytes(),
+        ),
     ];
     for (reader, name, bytes) in files {
         let path = dir.path().join(name);

@@ -77,6 +77,7 @@ enum Target {
     UosFrames,
     KittiCalib,
     SensorToml,
+    SlamConfig,
     VoxelMap,
     /// A saved map whose `map.json` is the input.
     MapManifest,
@@ -99,6 +100,7 @@ impl Target {
             Target::UosFrames => "scan000.frames",
             Target::KittiCalib => "calib.txt",
             Target::SensorToml => "sensor.toml",
+            Target::SlamConfig => "config.toml",
             Target::VoxelMap => "map.sdemvox",
             Target::MapManifest => "map.json",
             Target::MapNode => "000001.pts",
@@ -212,6 +214,12 @@ fn read_and_check(target: Target, path: &Path) -> Result<Result<(), String>, Str
         },
         Target::SensorToml => match io::read_sensor_toml(path) {
             Ok(sensor) => sensor
+                .validate()
+                .map_err(|e| format!("Ok but invalid: {e}")),
+            Err(err) => return e(err),
+        },
+        Target::SlamConfig => match io::read_slam_config(path) {
+            Ok(config) => config
                 .validate()
                 .map_err(|e| format!("Ok but invalid: {e}")),
             Err(err) => return e(err),
@@ -766,6 +774,9 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
             "# sdem sensor model\ntilt_min_deg = -45.0\ntilt_max_deg = 40.0\npan_step_deg = 1.0\n\
              max_range_m = 8.0\ntrusted_range_m = 3.0\n\n[lift]\nlink_length_m = 0.4\n",
         ),
+        Target::SlamConfig => vec![toml::to_string_pretty(&SlamConfig::default())
+            .unwrap()
+            .into_bytes()],
         Target::VoxelMap => vec![voxel_bytes()],
         Target::MapManifest | Target::MapNode => {
             let dir = tempfile::tempdir().unwrap();
@@ -944,6 +955,7 @@ fuzz_targets! {
     uos_frames => Target::UosFrames,
     kitti_calib => Target::KittiCalib,
     sensor_toml => Target::SensorToml,
+    slam_config => Target::SlamConfig,
     voxel_map => Target::VoxelMap,
     map_manifest => Target::MapManifest,
     map_node_file => Target::MapNode,

@@ -428,24 +428,49 @@ pub fn read_sensor_toml(path: &Path) -> Result<SensorConfig> {
              use the default sensor model",
         ));
     }
-    let config: SensorConfig = toml::from_str(&text).map_err(|e| {
-        let line = e
-            .span()
-            .map(|span| 1 + text.get(..span.start).map_or(0, |t| count_newlines(t.as_bytes())));
-        Error::parse(
-            path,
-            line,
-            format!(
-                "{} (the keys are those of sdem's SensorConfig; angles in degrees, lengths in metres)",
-                e.message().trim_end()
-            ),
-        )
-    })?;
+    let config: SensorConfig = parse_toml(
+        path,
+        &text,
+        "the keys are those of sdem's SensorConfig; angles in degrees, lengths in metres",
+    )?;
     config.validate().map_err(|e| {
         let message = e.to_string();
         Error::parse(path, line_of_named_key(&text, &message), message)
     })?;
     Ok(config)
+}
+
+/// Reads the configuration file of `sdem slam --config FILE`: the fields of
+/// [`crate::slam::SlamConfig`] as `sdem slam` writes them into `config.toml` (unknown keys are
+/// errors, missing keys take the defaults), then [`crate::slam::SlamConfig::validate`]. Errors
+/// name the file and the line (for an invalid value, the line of the key the message names,
+/// where the file sets it), on one line.
+pub fn read_slam_config(path: &Path) -> Result<crate::slam::SlamConfig> {
+    let text = read_text(path)?;
+    let config: crate::slam::SlamConfig = parse_toml(
+        path,
+        &text,
+        "the keys are those of the config.toml that sdem slam writes",
+    )?;
+    config.validate().map_err(|e| {
+        let message = e.to_string();
+        Error::parse(path, line_of_named_key(&text, &message), message)
+    })?;
+    Ok(config)
+}
+
+/// Parses TOML `text` read from `path`; an error names the file and line on one line (TOML's own
+/// message shows the line over several), with `keys` saying what the keys are.
+fn parse_toml<T: serde::de::DeserializeOwned>(path: &Path, text: &str, keys: &str) -> Result<T> {
+    toml::from_str(text).map_err(|e| {
+        let line = e.span().map(|span| {
+            1 + text
+                .get(..span.start)
+                .map_or(0, |t| count_newlines(t.as_bytes()))
+        });
+        let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+        Error::parse(path, line, format!("{message} ({keys})"))
+    })
 }
 
 /// The 1-based line of the first `KEY = value` line of a TOML text whose `KEY` the message
