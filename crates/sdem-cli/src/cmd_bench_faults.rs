@@ -4,7 +4,8 @@
 //! ([`sdem::faults::fault_pairs`]) are localized as the robot would in the field
 //! ([`sdem::faults::localize_config`]: ±0.15 m around the odometry prior, headings within ±25°
 //! of the compass) and scored against the truth: success rate (error < 2 cm), translation and
-//! rotation errors, time.
+//! rotation errors, time, and how many failures the diagnostics flagged (`ambiguous`, or an
+//! error) so the robot knows not to trust them.
 
 use crate::output::print_json;
 use anyhow::{bail, Result};
@@ -37,6 +38,10 @@ struct CaseReport {
     translation_error_mm: Stats,
     rotation_error_deg: Stats,
     time_ms: Stats,
+    /// Failures (≥ 2 cm) that the diagnostics flagged `ambiguous`: the robot knows not to trust them.
+    failures_flagged: usize,
+    /// Successes flagged `ambiguous` all the same (false alarms).
+    successes_flagged: usize,
     failures: Vec<String>,
 }
 
@@ -87,6 +92,7 @@ fn run_case(
     let sdem_config = SdemConfig::default();
     let (mut translation, mut rotation, mut times, mut failures) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut failures_flagged, mut successes_flagged) = (0, 0);
     let bar = crate::progress::bar(pairs.len() as u64, args.json, &format!("{name}: localized"));
     for (i, pair) in pairs.iter().enumerate() {
         bar.inc(1);
@@ -95,18 +101,29 @@ fn run_case(
                 translation.push(result.translation_error_m * 1e3);
                 rotation.push(result.rotation_error_deg);
                 times.push(result.time_ms);
+                let d = &result.localization.diagnostics;
                 if result.translation_error_m >= 0.02 {
+                    failures_flagged += usize::from(d.ambiguous);
                     failures.push(format!(
-                        "pair {i}: error {:.1} mm, {:.2}° ({:?})",
+                        "pair {i}: error {:.1} mm, {:.2}°, {:.0} % of points matched, {} ({:?})",
                         result.translation_error_m * 1e3,
                         result.rotation_error_deg,
+                        d.inlier_fraction * 100.0,
+                        if d.ambiguous {
+                            format!("flagged: {}", d.ambiguity.join("; "))
+                        } else {
+                            "not flagged".to_string()
+                        },
                         pair.injected
                     ));
+                } else {
+                    successes_flagged += usize::from(d.ambiguous);
                 }
             }
             Err(e) => {
                 translation.push(f64::NAN);
                 rotation.push(f64::NAN);
+                failures_flagged += 1;
                 failures.push(format!("pair {i}: {e}"));
             }
         }
@@ -132,6 +149,8 @@ fn run_case(
         translation_error_mm: summarize(&translation),
         rotation_error_deg: summarize(&rotation),
         time_ms: summarize(&times),
+        failures_flagged,
+        successes_flagged,
         failures,
     })
 }
@@ -176,15 +195,25 @@ pub fn run(args: &FaultArgs, say: &dyn Fn(&str)) -> Result<()> {
     );
     println!();
     println!(
-        "{:<11} {:>5} {:>9} {:>10} {:>10} {:>10} {:>10} {:>9}  what",
-        "case", "pairs", "success", "median mm", "p95 mm", "max mm", "median °", "time ms"
+        "{:<11} {:>5} {:>9} {:>8} {:>10} {:>10} {:>10} {:>10} {:>9}  what",
+        "case",
+        "pairs",
+        "success",
+        "flagged",
+        "median mm",
+        "p95 mm",
+        "max mm",
+        "median °",
+        "time ms"
     );
     for c in &report.cases {
+        let failed = c.pairs - (c.success_rate_2cm * c.pairs as f64).round() as usize;
         println!(
-            "{:<11} {:>5} {:>8.1}% {:>10.2} {:>10.2} {:>10.1} {:>10.3} {:>9.0}  {}",
+            "{:<11} {:>5} {:>8.1}% {:>8} {:>10.2} {:>10.2} {:>10.1} {:>10.3} {:>9.0}  {}",
             c.case,
             c.pairs,
             c.success_rate_2cm * 100.0,
+            format!("{}/{failed}", c.failures_flagged),
             c.translation_error_mm.median,
             c.translation_error_mm.p95,
             c.translation_error_mm.max,

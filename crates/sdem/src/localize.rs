@@ -73,6 +73,10 @@ pub struct LocalizeConfig {
     /// … or when, half the peak radius from the optimum, the cost rises along some principal
     /// direction by less than this fraction of its rise along the steepest.
     pub ambiguous_rise_ratio: f64,
+    /// … or when fewer than this fraction of the query's points found their reference point
+    /// after refinement: too little in common to trust (the fault bench's wrong answers matched
+    /// 14–21 %).
+    pub min_trusted_inlier_fraction: f64,
 }
 
 impl Default for LocalizeConfig {
@@ -92,6 +96,7 @@ impl Default for LocalizeConfig {
             ambiguous_cost_ratio: 1.1,
             ambiguous_sigma_ratio: 10.0,
             ambiguous_rise_ratio: 0.05,
+            min_trusted_inlier_fraction: 0.25,
         }
     }
 }
@@ -162,7 +167,9 @@ pub struct Diagnostics {
     /// Standard deviation along the best-constrained direction, metres.
     pub strongest_sigma_m: Option<f64>,
     /// True when another, distant candidate scores almost as well or the cost is flat along
-    /// some direction: the pose along [`Self::weakest_direction`] should not be trusted.
+    /// some direction (the pose along [`Self::weakest_direction`] should not be trusted), when
+    /// the 6-DoF refinement failed (the pose is the grid's, unconfirmed), or when too few of the
+    /// query's points matched. The reasons are in [`Self::ambiguity`].
     pub ambiguous: bool,
     /// Why the match is ambiguous, in words.
     pub ambiguity: Vec<String>,
@@ -291,6 +298,7 @@ pub fn localize(
     let grid_rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), grid_heading);
     let mut rotation = grid_rotation;
     let mut refinement = None;
+    let mut refine_error = None;
     let (offset, refined) = if !config.refine {
         (grid_offset, RefineOutcome::None)
     } else {
@@ -303,10 +311,13 @@ pub fn localize(
                 refinement = Some(r);
                 (t, RefineOutcome::SixDof)
             }
-            Err(_) => match refine_quadratic(&mut evaluator, grid_index) {
-                Some(o) => (o, RefineOutcome::Quadratic),
-                None => (grid_offset, RefineOutcome::Failed),
-            },
+            Err(e) => {
+                refine_error = Some(e.to_string());
+                match refine_quadratic(&mut evaluator, grid_index) {
+                    Some(o) => (o, RefineOutcome::Quadratic),
+                    None => (grid_offset, RefineOutcome::Failed),
+                }
+            }
         }
     };
     let heading_correction = {
@@ -345,7 +356,7 @@ pub fn localize(
             .evaluate(&offset, grid_heading)
             .map_or(f64::INFINITY, |c| c.cost)
     };
-    let diagnostics = diagnose(
+    let mut diagnostics = diagnose(
         config,
         query.known_cells(),
         &at_best,
@@ -354,6 +365,27 @@ pub fn localize(
         refinement.as_ref(),
         &mut cost_at,
     );
+    // The points did not confirm the grid's answer: on the fault bench's failures (a query
+    // 0.45 m away seeing little of what the reference saw) the grid optimum was 10 cm off and
+    // the refinement refused to follow it. Say so rather than return the grid's pose as if it
+    // were as good as a refined one.
+    if refined == RefineOutcome::SixDof
+        && diagnostics.inlier_fraction < config.min_trusted_inlier_fraction
+    {
+        diagnostics.ambiguous = true;
+        diagnostics.ambiguity.push(format!(
+            "only {:.0} % of the query's points matched the reference (trusted from {:.0} %): \
+             too little in common",
+            diagnostics.inlier_fraction * 100.0,
+            config.min_trusted_inlier_fraction * 100.0
+        ));
+    }
+    if let Some(e) = refine_error {
+        diagnostics.ambiguous = true;
+        diagnostics.ambiguity.push(format!(
+            "the 6-DoF refinement failed ({e}); the pose is the grid's, unconfirmed by the points"
+        ));
+    }
     Ok(Localization {
         reference_from_query: world_from_reference.inverse() * world_from_query,
         offset,
