@@ -32,6 +32,10 @@
 //!   shorter valid file (`.xyz`, `.3d`, `attitude.csv`, pose files, `sensor.toml`).
 //! - A KITTI `.bin` has no header (any 16 bytes are a point), so no header row.
 
+mod common;
+
+use common::{crc32, resealed};
+
 use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
 use sdem::io;
 use sdem::map::{LoopClosure, Map, Node};
@@ -343,30 +347,6 @@ fn voxel_bytes() -> Vec<u8> {
     let path = dir.path().join("m.sdemvox");
     io::write_voxel_map(&path, &map).unwrap();
     std::fs::read(path).unwrap()
-}
-
-/// CRC-32 (IEEE), as zlib computes it: the checksum of voxel maps, node files and manifests.
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                0xEDB8_8320 ^ (crc >> 1)
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
-}
-
-/// `bytes` with the trailing CRC-32 recomputed, so that the reader gets past the checksum.
-fn resealed(mut bytes: Vec<u8>) -> Vec<u8> {
-    let body = bytes.len() - 4;
-    let crc = crc32(&bytes[..body]);
-    bytes[body..].copy_from_slice(&crc.to_le_bytes());
-    bytes
 }
 
 /// A saved map of three nodes with one loop closure, written into `root`.

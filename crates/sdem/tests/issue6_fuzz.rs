@@ -27,6 +27,10 @@
 //! Failing inputs are shrunk and printed, not saved (`failure_persistence: None`), so nothing is
 //! written into the repository.
 
+mod common;
+
+use common::{crc32, resealed};
+
 use proptest::prelude::*;
 use proptest::sample::Index;
 use proptest::test_runner::{Config, RngSeed, TestCaseError, TestError, TestRunner};
@@ -813,30 +817,6 @@ fn voxel_bytes() -> Vec<u8> {
     let path = dir.path().join("m.sdemvox");
     io::write_voxel_map(&path, &map).unwrap();
     std::fs::read(path).unwrap()
-}
-
-/// CRC-32 (IEEE), as zlib computes it.
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            crc = if crc & 1 != 0 {
-                0xEDB8_8320 ^ (crc >> 1)
-            } else {
-                crc >> 1
-            };
-        }
-    }
-    !crc
-}
-
-/// `bytes` with the trailing CRC-32 recomputed.
-fn resealed(mut bytes: Vec<u8>) -> Vec<u8> {
-    let body = bytes.len() - 4;
-    let crc = crc32(&bytes[..body]);
-    bytes[body..].copy_from_slice(&crc.to_le_bytes());
-    bytes
 }
 
 /// A manifest with its checksum recomputed, when it is a JSON object with a body (else as is).
