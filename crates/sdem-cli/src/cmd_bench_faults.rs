@@ -13,6 +13,7 @@ use sdem::benchmark::{success_rate, summarize, Stats};
 use sdem::faults::{fault_pairs, localize_fault_pair, Fault, FaultConfig};
 use sdem::sdem::SdemConfig;
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// What `sdem bench --faults` runs.
 pub struct FaultArgs {
@@ -42,6 +43,8 @@ struct CaseReport {
     failures_flagged: usize,
     /// Successes flagged `ambiguous` all the same (false alarms).
     successes_flagged: usize,
+    /// Why the successes were flagged: reason kind → count (a success may have several).
+    false_alarm_reasons: BTreeMap<&'static str, usize>,
     failures: Vec<String>,
 }
 
@@ -93,6 +96,7 @@ fn run_case(
     let (mut translation, mut rotation, mut times, mut failures) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut failures_flagged, mut successes_flagged) = (0, 0);
+    let mut false_alarm_reasons = BTreeMap::new();
     let bar = crate::progress::bar(pairs.len() as u64, args.json, &format!("{name}: localized"));
     for (i, pair) in pairs.iter().enumerate() {
         bar.inc(1);
@@ -116,8 +120,11 @@ fn run_case(
                         },
                         pair.injected
                     ));
-                } else {
-                    successes_flagged += usize::from(d.ambiguous);
+                } else if d.ambiguous {
+                    successes_flagged += 1;
+                    for reason in &d.ambiguity {
+                        *false_alarm_reasons.entry(reason_kind(reason)).or_insert(0) += 1;
+                    }
                 }
             }
             Err(e) => {
@@ -151,8 +158,24 @@ fn run_case(
         time_ms: summarize(&times),
         failures_flagged,
         successes_flagged,
+        false_alarm_reasons,
         failures,
     })
+}
+
+/// A short name for one of [`sdem::localize::Diagnostics::ambiguity`]'s reasons.
+fn reason_kind(reason: &str) -> &'static str {
+    if reason.starts_with("a candidate") {
+        "runner-up close"
+    } else if reason.contains("refinement failed") {
+        "refinement failed"
+    } else if reason.contains("flat along") {
+        "flat cost"
+    } else if reason.starts_with("only") {
+        "thin match"
+    } else {
+        "other"
+    }
 }
 
 /// Runs `sdem bench --faults`.

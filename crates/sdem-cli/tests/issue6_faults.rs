@@ -65,6 +65,15 @@ fn bench_faults_scores_each_case() {
         // gyro do not throw sdem off.
         assert_eq!(case["success_rate_2cm"], 1.0, "{case}");
         assert!(case["translation_error_mm"]["max"].as_f64().unwrap() < 20.0);
+        assert_eq!(case["failures_flagged"], 0);
+        // Every flagged success has at least one reason counted.
+        let reasons: u64 = case["false_alarm_reasons"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_u64().unwrap())
+            .sum();
+        assert!(reasons >= case["successes_flagged"].as_u64().unwrap());
     }
     let e = fails(dir.path(), &["bench", "--faults", "--case", "hail"]);
     assert!(e.contains("hail") && e.contains("person"), "{e}");
