@@ -22,7 +22,7 @@
 
 use super::poses::to_rotation;
 use super::voxels::crc32;
-use super::write_atomic;
+use super::{remove_stale_temporaries, write_atomic};
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Pose};
 use crate::map::{LoopClosure, Map, Node};
@@ -226,34 +226,6 @@ fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f3
         points.push(p);
     }
     Ok(points)
-}
-
-/// Removes the temporary files (`.NAME.tmp-PID-N`, see [`write_atomic`]) that a process killed
-/// mid-save left in `folder`: those of other processes that are no longer running (on Linux; on
-/// other systems, those of every other process). Best effort: a file that cannot be removed is
-/// left, as it does no harm but take room.
-fn remove_stale_temporaries(folder: &Path) {
-    let Ok(entries) = std::fs::read_dir(folder) else {
-        return;
-    };
-    let own = std::process::id();
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        let Some(name) = name.to_str() else { continue };
-        let Some(pid) = name
-            .strip_prefix('.')
-            .and_then(|n| n.rsplit_once(".tmp-"))
-            .and_then(|(_, tail)| tail.split_once('-'))
-            .and_then(|(pid, _)| pid.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        let alive = pid == own
-            || (cfg!(target_os = "linux") && Path::new("/proc").join(pid.to_string()).exists());
-        if !alive {
-            let _ = std::fs::remove_file(entry.path());
-        }
-    }
 }
 
 /// Saves the map into `folder` (created when missing): node files that `node_files` does not

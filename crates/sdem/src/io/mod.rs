@@ -208,6 +208,9 @@ pub use poses::{
 pub use sweep::{read_sweep, write_sweep, SWEEP_MAGIC, SWEEP_VERSION};
 pub use voxels::{read_voxel_map, write_voxel_map, VOXEL_EXTENSION, VOXEL_MAGIC, VOXEL_VERSION};
 
+/// What [`write_atomic`]'s temporary files carry between the target's name and the process id.
+const TEMPORARY_MARK: &str = ".tmp-";
+
 /// Writes a file atomically: `write` fills a temporary file in the same folder (named
 /// `.NAME.tmp-PID-N`), which is flushed, synced to disk and then renamed over `path`. A crash or
 /// an error leaves either the old file or the new one, never a half-written one; on error the
@@ -244,7 +247,7 @@ pub fn write_atomic(
     let mut tmp_name = OsString::from(".");
     tmp_name.push(file_name);
     tmp_name.push(format!(
-        ".tmp-{}-{}",
+        "{TEMPORARY_MARK}{}-{}",
         std::process::id(),
         COUNTER.fetch_add(1, Ordering::Relaxed)
     ));
@@ -270,6 +273,34 @@ pub fn write_atomic(
         let _ = dir.sync_all();
     }
     Ok(())
+}
+
+/// Removes the temporary files (`.NAME.tmp-PID-N`, as [`write_atomic`] names them) that a
+/// process killed mid-save left in `folder`: those of other processes that are no longer running (on Linux; on
+/// other systems, those of every other process). Best effort: a file that cannot be removed is
+/// left, as it does no harm but take room.
+pub(crate) fn remove_stale_temporaries(folder: &Path) {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return;
+    };
+    let own = std::process::id();
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let Some(pid) = name
+            .strip_prefix('.')
+            .and_then(|n| n.rsplit_once(TEMPORARY_MARK))
+            .and_then(|(_, tail)| tail.split_once('-'))
+            .and_then(|(pid, _)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = pid == own
+            || (cfg!(target_os = "linux") && Path::new("/proc").join(pid.to_string()).exists());
+        if !alive {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
 }
 
 /// Reads a whole file, mapping OS errors to [`Error::Io`].
