@@ -49,6 +49,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::fmt;
 use std::str::FromStr;
 
@@ -552,21 +553,19 @@ pub fn simulate_run_with_faults(
         .iter()
         .map(|s| s.world_from_sensor(&sensor.lift))
         .collect::<Result<Vec<Pose>>>()?;
-    let mut run = sim::simulate_run(scene, stops, sensor, seed)?;
-    let mut injected = vec![Injected::default(); run.len()];
     let stop_rng = |k: usize| {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ FAULT_STREAM_SALT);
         rng.set_stream(k as u64);
         rng
     };
-    if has(Fault::Rubble) && run.len() > 1 {
-        // Block j (placed for stop j) lies at `before` in sweeps 0..j and at `after` from j on.
+    // Block j (placed for stop j) lies at `before` in sweeps 0..j and at `after` from j on.
+    let mut blocks: Vec<(usize, OrientedBox, OrientedBox)> = Vec::new();
+    if has(Fault::Rubble) {
         let one = FaultConfig {
             rubble_pieces: 1,
             ..config.clone()
         };
-        let mut blocks: Vec<(usize, OrientedBox, OrientedBox)> = Vec::new();
-        for j in 1..run.len() {
+        for j in 1..stops.len() {
             let mut rng = stop_rng(j);
             let previous = poses[j - 1].translation.vector;
             for _ in 0..20 {
@@ -589,19 +588,27 @@ pub fn simulate_run_with_faults(
                 }
             }
         }
-        for (k, stop) in run.iter_mut().enumerate() {
+    }
+    let placed_at = |k: usize| {
+        blocks
+            .iter()
+            .map(move |(j, before, after)| if *j <= k { after } else { before })
+    };
+    let mut run = if blocks.is_empty() {
+        sim::simulate_run(scene, stops, sensor, seed)?
+    } else {
+        sim::simulate_changing_run(stops, sensor, seed, |k| {
             let mut here = scene.clone();
-            for (j, before, after) in &blocks {
-                here.add_solid(Solid::Box(if *j <= k { after } else { before }.clone()));
+            for block in placed_at(k) {
+                here.add_solid(Solid::Box(block.clone()));
             }
-            // The clean run's noise stream for this stop (see `sim::simulate_run`).
-            let mut rng = ChaCha8Rng::seed_from_u64(seed);
-            rng.set_stream(k as u64);
-            stop.sweep = sim::scan(&here, sensor, &poses[k], stop.lift_slide_m, &mut rng);
-            let placed = blocks
-                .iter()
-                .map(|(j, before, after)| if *j <= k { after } else { before });
-            injected[k].rubble_returns = returns_on(&stop.sweep, &poses[k], placed);
+            Cow::Owned(here)
+        })?
+    };
+    let mut injected = vec![Injected::default(); run.len()];
+    if !blocks.is_empty() {
+        for (k, stop) in run.iter().enumerate() {
+            injected[k].rubble_returns = returns_on(&stop.sweep, &poses[k], placed_at(k));
         }
     }
     let mut bias = [0.0f64; 2];

@@ -36,6 +36,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::f64::consts::{PI, TAU};
 
 /// Tolerance (metres) for points on a shared face and for ray intervals that touch.
@@ -1725,6 +1726,21 @@ pub fn simulate_run(
     sensor: &SensorConfig,
     seed: u64,
 ) -> Result<Vec<SimStop>> {
+    simulate_changing_run(stops, sensor, seed, |_| Cow::Borrowed(scene))
+}
+
+/// [`simulate_run`] in a scene that changes between stops (rubble moved, say): stop `i` is
+/// scanned in `scene_at(i)`, with the same noise streams as [`simulate_run`], so where the
+/// scenes do not differ the sweeps are the same.
+///
+/// # Errors
+/// As [`simulate_run`].
+pub fn simulate_changing_run<'a>(
+    stops: &[Stop],
+    sensor: &SensorConfig,
+    seed: u64,
+    scene_at: impl Fn(usize) -> Cow<'a, Scene> + Sync,
+) -> Result<Vec<SimStop>> {
     sensor.validate()?;
     stops
         .par_iter()
@@ -1734,7 +1750,7 @@ pub fn simulate_run(
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             rng.set_stream(index as u64);
             let sweep = scan(
-                scene,
+                &scene_at(index),
                 sensor,
                 &world_from_sensor,
                 stop.lift_slide_m,
