@@ -12,7 +12,7 @@
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
 use sdem::benchmark::{
-    bench_pairs, localize_pair, paper_pair, success_rate, summarize, PairConfig, Stats,
+    bench_pairs, localize_pair, paper_pair, success_rate, summarize, PairConfig, PairResult, Stats,
     PAPER_MOVE_M,
 };
 use sdem::geometry::Vec3;
@@ -164,6 +164,56 @@ fn exact_vs_exhaustive(quick: bool, say: &dyn Fn(&str)) -> Result<ExactReport> {
     })
 }
 
+/// A localization within this of the truth is a success, metres.
+pub(crate) const SUCCESS_M: f64 = 0.02;
+
+/// The errors and times of the pairs a bench localized, in the order localized.
+#[derive(Default)]
+pub(crate) struct Tally {
+    translation_mm: Vec<f64>,
+    rotation_deg: Vec<f64>,
+    times_ms: Vec<f64>,
+}
+
+impl Tally {
+    /// Records one pair: its result, or `None` when the localization returned an error (which
+    /// counts as infinitely wrong). Returns whether the pair failed (an error, or off by
+    /// [`SUCCESS_M`] or more).
+    pub(crate) fn record(&mut self, result: Option<&PairResult>) -> bool {
+        match result {
+            Some(r) => {
+                self.translation_mm.push(r.translation_error_m * 1e3);
+                self.rotation_deg.push(r.rotation_error_deg);
+                self.times_ms.push(r.time_ms);
+                r.translation_error_m >= SUCCESS_M
+            }
+            None => {
+                self.translation_mm.push(f64::NAN);
+                self.rotation_deg.push(f64::NAN);
+                true
+            }
+        }
+    }
+
+    pub(crate) fn translation_error_mm(&self) -> Stats {
+        summarize(&self.translation_mm)
+    }
+
+    pub(crate) fn rotation_error_deg(&self) -> Stats {
+        summarize(&self.rotation_deg)
+    }
+
+    /// Times of the localizations that returned (errors have none).
+    pub(crate) fn time_ms(&self) -> Stats {
+        summarize(&self.times_ms)
+    }
+
+    pub(crate) fn success_rate(&self) -> f64 {
+        let errors_m: Vec<f64> = self.translation_mm.iter().map(|e| e / 1e3).collect();
+        success_rate(&errors_m, SUCCESS_M)
+    }
+}
+
 fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
     let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
     if count == 0 {
@@ -181,17 +231,13 @@ fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
         ..Default::default()
     };
     let sdem_config = SdemConfig::default();
-    let (mut translation, mut rotation, mut times, mut failures) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut tally, mut failures) = (Tally::default(), Vec::new());
     let bar = crate::progress::bar(count as u64, args.json, "pairs localized");
     for (i, pair) in pairs.iter().enumerate() {
         bar.inc(1);
         match localize_pair(pair, &sdem_config, &config) {
             Ok(result) => {
-                translation.push(result.translation_error_m * 1e3);
-                rotation.push(result.rotation_error_deg);
-                times.push(result.time_ms);
-                if result.translation_error_m >= 0.02 {
+                if tally.record(Some(&result)) {
                     failures.push(format!(
                         "pair {i}: error {:.1} mm, {:.2}°",
                         result.translation_error_m * 1e3,
@@ -200,24 +246,22 @@ fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
                 }
             }
             Err(e) => {
-                translation.push(f64::NAN);
-                rotation.push(f64::NAN);
+                tally.record(None);
                 failures.push(format!("pair {i}: {e}"));
             }
         }
     }
     bar.finish_and_clear();
-    let errors_m: Vec<f64> = translation.iter().map(|e| e / 1e3).collect();
     Ok(PairsReport {
         count,
         seed: args.seed,
         step_m: args.step,
         heading_window_deg: config.heading.half_range_deg,
         window: config.window,
-        translation_error_mm: summarize(&translation),
-        rotation_error_deg: summarize(&rotation),
-        time_ms: summarize(&times),
-        success_rate_2cm: success_rate(&errors_m, 0.02),
+        translation_error_mm: tally.translation_error_mm(),
+        rotation_error_deg: tally.rotation_error_deg(),
+        time_ms: tally.time_ms(),
+        success_rate_2cm: tally.success_rate(),
         failures,
     })
 }

@@ -7,9 +7,10 @@
 //! rotation errors, time, and how many failures the diagnostics flagged (`ambiguous`, or an
 //! error) so the robot knows not to trust them.
 
+use crate::cmd_bench::Tally;
 use crate::output::print_json;
 use anyhow::{bail, Result};
-use sdem::benchmark::{success_rate, summarize, Stats};
+use sdem::benchmark::Stats;
 use sdem::faults::{fault_pairs, localize_fault_pair, Fault, FaultConfig};
 use sdem::sdem::SdemConfig;
 use serde::Serialize;
@@ -93,8 +94,7 @@ fn run_case(
     say(&format!("{name}: simulating {} pairs ...", args.pairs));
     let pairs = fault_pairs(args.seed, args.pairs, faults, config)?;
     let sdem_config = SdemConfig::default();
-    let (mut translation, mut rotation, mut times, mut failures) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut tally, mut failures) = (Tally::default(), Vec::new());
     let (mut failures_flagged, mut successes_flagged) = (0, 0);
     let mut false_alarm_reasons = BTreeMap::new();
     let bar = crate::progress::bar(pairs.len() as u64, args.json, &format!("{name}: localized"));
@@ -102,11 +102,8 @@ fn run_case(
         bar.inc(1);
         match localize_fault_pair(pair, &sdem_config, config) {
             Ok(result) => {
-                translation.push(result.translation_error_m * 1e3);
-                rotation.push(result.rotation_error_deg);
-                times.push(result.time_ms);
                 let d = &result.localization.diagnostics;
-                if result.translation_error_m >= 0.02 {
+                if tally.record(Some(&result)) {
                     failures_flagged += usize::from(d.ambiguous);
                     failures.push(format!(
                         "pair {i}: error {:.1} mm, {:.2}°, {:.0} % of points matched, {} ({:?})",
@@ -128,15 +125,13 @@ fn run_case(
                 }
             }
             Err(e) => {
-                translation.push(f64::NAN);
-                rotation.push(f64::NAN);
+                tally.record(None);
                 failures_flagged += 1;
                 failures.push(format!("pair {i}: {e}"));
             }
         }
     }
     bar.finish_and_clear();
-    let errors_m: Vec<f64> = translation.iter().map(|e| e / 1e3).collect();
     let what = if faults.is_empty() {
         "no fault".to_string()
     } else if faults.len() == Fault::ALL.len() {
@@ -152,10 +147,10 @@ fn run_case(
         case: name.to_string(),
         what,
         pairs: pairs.len(),
-        success_rate_2cm: success_rate(&errors_m, 0.02),
-        translation_error_mm: summarize(&translation),
-        rotation_error_deg: summarize(&rotation),
-        time_ms: summarize(&times),
+        success_rate_2cm: tally.success_rate(),
+        translation_error_mm: tally.translation_error_mm(),
+        rotation_error_deg: tally.rotation_error_deg(),
+        time_ms: tally.time_ms(),
         failures_flagged,
         successes_flagged,
         false_alarm_reasons,
