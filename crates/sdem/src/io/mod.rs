@@ -464,10 +464,7 @@ pub fn read_sensor_toml(path: &Path) -> Result<SensorConfig> {
         &text,
         "the keys are those of sdem's SensorConfig; angles in degrees, lengths in metres",
     )?;
-    config.validate().map_err(|e| {
-        let message = e.to_string();
-        Error::parse(path, line_of_named_key(&text, &message), message)
-    })?;
+    at_named_key(path, &text, config.validate())?;
     Ok(config)
 }
 
@@ -483,11 +480,17 @@ pub fn read_slam_config(path: &Path) -> Result<crate::slam::SlamConfig> {
         &text,
         "the keys are those of the config.toml that sdem slam writes",
     )?;
-    config.validate().map_err(|e| {
-        let message = e.to_string();
-        Error::parse(path, line_of_named_key(&text, &message), message)
-    })?;
+    at_named_key(path, &text, config.validate())?;
     Ok(config)
+}
+
+/// A configuration's validation error as a parse error of `path` at the line of `text` that
+/// sets the key the message names (the whole file where none does).
+fn at_named_key(path: &Path, text: &str, validated: Result<()>) -> Result<()> {
+    validated.map_err(|e| {
+        let message = e.to_string();
+        Error::parse(path, line_of_named_key(text, &message), message)
+    })
 }
 
 /// Parses TOML `text` read from `path`; an error names the file and line on one line (TOML's own
