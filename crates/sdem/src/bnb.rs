@@ -1,29 +1,39 @@
 //! Exact branch-and-bound search over translation and heading for the projective cost
-//! ([`crate::cost::CostModel::Projective`]), after the idea of correlative scan matching with
-//! precomputed multi-resolution tables (Olson 2009; Hess et al. 2016, Cartographer).
+//! ([`crate::cost::CostModel::Projective`]), after correlative scan matching with precomputed
+//! multi-resolution tables (Olson 2009; Hess et al. 2016, Cartographer).
 //!
-//! A node is a box of grid candidates (index intervals in x, y, z and heading). For every
-//! candidate in it, each query point lies within a ball around its position at the box centre:
-//! the radius is the half-diagonal of the translation box plus the chord the heading interval
-//! sweeps. The ball spans a range interval and a cone of directions; precomputed tables give the
-//! smallest and largest reference range and the count of known cells over that cone. From them
-//! each point gets a valid lower bound on its truncated squared difference, and whether it is
-//! certainly, possibly or never compared. The smallest mean any candidate of the box can reach is
-//! then a lower bound on its cost (normalization and the minimum overlap included). Boxes whose
-//! bound exceeds the best cost found so far are dropped; single candidates are scored exactly with
-//! the same [`Correlator`] the exhaustive search uses, so both return the same minimum.
+//! A node is a box of grid candidates (index intervals in x, y, z and heading), split on a
+//! power-of-two lattice into up to 16 children. Each query point's term depends on its own moved
+//! position only (the cost is a plain sum: a cell the reference does not see costs `τ²`), so a
+//! lower bound on every point's term over a box bounds the box:
 //!
-//! Query points are grouped (by S-DEM block and range) at coarser levels, so large boxes are
-//! bounded from a few hundred groups instead of every point: a group's ball covers its members'.
+//! * over the box, a point moves within the translation box, plus the arc the heading interval
+//!   turns it through, plus (for a group of nearby points bounded together) the group's radius;
+//!   that region sees the reference through a cone of S-DEM cells;
+//! * in each cell of the cone, its distance to the cell's plane can shrink by at most the
+//!   region's extent along the plane's normal (the box's support, and the arc's radial and
+//!   tangential parts), and a cell whose range gate the region cannot reach, or that the
+//!   reference does not see, costs `τ²`; the smallest over the cone bounds the point (large
+//!   cones fall back to the range tables: `τ²` when no cell of the cone can be reached, else 0).
+//!
+//! The search is best first: the box with the lowest bound is expanded next (a few at a time,
+//! their children bounded in parallel), after a first dive into the most promising child at each
+//! level finds a good candidate. Boxes whose bound exceeds the best cost so far are dropped, and
+//! every bound and every candidate is summed point block by point block and cut short as soon as
+//! the sum passes the best (the terms are >= 0). Points certainly at `τ²` in a box are not
+//! bounded again in its children. Single candidates are scored with the same [`Correlator`] the
+//! exhaustive search uses, so both return the same minimum, bit for bit.
+//!
+//! Query points are grouped (by cubes of 2, 4, 8 … cm) at coarser levels, so large boxes are
+//! bounded from a few hundred groups instead of every point: a group's reach covers its members'.
 
-use crate::cost::{yaw_matrix, Correlator, CostConfig};
+use crate::cost::{scrambled_order, search_points, Correlator, CostConfig};
 use crate::geometry::fast_atan2;
 use crate::geometry::FAST_ATAN2_MAX_ERROR;
 use crate::sdem::floor_i32;
 use crate::sdem::Sdem;
 use crate::search::{better, CandidateGrid, Index, Scored};
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// Range minimum, maximum and known-cell count of the reference S-DEM over rectangles of cells.
 pub(crate) struct RangeTables {
@@ -32,16 +42,13 @@ pub(crate) struct RangeTables {
     /// Columns stored: twice the azimuth cells on a full circle, so windows can wrap.
     width: usize,
     full_circle: bool,
-    /// Known-cell prefix sums, `(n_el + 1) × (width + 1)`.
-    known_prefix: Vec<u32>,
     /// Square sparse tables: level `k` holds `(min, max)` over the `2^k × 2^k` square starting at
     /// each cell, `n_el × width` entries (squares running off the grid are clipped).
     squares: Vec<Vec<(f32, f32)>>,
     /// 1-D sparse table over whole rows: level `k` holds `(min, max)` over rows `e..e + 2^k`.
     rows: Vec<Vec<(f32, f32)>>,
-    global: (u32, f32, f32),
+    global: (f32, f32),
     elevation_min: f32,
-    elevation_max: f32,
     azimuth_min: f32,
     inv_resolution: f32,
 }
@@ -59,21 +66,18 @@ impl RangeTables {
         let config = reference.config();
         let full_circle = (config.azimuth_max_deg - config.azimuth_min_deg - 360.0).abs() < 1e-9;
         let width = if full_circle { 2 * n_az } else { n_az };
-        let ranges = reference.ranges();
-        let cell = |e: usize, a: usize| ranges[e * n_az + a % n_az];
+        let planes = &reference.surfaces().cells;
+        let cell = |e: usize, a: usize| {
+            let c = &planes[e * n_az + a % n_az];
+            [c.lo, c.hi]
+        };
         let mut base = vec![EMPTY; n_el * width];
-        let mut known_prefix = vec![0u32; (n_el + 1) * (width + 1)];
         for e in 0..n_el {
             for a in 0..width {
-                let r = cell(e, a);
-                let known = !r.is_nan();
-                if known {
-                    base[e * width + a] = (r, r);
+                let [lo, hi] = cell(e, a);
+                if !lo.is_nan() {
+                    base[e * width + a] = (lo, hi);
                 }
-                known_prefix[(e + 1) * (width + 1) + a + 1] = known_prefix[e * (width + 1) + a + 1]
-                    + known_prefix[(e + 1) * (width + 1) + a]
-                    - known_prefix[e * (width + 1) + a]
-                    + known as u32;
             }
         }
         let mut squares = vec![base];
@@ -122,31 +126,19 @@ impl RangeTables {
             n_el,
             width,
             full_circle,
-            known_prefix,
             squares,
             rows,
-            global: (
-                reference.known_cells() as u32,
-                global_range.0,
-                global_range.1,
-            ),
+            global: global_range,
             elevation_min: config.elevation_min_deg.to_radians() as f32,
-            elevation_max: config.elevation_max_deg.to_radians() as f32,
             azimuth_min: config.azimuth_min_deg.to_radians() as f32,
             inv_resolution: (1.0 / config.resolution_deg.to_radians()) as f32,
         }
     }
 
-    fn known(&self, e0: usize, e1: usize, a0: usize, a1: usize) -> u32 {
-        let w = self.width + 1;
-        self.known_prefix[(e1 + 1) * w + a1 + 1] + self.known_prefix[e0 * w + a0]
-            - self.known_prefix[e0 * w + a1 + 1]
-            - self.known_prefix[(e1 + 1) * w + a0]
-    }
-
-    /// The range of the cell at row `e`, column `a` (columns wrap on a full circle), or `None`
-    /// when it is unknown or outside the grid.
-    fn range_at(&self, e: i32, a: i32) -> Option<f32> {
+    /// The index of the cell at row `e`, column `a` (columns wrap on a full circle), or `None`
+    /// outside the grid.
+    #[inline]
+    fn cell(&self, e: i32, a: i32) -> Option<usize> {
         if e < 0 || e >= self.n_el as i32 {
             return None;
         }
@@ -157,8 +149,7 @@ impl RangeTables {
         } else {
             a
         };
-        let (lo, _) = self.squares[0][e as usize * self.width + a as usize];
-        lo.is_finite().then_some(lo)
+        Some(e as usize * self.n_az + a as usize)
     }
 
     fn rows_range(&self, e0: usize, e1: usize) -> (f32, f32) {
@@ -168,22 +159,17 @@ impl RangeTables {
         merge(self.rows[k][e0], self.rows[k][e1 + 1 - s])
     }
 
-    /// `(known, cells, min, max)` over rows `e0..=e1` and columns `a0..=a1` (columns may run past
-    /// `n_az` on a full circle; `a1 - a0 < n_az`).
-    fn window(&self, e0: usize, e1: usize, a0: usize, a1: usize) -> (u32, u32, f32, f32) {
+    /// `(min, max)` over rows `e0..=e1` and columns `a0..=a1` (columns may run past `n_az` on a
+    /// full circle; `a1 - a0 < n_az`); `(∞, −∞)` where every cell is unknown.
+    #[inline]
+    fn window(&self, e0: usize, e1: usize, a0: usize, a1: usize) -> (f32, f32) {
         let (h, w) = (e1 - e0 + 1, a1 - a0 + 1);
-        let cells = (h * w) as u32;
-        let known = self.known(e0, e1, a0, a1);
-        if known == 0 {
-            return (0, cells, f32::INFINITY, f32::NEG_INFINITY);
-        }
         let k = ((usize::BITS - 1 - h.min(w).leading_zeros()) as usize).min(self.squares.len() - 1);
         let s = 1usize << k;
         let (ne, na) = (h.div_ceil(s), w.div_ceil(s));
         if ne * na > 12 {
             // A wide band near a pole: whole rows bound it (a superset, still valid).
-            let (lo, hi) = self.rows_range(e0, e1);
-            return (known, cells, lo, hi);
+            return self.rows_range(e0, e1);
         }
         let table = &self.squares[k];
         let mut acc = EMPTY;
@@ -194,7 +180,7 @@ impl RangeTables {
                 acc = merge(acc, table[e * self.width + a]);
             }
         }
-        (known, cells, acc.0, acc.1)
+        acc
     }
 }
 
@@ -208,19 +194,20 @@ struct Group {
     count: u32,
 }
 
-/// The query's points at several groupings: level 0 one point per group; level `m` the points of
-/// a `2^m × 2^m` block of cells whose ranges fall in one `2^m · 2 cm` bin.
+/// The query's points at several groupings: level 0 one point per group; level `m` the points in
+/// one cube of side `2^m` cm.
 pub(crate) struct QueryGroups {
     /// The groups of each level, one field per array (for the vectorized bound).
     balls: Vec<Balls>,
     /// The 75th-percentile group radius of each level, metres.
     typical_radius: Vec<f32>,
+    /// The number of query points (the sum of every level's counts).
+    points: usize,
 }
 
 impl QueryGroups {
-    pub fn new(query: &Sdem, levels: usize) -> Self {
-        let n_az = query.grid().azimuth_cells() as u32;
-        let points = query.points();
+    /// Groups `points` (the points the cost compares) at `levels` levels.
+    pub fn new(points: &[[f32; 3]], levels: usize) -> Self {
         let make = |members: &[usize]| -> Group {
             let mut c = [0f64; 3];
             for &i in members {
@@ -244,7 +231,11 @@ impl QueryGroups {
             // Rounding margin: the members' distance was computed in f32.
             Group {
                 center,
-                radius: radius * (1.0 + 1e-5) + 1e-6,
+                radius: if members.len() == 1 {
+                    0.0
+                } else {
+                    radius * (1.0 + 1e-5) + 1e-6
+                },
                 horizontal,
                 count: members.len() as u32,
             }
@@ -252,16 +243,36 @@ impl QueryGroups {
         let mut out = Vec::new();
         let mut typical = Vec::new();
         for m in 0..levels.max(1) {
-            let mut buckets: HashMap<(u32, u32, u32), Vec<usize>> = HashMap::new();
-            for (i, (&cell, p)) in query.cells().iter().zip(points).enumerate() {
-                let range = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-                let bin = (range / (0.02 * (1u32 << m) as f32)) as u32;
-                let key = ((cell / n_az) >> m, (cell % n_az) >> m, bin);
-                buckets.entry(key).or_default().push(i);
-            }
-            let mut keys: Vec<_> = buckets.keys().copied().collect();
+            let mut keys: Vec<([i32; 3], usize)> = if m == 0 {
+                (0..points.len()).map(|i| ([i as i32, 0, 0], i)).collect()
+            } else {
+                let side = 0.01 * (1u32 << m) as f32;
+                points
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| (p.map(|c| (c / side).floor() as i32), i))
+                    .collect()
+            };
             keys.sort_unstable();
-            let groups: Vec<Group> = keys.iter().map(|k| make(&buckets[k])).collect();
+            let mut groups_of: Vec<Vec<usize>> = Vec::new();
+            for (j, (key, i)) in keys.iter().enumerate() {
+                if j == 0 || keys[j - 1].0 != *key {
+                    groups_of.push(Vec::new());
+                }
+                groups_of.last_mut().expect("pushed").push(*i);
+            }
+            // Scrambled, so that a partial bound is a fair sample and can stop early.
+            let groups: Vec<Group> = scrambled_order(groups_of.len())
+                .into_iter()
+                .map(|i| make(&groups_of[i]))
+                .collect();
+            // A level that hardly groups anything would only lose the finer level's detail.
+            if out
+                .last()
+                .is_some_and(|finer: &Vec<Group>| groups.len() * 5 > finer.len() * 4)
+            {
+                continue;
+            }
             let mut radii: Vec<f32> = groups.iter().map(|g| g.radius).collect();
             radii.sort_by(f32::total_cmp);
             typical.push(radii.get(radii.len() * 3 / 4).copied().unwrap_or(0.0));
@@ -281,6 +292,7 @@ impl QueryGroups {
         Self {
             balls,
             typical_radius: typical,
+            points: points.len(),
         }
     }
 }
@@ -295,8 +307,9 @@ struct Balls {
     count: Vec<u32>,
 }
 
-/// A box of candidates: inclusive index intervals per axis (x, y, z, heading).
-#[derive(Clone, Copy, Debug)]
+/// A box of candidates: inclusive index intervals per axis (x, y, z, heading). Boxes are split
+/// on a power-of-two lattice, so every box of one size starts at a multiple of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Node {
     lo: Index,
     hi: Index,
@@ -307,11 +320,15 @@ impl Node {
         self.lo == self.hi
     }
 
+    /// The boxes this one splits into: every axis longer than one candidate is halved at the
+    /// power of two below its length (up to 16 children).
     fn children(&self) -> Vec<Node> {
         let mut out = vec![*self];
         for a in 0..4 {
-            if self.hi[a] > self.lo[a] {
-                let mid = (self.lo[a] + self.hi[a]) / 2;
+            let extent = self.hi[a] - self.lo[a] + 1;
+            if extent > 1 {
+                let half = extent.next_power_of_two() / 2;
+                let mid = self.lo[a] + half - 1;
                 out = out
                     .into_iter()
                     .flat_map(|n| {
@@ -333,8 +350,12 @@ impl Node {
 pub struct BranchAndBoundStats {
     /// Boxes bounded.
     pub nodes_bounded: usize,
-    /// Single candidates scored exactly.
+    /// Single candidates scored (each stops as soon as its sum exceeds the best so far).
     pub leaves_evaluated: usize,
+    /// Of those, candidates scored to the end (the others stopped early).
+    pub leaves_completed: usize,
+    /// Boxes expanded (their bound lay below the best cost).
+    pub nodes_expanded: usize,
 }
 
 /// A box is bounded from the coarsest grouping whose typical group radius is at most this
@@ -343,7 +364,53 @@ pub struct BranchAndBoundStats {
 /// it saves per box).
 const GROUP_REACH_FRACTION: f64 = 0.1;
 
-/// The search state shared by the recursion.
+/// Boxes expanded together, their children bounded in parallel.
+const BATCH: usize = 4;
+
+/// A box waiting in the queue, ordered by bound, then by the estimated cost at its centre.
+struct Pending {
+    bound: f64,
+    estimate: f64,
+    node: Node,
+    /// The query points whose term is `τ²` at every candidate of the box (bit per point, in
+    /// the order of grouping level 0), when the box was bounded point by point: they are
+    /// `τ²` in every box inside it too, and are not bounded again.
+    saturated: Option<std::sync::Arc<Vec<u64>>>,
+}
+
+impl PartialEq for Pending {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == std::cmp::Ordering::Equal
+    }
+}
+impl Eq for Pending {}
+impl PartialOrd for Pending {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Pending {
+    /// Reversed, so that `BinaryHeap` pops the lowest bound first.
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        other
+            .bound
+            .total_cmp(&self.bound)
+            .then(other.estimate.total_cmp(&self.estimate))
+            .then(other.node.lo.cmp(&self.node.lo))
+    }
+}
+
+/// What one child of an expanded box turned out to be.
+enum Outcome {
+    /// A candidate scored at or below the limit.
+    Leaf(Scored),
+    /// A box that may hold a candidate below the limit.
+    Open(Pending),
+    /// Nothing below the limit (a pruned box, or a candidate above it or without overlap).
+    Closed,
+}
+
+/// The search state.
 pub(crate) struct BranchAndBound<'a> {
     reference: &'a Sdem,
     query: &'a Sdem,
@@ -351,7 +418,6 @@ pub(crate) struct BranchAndBound<'a> {
     grid: &'a CandidateGrid,
     tables: &'a RangeTables,
     groups: &'a QueryGroups,
-    min_overlap: u64,
     truncation_sq: f32,
     /// Only candidates costing at most this are of interest (∞: all).
     cap: f64,
@@ -368,7 +434,7 @@ impl<'a> BranchAndBound<'a> {
         tables: &'a RangeTables,
         groups: &'a QueryGroups,
     ) -> crate::Result<Self> {
-        let correlator = Correlator::new(reference, query, cost)?;
+        Correlator::new(reference, query, cost)?;
         Ok(Self {
             reference,
             query,
@@ -376,7 +442,6 @@ impl<'a> BranchAndBound<'a> {
             grid,
             tables,
             groups,
-            min_overlap: correlator.min_overlap() as u64,
             truncation_sq: cost.truncation_sq(),
             cap: f64::INFINITY,
             best: None,
@@ -385,6 +450,10 @@ impl<'a> BranchAndBound<'a> {
     }
 
     /// Runs the search over the whole grid; returns the exhaustive search's minimum.
+    ///
+    /// Best first: the box with the lowest bound is expanded next, so no box whose bound lies
+    /// above the minimum is ever expanded. A first dive (always into the most promising child)
+    /// finds a good candidate early, against which every later box and candidate is cut short.
     pub fn run(mut self) -> (Option<Scored>, BranchAndBoundStats) {
         let c = self.grid.counts;
         let root = Node {
@@ -392,313 +461,479 @@ impl<'a> BranchAndBound<'a> {
             hi: [c[0] - 1, c[1] - 1, c[2] - 1, c[3] - 1],
         };
         if root.is_leaf() {
-            let (score, _) = self.score_leaf(&mut self.correlator(), &root);
+            let mut correlator = self.correlator();
+            let score = self.score_leaf(&mut correlator, &root, self.cap);
             self.stats.leaves_evaluated += 1;
-            return (score.filter(|s| s.0 <= self.cap), self.stats);
+            self.stats.leaves_completed += score.is_some() as usize;
+            return (score, self.stats);
         }
-        self.visit(root);
+        let mut queue = std::collections::BinaryHeap::new();
+        // The dive.
+        let mut current = Some(Pending {
+            bound: 0.0,
+            estimate: 0.0,
+            node: root,
+            saturated: None,
+        });
+        while let Some(node) = current.take() {
+            let mut open = self.expand(std::slice::from_ref(&node));
+            open.sort_by(|a, b| b.cmp(a));
+            let mut open = open.into_iter();
+            current = open.next();
+            queue.extend(open);
+        }
+        // Best first.
+        while let Some(top) = queue.pop() {
+            if self.prunable(top.bound) {
+                break;
+            }
+            let mut batch = vec![top];
+            while batch.len() < BATCH {
+                match queue.peek() {
+                    Some(next) if !self.prunable(next.bound) => {
+                        batch.push(queue.pop().expect("peeked"))
+                    }
+                    _ => break,
+                }
+            }
+            let open = self.expand(&batch);
+            queue.extend(open.into_iter().filter(|p| !self.prunable(p.bound)));
+        }
         (self.best, self.stats)
     }
 
+    /// The cost below which a candidate is of interest: the best so far, or the cap.
+    fn limit(&self) -> f64 {
+        self.best.map_or(self.cap, |(cost, _)| cost.min(self.cap))
+    }
+
     fn prunable(&self, bound: f64) -> bool {
-        let limit = self.best.map_or(self.cap, |(cost, _)| cost.min(self.cap));
-        if limit.is_infinite() {
-            return bound.is_infinite();
-        }
         // A margin far above rounding: bounds are computed with slack, costs exactly.
-        bound > limit * (1.0 + 1e-9) + 1e-15
+        bound > self.limit() * (1.0 + 1e-9) + 1e-15
     }
 
     fn correlator(&self) -> Correlator<'a> {
         Correlator::new(self.reference, self.query, self.cost).expect("validated in new()")
     }
 
-    fn score_leaf(&self, correlator: &mut Correlator, node: &Node) -> (Option<Scored>, f64) {
+    fn score_leaf(&self, correlator: &mut Correlator, node: &Node, limit: f64) -> Option<Scored> {
         let idx = node.lo;
-        let flat = self.grid.flat(idx);
         if self.grid.excluded(idx) {
-            return (None, f64::INFINITY);
+            return None;
         }
-        match correlator.evaluate(&self.grid.offset(idx), self.grid.yaw(idx)) {
-            Some(c) => (Some((c.cost, flat)), c.cost),
-            None => (None, f64::INFINITY),
-        }
+        // A little above the limit, so a candidate that ties with the best (same cost, lower
+        // index) is scored to the end.
+        let cap = limit * (1.0 + 1e-9) + 1e-15;
+        correlator
+            .evaluate_capped(&self.grid.offset(idx), self.grid.yaw(idx), cap)
+            .map(|c| (c.cost, self.grid.flat(idx)))
+            .filter(|s| s.0 <= self.cap)
     }
 
-    fn visit(&mut self, node: Node) {
-        let mut children = node.children();
-        children.retain(|c| !self.grid.box_excluded(c.lo, c.hi));
-        // One correlator (with its scratch buffers) per worker that meets a leaf, not per leaf.
-        let scored: Vec<(Node, f64, f64, Option<Scored>)> = children
+    /// Bounds or scores the children of `nodes` in parallel against the current limit; updates
+    /// the best candidate and returns the boxes still open.
+    fn expand(&mut self, parents: &[Pending]) -> Vec<Pending> {
+        self.stats.nodes_expanded += parents.len();
+        let children: Vec<(Node, Option<&[u64]>)> = parents
+            .iter()
+            .flat_map(|p| {
+                let mask = p.saturated.as_deref().map(Vec::as_slice);
+                p.node.children().into_iter().map(move |c| (c, mask))
+            })
+            .filter(|(c, _)| !self.grid.box_excluded(c.lo, c.hi))
+            .collect();
+        let limit = self.limit();
+        let this = &*self;
+        let outcomes: Vec<Outcome> = children
             .par_iter()
             .map_init(
                 || None,
-                |correlator: &mut Option<Correlator>, child| {
+                |correlator: &mut Option<Correlator>, (child, mask)| {
                     if child.is_leaf() {
-                        let correlator = correlator.get_or_insert_with(|| self.correlator());
-                        let (score, bound) = self.score_leaf(correlator, child);
-                        (*child, bound, bound, score)
+                        let correlator = correlator.get_or_insert_with(|| this.correlator());
+                        match this.score_leaf(correlator, child, limit) {
+                            Some(s) => Outcome::Leaf(s),
+                            None => Outcome::Closed,
+                        }
                     } else {
-                        let (bound, estimate) = self.bound(child);
-                        (*child, bound, estimate, None)
+                        let (bound, estimate, saturated) = this.bound_below(child, limit, *mask);
+                        if bound > limit * (1.0 + 1e-9) + 1e-15 {
+                            Outcome::Closed
+                        } else {
+                            Outcome::Open(Pending {
+                                bound,
+                                estimate,
+                                node: *child,
+                                saturated: saturated.map(std::sync::Arc::new),
+                            })
+                        }
                     }
                 },
             )
             .collect();
-        let mut pending = Vec::with_capacity(scored.len());
-        for (child, bound, estimate, score) in scored {
+        let mut open = Vec::new();
+        for ((child, _), outcome) in children.iter().zip(outcomes) {
             if child.is_leaf() {
                 self.stats.leaves_evaluated += 1;
-                if let Some(s) = score.filter(|s| s.0 <= self.cap) {
+            } else {
+                self.stats.nodes_bounded += 1;
+            }
+            match outcome {
+                Outcome::Leaf(s) => {
+                    self.stats.leaves_completed += 1;
                     if self.best.is_none_or(|b| better(&s, &b)) {
                         self.best = Some(s);
                     }
                 }
-            } else {
-                self.stats.nodes_bounded += 1;
-                pending.push((bound, estimate, child));
+                Outcome::Open(p) => open.push(p),
+                Outcome::Closed => {}
             }
         }
-        // By bound (so the first prunable box ends the loop), ties (every bound is 0 while boxes
-        // are large) broken by the estimated cost at the box's centre, so the search reaches a
-        // good candidate early and prunes with it.
-        pending.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-        for (bound, _, child) in pending {
-            if self.prunable(bound) {
-                break;
-            }
-            self.visit(child);
-        }
+        open
     }
 
-    /// A lower bound on the cost of every candidate in `node` (∞ when none can reach the minimum
-    /// overlap), and an estimate of the cost at its centre (the groups' centres looked up in
-    /// their cells; only for ordering the search).
+    /// A lower bound on the cost of every candidate in `node`, and an estimate of the cost at
+    /// its centre (the groups' centres looked up in their cells; only for ordering the search).
+    #[cfg(test)]
     fn bound(&self, node: &Node) -> (f64, f64) {
+        let (bound, estimate, _) = self.bound_below(node, f64::INFINITY, None);
+        (bound, estimate)
+    }
+
+    /// [`Self::bound`], cut short once the bound exceeds `limit` (then the partial sum is
+    /// returned: a weaker bound, but above the limit all the same).
+    ///
+    /// Every member of a ball (a query point, or a group of nearby ones around their centre) lies,
+    /// at every candidate of the box, within the box's translation of the ball centre's position
+    /// at the box's middle candidate, plus the arc the heading interval turns it through, plus the
+    /// group's radius. That region sees the reference through a cone of cells; in each, the
+    /// distance to the cell's plane can shrink by at most the region's extent along its normal.
+    /// The smallest over the cone's cells is a lower bound on the member's term (`τ²` for a cell
+    /// the reference does not see, or a range out of the cell's gate).
+    fn bound_below(
+        &self,
+        node: &Node,
+        limit: f64,
+        parent_saturated: Option<&[u64]>,
+    ) -> (f64, f64, Option<Vec<u64>>) {
         let grid = self.grid;
         let lo = grid.offset(node.lo);
         let hi = grid.offset(node.hi);
         let centre = (lo + hi) * 0.5;
-        let translation_radius = ((hi - lo) * 0.5).norm();
+        let half = ((hi - lo) * 0.5).map(|v| v as f32 + 1e-5);
+        let translation_radius = half.norm();
         let (yaw_lo, yaw_hi) = (grid.yaws[node.lo[3]], grid.yaws[node.hi[3]]);
         let yaw_centre = 0.5 * (yaw_lo + yaw_hi);
-        let chord = 2.0 * (0.25 * (yaw_hi - yaw_lo)).sin();
+        // A point at horizontal distance h turns through at most `chord · h` from its position
+        // at the middle heading.
+        let chord = (2.0 * (0.25 * (yaw_hi - yaw_lo)).sin() * (1.0 + 1e-6)) as f32;
+        let delta = 0.5 * (yaw_hi - yaw_lo);
+        let turn = (
+            ((1.0 - delta.cos()) * (1.0 + 1e-6)) as f32,
+            (delta.sin() * (1.0 + 1e-6)) as f32,
+        );
         // The coarsest grouping whose groups are small against the box.
-        let reach = translation_radius + chord;
+        let reach = translation_radius as f64 + chord as f64;
         let level = (0..self.groups.balls.len())
             .rev()
             .find(|&m| self.groups.typical_radius[m] as f64 <= GROUP_REACH_FRACTION * reach)
             .unwrap_or(0);
         let balls = &self.groups.balls[level];
-        let m = yaw_matrix(yaw_centre);
+        let total = self.groups.points as f64;
+        // Point by point (level 0), the points saturated in the parent box are skipped.
+        let parent_saturated = parent_saturated.filter(|_| level == 0);
+        let mut saturated = (level == 0).then(|| vec![0u64; balls.cx.len().div_ceil(64)]);
+        let limit_sum = if limit.is_finite() {
+            limit * (1.0 + 1e-9) * total + 1e-12
+        } else {
+            f64::INFINITY
+        };
+        let (sin, cos) = yaw_centre.sin_cos();
+        let (sin, cos) = (sin as f32, cos as f32);
         let t = centre.cast::<f32>();
         let tables = self.tables;
+        let planes = self.reference.surfaces();
         let truncation_sq = self.truncation_sq;
-        let (rt, chord) = (translation_radius as f32, chord as f32);
         let margin = 2.0 * FAST_ATAN2_MAX_ERROR;
-        // 2 |t_c,h| δ, with δ the largest turn from the middle heading (slightly enlarged for
-        // rounding).
-        let yaw_spread = (2.0 * centre.xy().norm() * 0.5 * (yaw_hi - yaw_lo) * (1.0 + 1e-6)) as f32;
-        let mut certain_sum = 0f64;
-        let mut certain_count = 0u64;
-        let mut maybe: Vec<(f32, u32)> = Vec::new();
-        let mut maybe_count = 0u64;
-        let (mut estimate_sum, mut estimate_count) = (0f64, 0u64);
+        let mut bound_sum = 0f64;
+        let mut estimate_sum = 0f64;
         const CHUNK: usize = 64;
-        let mut geometry = [BallGeometry::default(); CHUNK];
+        // One array per quantity, so the compiler vectorizes the geometry.
+        let mut ux = [0f32; CHUNK];
+        let mut uy = [0f32; CHUNK];
+        let mut uz = [0f32; CHUNK];
+        let mut ranges = [0f32; CHUNK];
+        let mut horizontals = [0f32; CHUNK];
+        let mut radii = [0f32; CHUNK];
+        let mut spreads = [0f32; CHUNK];
+        let mut cells = [[0i32; 6]; CHUNK];
         let n = balls.cx.len();
         for start in (0..n).step_by(CHUNK) {
             let len = CHUNK.min(n - start);
-            // Vectorizable: each ball's position, range and angular extent.
-            for (i, g) in geometry[..len].iter_mut().enumerate() {
-                let k = start + i;
-                let (x, y, z) = (balls.cx[k], balls.cy[k], balls.cz[k]);
-                let u0 = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
-                let u1 = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
-                let u2 = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
-                // Every member at every candidate of the box lies within `rt + group radius` of
-                // the group centre's arc `Rz(ψ) c + t_c`, and the arc within `chord · ρ` of its
-                // middle: a ball bounds the azimuths (slack covers single-precision rounding).
-                let near = rt + balls.radius[k] + 1e-4;
-                let radius = near + chord * balls.horizontal[k];
+            let (bx, by, bz) = (
+                &balls.cx[start..start + len],
+                &balls.cy[start..start + len],
+                &balls.cz[start..start + len],
+            );
+            let (br, bh) = (
+                &balls.radius[start..start + len],
+                &balls.horizontal[start..start + len],
+            );
+            for i in 0..len {
+                let (x, y, z) = (bx[i], by[i], bz[i]);
+                let u0 = cos * x - sin * y + t.x;
+                let u1 = sin * x + cos * y + t.y;
+                let u2 = z + t.z;
+                // A group member turns about the query origin with its centre, so its offset
+                // from the centre keeps its length.
+                let spread = br[i] + 1e-4;
+                let radius = translation_radius + chord * bh[i] + spread;
                 let horizontal = (u0 * u0 + u1 * u1).sqrt();
                 let range = (horizontal * horizontal + u2 * u2).sqrt();
-                // Turning about z keeps the height, and changes the squared horizontal distance
-                // by at most 2 ρ |t_c,h| δ: in the (horizontal, height) plane the members lie
-                // within `near + dh` of the centre's middle position, which bounds their range
-                // and elevation far tighter than the ball.
-                let w = yaw_spread * balls.horizontal[k];
-                let dh = horizontal - (horizontal * horizontal - w).max(0.0).sqrt();
-                let radial = (near + dh).min(radius);
                 // Angular radius: tan(asin(ρ/|u|)) ≥ asin(ρ/|u|), plus the arctangent's error.
-                let alpha = radial / (range * range - radial * radial).sqrt() + margin;
-                let elevation = fast_atan2(u2, horizontal);
+                let alpha = radius / (range * range - radius * radius).sqrt() + margin;
                 let beta = radius / (horizontal * horizontal - radius * radius).sqrt() + margin;
+                let elevation = fast_atan2(u2, horizontal);
                 let azimuth = fast_atan2(u1, u0);
-                let (el_lo, el_hi) = (elevation - alpha, elevation + alpha);
-                *g = BallGeometry {
-                    range,
-                    radius,
-                    radial,
-                    horizontal,
-                    el_lo,
-                    el_hi,
-                    e0: floor_i32((el_lo - tables.elevation_min) * tables.inv_resolution),
-                    e1: floor_i32((el_hi - tables.elevation_min) * tables.inv_resolution),
-                    a0: floor_i32((azimuth - beta - tables.azimuth_min) * tables.inv_resolution),
-                    a1: floor_i32((azimuth + beta - tables.azimuth_min) * tables.inv_resolution),
-                    ec: floor_i32((elevation - tables.elevation_min) * tables.inv_resolution),
-                    ac: floor_i32((azimuth - tables.azimuth_min) * tables.inv_resolution),
+                let el = (elevation - tables.elevation_min) * tables.inv_resolution;
+                let az = (azimuth - tables.azimuth_min) * tables.inv_resolution;
+                let (da, db) = (alpha * tables.inv_resolution, beta * tables.inv_resolution);
+                ux[i] = u0;
+                uy[i] = u1;
+                uz[i] = u2;
+                ranges[i] = range;
+                horizontals[i] = horizontal;
+                radii[i] = radius;
+                spreads[i] = spread;
+                cells[i] = [
+                    floor_i32(el - da),
+                    floor_i32(el + da),
+                    floor_i32(az - db),
+                    floor_i32(az + db),
+                    floor_i32(el),
+                    floor_i32(az),
+                ];
+            }
+            for i in 0..len {
+                let k = start + i;
+                let count = balls.count[k] as f64;
+                let word = k / 64;
+                let bit = 1u64 << (k % 64);
+                if parent_saturated.is_some_and(|m| m[word] & bit != 0) {
+                    bound_sum += truncation_sq as f64 * count;
+                    estimate_sum += truncation_sq as f64 * count;
+                    if let Some(m) = saturated.as_mut() {
+                        m[word] |= bit;
+                    }
+                    continue;
+                }
+                let [e0, e1, a0, a1, ec, ac] = cells[i];
+                let g = Reach {
+                    x: [ux[i], uy[i], uz[i]],
+                    arm: [ux[i] - t.x, uy[i] - t.y],
+                    range: ranges[i],
+                    radius: radii[i],
+                    spread: spreads[i],
+                    holds_origin: ranges[i] <= radii[i] * 1.0001,
+                    holds_axis: horizontals[i] <= radii[i] * 1.0001,
+                    e0,
+                    e1,
+                    a0,
+                    a1,
+                    ec,
+                    ac,
                 };
-            }
-            for (i, g) in geometry[..len].iter().enumerate() {
-                let count = balls.count[start + i];
-                if let Some(r) = tables.range_at(g.ec, g.ac) {
-                    let e = g.range - r;
-                    estimate_sum += (e * e).min(truncation_sq) as f64 * count as f64;
-                    estimate_count += count as u64;
-                }
-                match ball_bound(tables, g, truncation_sq) {
-                    (Status::Never, _) => {}
-                    (Status::Certain, lb) => {
-                        certain_sum += lb as f64 * count as f64;
-                        certain_count += count as u64;
-                    }
-                    (Status::Maybe, lb) => {
-                        maybe.push((lb, count));
-                        maybe_count += count as u64;
+                let (lb, at_centre) = reach_bound(tables, planes, &g, half, turn, truncation_sq);
+                estimate_sum += at_centre as f64 * count;
+                bound_sum += lb as f64 * count;
+                if lb >= truncation_sq {
+                    if let Some(m) = saturated.as_mut() {
+                        m[word] |= bit;
                     }
                 }
             }
-        }
-        let estimate = if estimate_count == 0 {
-            f64::INFINITY
-        } else {
-            estimate_sum / estimate_count as f64
-        };
-        if certain_count + maybe_count < self.min_overlap {
-            return (f64::INFINITY, estimate);
-        }
-        // The smallest mean over the certain terms plus any subset of the possible ones that
-        // reaches the minimum overlap: take the possible ones from the smallest up.
-        maybe.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (mut sum, mut count) = (certain_sum, certain_count);
-        for (lb, n) in maybe {
-            let lb = lb as f64;
-            if count < self.min_overlap {
-                let take = (self.min_overlap - count).min(n as u64);
-                sum += lb * take as f64;
-                count += take;
-                if take < n as u64 && lb * (count as f64) < sum {
-                    let rest = n as u64 - take;
-                    sum += lb * rest as f64;
-                    count += rest;
-                }
-            } else if lb * (count as f64) < sum {
-                sum += lb * n as f64;
-                count += n as u64;
-            } else {
-                break;
+            if bound_sum > limit_sum {
+                return (bound_sum / total, f64::INFINITY, None);
             }
         }
-        if count == 0 {
-            (f64::INFINITY, estimate)
-        } else {
-            (sum / count as f64, estimate)
-        }
+        (bound_sum / total, estimate_sum / total, saturated)
     }
 }
 
-enum Status {
-    Never,
-    Maybe,
-    Certain,
-}
-
-/// A ball's position against the reference (see [`ball_bound`]).
+/// Where a ball's members may be over a box of candidates (see [`BranchAndBound::bound_below`]).
 #[derive(Clone, Copy, Default)]
-struct BallGeometry {
-    /// Distance of the ball's centre from the reference origin, and its horizontal part.
+struct Reach {
+    /// The ball centre's position at the box's middle candidate.
+    x: [f32; 3],
+    /// Its horizontal offset from the query's origin there (the arm the heading turns).
+    arm: [f32; 2],
+    /// Its range.
     range: f32,
-    horizontal: f32,
-    /// The ball's radius (bounds the azimuths, and decides whether it holds the origin or the z
-    /// axis).
+    /// Every member lies within this of `x`.
     radius: f32,
-    /// Radius in the (horizontal, height) plane (bounds the range and the elevation).
-    radial: f32,
-    /// Elevation interval the ball spans, radians, and its cell rows (unclamped).
-    el_lo: f32,
-    el_hi: f32,
+    /// Of that, the group's own radius (and a rounding margin).
+    spread: f32,
+    /// The ball holds the origin, or the z axis (then it sees every direction, or every azimuth).
+    holds_origin: bool,
+    holds_axis: bool,
+    /// The cone's cell rows and columns (unclamped), and the centre's cell.
     e0: i32,
     e1: i32,
-    /// Azimuth cell columns the ball spans (unclamped), when it does not hold the z axis.
     a0: i32,
     a1: i32,
-    /// The cell of the centre's direction (unclamped).
     ec: i32,
     ac: i32,
 }
 
-/// Bounds one ball: whether the points it may hold are compared with a known reference cell,
-/// and a lower bound on their truncated squared range difference.
+/// Cones of up to this many cells are bounded cell by cell, from each cell's plane; larger ones
+/// from the range tables alone (whether any cell could compare the members at all).
+const MAX_CONE_CELLS: i32 = 256;
+
+/// A lower bound on the term of every member of a ball over the box (see
+/// [`BranchAndBound::bound_below`]); `half` is the box's translation half-extent per axis.
 #[inline]
-fn ball_bound(t: &RangeTables, g: &BallGeometry, truncation_sq: f32) -> (Status, f32) {
-    let (range, radius) = (g.range, g.radius);
-    let (lo_r, hi_r) = (range - g.radial, range + g.radial);
-    let lb_of = |min: f32, max: f32| -> f32 {
-        let d = if min > hi_r {
-            min - hi_r
-        } else if max < lo_r {
-            lo_r - max
+fn reach_bound(
+    tables: &RangeTables,
+    planes: &crate::sdem::CellSurfaces,
+    g: &Reach,
+    half: nalgebra::Vector3<f32>,
+    turn: (f32, f32),
+    truncation_sq: f32,
+) -> (f32, f32) {
+    let (r_lo, r_hi) = (g.range - g.radius, g.range + g.radius);
+    // The centre's own cell: the estimate (the squared distance there), and for a point on a
+    // surface often a bound of 0 at once.
+    let centre = tables.cell(g.ec, g.ac).map(|c| &planes.cells[c]);
+    let estimate = centre
+        .filter(|c| c.lo <= g.range && g.range <= c.hi)
+        .map_or(truncation_sq, |c| {
+            let e = c.n[0] * g.x[0] + c.n[1] * g.x[1] + c.n[2] * g.x[2] - c.d;
+            (e * e).min(truncation_sq)
+        });
+    if g.holds_origin {
+        // Any direction, any range: the reference's whole extent.
+        let (min, max) = tables.global;
+        return (if min > max { truncation_sq } else { 0.0 }, estimate);
+    }
+    let last_row = tables.n_el as i32 - 1;
+    if g.e1 < 0 || g.e0 > last_row {
+        return (truncation_sq, estimate);
+    }
+    let (e0, e1) = (g.e0.max(0), g.e1.min(last_row));
+    let n_az = tables.n_az as i32;
+    let (mut a0, mut a1) = (g.a0, g.a1);
+    if g.holds_axis || (tables.full_circle && a1 - a0 + 1 >= n_az) {
+        (a0, a1) = (0, n_az - 1);
+    } else if tables.full_circle {
+        // Columns run from a0 in [0, n_az) for at most n_az - 1 more, so wrap at most once.
+        let start = a0.rem_euclid(n_az);
+        (a0, a1) = (start, start + (a1 - a0));
+    } else {
+        if a1 < 0 || a0 >= n_az {
+            return (truncation_sq, estimate);
+        }
+        (a0, a1) = (a0.max(0), a1.min(n_az - 1));
+    }
+    if (e1 - e0 + 1) * (a1 - a0 + 1) > MAX_CONE_CELLS {
+        // Whether any cell of the cone could compare the members within its gate.
+        let (min, max) = tables.window(e0 as usize, e1 as usize, a0 as usize, a1 as usize);
+        let lb = if min > r_hi || max < r_lo {
+            truncation_sq
         } else {
             0.0
         };
-        (d * d).min(truncation_sq)
-    };
-    if range <= radius * 1.0001 {
-        // The ball holds the origin: any direction.
-        let (known, min, max) = t.global;
-        return if known == 0 {
-            (Status::Never, 0.0)
-        } else {
-            (Status::Maybe, lb_of(min, max))
-        };
+        return (lb, estimate);
     }
-    let mut outside = g.el_lo < t.elevation_min || g.el_hi > t.elevation_max;
-    let last_row = t.n_el as i32 - 1;
-    let e0 = g.e0.clamp(0, last_row) as usize;
-    let e1 = g.e1.clamp(0, last_row) as usize;
-    let (a0, a1) = if g.horizontal <= radius * 1.0001 {
-        // The ball holds the z axis: every azimuth.
-        if !t.full_circle {
-            outside = true;
+    let (one_minus_cos, sin) = turn;
+    let term = |c: &crate::sdem::CellPlane| -> f32 {
+        // Unknown cells (NaN) and gates the members cannot reach cost τ².
+        if !(c.lo <= r_hi && c.hi >= r_lo) {
+            return truncation_sq;
         }
-        (0, t.n_az - 1)
-    } else {
-        let (lo, hi) = (g.a0 as i64, g.a1 as i64);
-        let n = t.n_az as i64;
-        if t.full_circle {
-            if hi - lo + 1 >= n {
-                (0, t.n_az - 1)
-            } else {
-                let start = lo.rem_euclid(n);
-                (start as usize, (start + hi - lo) as usize)
-            }
-        } else {
-            if lo < 0 || hi >= n {
-                outside = true;
-            }
-            (lo.clamp(0, n - 1) as usize, hi.clamp(0, n - 1) as usize)
-        }
+        let [nx, ny, nz] = c.n;
+        // Turning by θ (|θ| ≤ δ) from the middle heading moves the centre by
+        // (cos θ − 1) arm + sin θ (ẑ × arm): along the normal, at most this.
+        let radial = (nx * g.arm[0] + ny * g.arm[1]).abs();
+        let tangential = (ny * g.arm[0] - nx * g.arm[1]).abs();
+        let along_normal = half.x * nx.abs()
+            + half.y * ny.abs()
+            + half.z * nz.abs()
+            + one_minus_cos * radial
+            + sin * tangential
+            + g.spread;
+        let distance = (nx * g.x[0] + ny * g.x[1] + nz * g.x[2] - c.d).abs();
+        let v = (distance - along_normal).max(0.0);
+        v * v
     };
-    let (known, cells, min, max) = t.window(e0, e1, a0, a1);
-    if known == 0 {
-        (Status::Never, 0.0)
-    } else if known == cells && !outside {
-        (Status::Certain, lb_of(min, max))
-    } else {
-        (Status::Maybe, lb_of(min, max))
+    let mut best = truncation_sq;
+    if let Some(c) = centre {
+        best = term(c).min(truncation_sq);
+        if best == 0.0 {
+            return (0.0, estimate);
+        }
     }
+    if e0 == e1 && a0 == a1 {
+        // A single cell: the centre's (or one outside the grid).
+        return (best, estimate);
+    }
+    let [cx, cy, cz, cd, clo, chi] = &planes.columns;
+    // Columns a0..=a1 of a row, as at most two runs of the stored row (wrapping once).
+    let runs = if a1 < n_az {
+        [(a0, a1 + 1), (0, 0)]
+    } else {
+        [(a0, n_az), (0, a1 + 1 - n_az)]
+    };
+    const LANES: usize = 8;
+    for e in e0..=e1 {
+        let row = (e * n_az) as usize;
+        for &(from, to) in &runs {
+            let (from, to) = (row + from as usize, row + to as usize);
+            let mut lanes = [truncation_sq; LANES];
+            // The same arithmetic as `term`, written so LANES cells at a time vectorize.
+            let cell = |nx: f32, ny: f32, nz: f32, d: f32, lo: f32, hi: f32| -> f32 {
+                let radial = (nx * g.arm[0] + ny * g.arm[1]).abs();
+                let tangential = (ny * g.arm[0] - nx * g.arm[1]).abs();
+                let along_normal = half.x * nx.abs()
+                    + half.y * ny.abs()
+                    + half.z * nz.abs()
+                    + one_minus_cos * radial
+                    + sin * tangential
+                    + g.spread;
+                let distance = (nx * g.x[0] + ny * g.x[1] + nz * g.x[2] - d).abs();
+                let v = distance - along_normal;
+                let v = if v > 0.0 { v } else { 0.0 };
+                if lo <= r_hi && hi >= r_lo {
+                    v * v
+                } else {
+                    truncation_sq
+                }
+            };
+            let (xs, ys, zs) = (&cx[from..to], &cy[from..to], &cz[from..to]);
+            let (ds, los, his) = (&cd[from..to], &clo[from..to], &chi[from..to]);
+            let full = xs.len() / LANES * LANES;
+            for k in (0..full).step_by(LANES) {
+                let (x8, y8, z8) = (&xs[k..k + LANES], &ys[k..k + LANES], &zs[k..k + LANES]);
+                let (d8, lo8, hi8) = (&ds[k..k + LANES], &los[k..k + LANES], &his[k..k + LANES]);
+                for l in 0..LANES {
+                    let t = cell(x8[l], y8[l], z8[l], d8[l], lo8[l], hi8[l]);
+                    lanes[l] = if t < lanes[l] { t } else { lanes[l] };
+                }
+            }
+            for k in full..xs.len() {
+                let t = cell(xs[k], ys[k], zs[k], ds[k], los[k], his[k]);
+                lanes[0] = if t < lanes[0] { t } else { lanes[0] };
+            }
+            for v in lanes {
+                if v < best {
+                    best = v;
+                }
+            }
+        }
+        if best == 0.0 {
+            return (0.0, estimate);
+        }
+    }
+    (best, estimate)
 }
 
 /// What the search precomputes for one reference/query pair: the reference's range tables and
@@ -710,10 +945,10 @@ pub(crate) struct Prepared {
 }
 
 impl Prepared {
-    pub fn new(reference: &Sdem, query: &Sdem) -> Self {
+    pub fn new(reference: &Sdem, query: &Sdem, cost: &CostConfig) -> Self {
         Self {
             tables: RangeTables::new(reference),
-            groups: QueryGroups::new(query, 4),
+            groups: QueryGroups::new(&search_points(query, cost.search_voxel_m), 6),
         }
     }
 }
@@ -776,9 +1011,9 @@ mod tests {
         let window = SearchWindow::around(&truth, [0.08, 0.08, 0.04]);
         let yaws: Vec<f64> = (-2..=2).map(|k| (k as f64).to_radians()).collect();
         let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-        let tables = RangeTables::new(&r);
-        let groups = QueryGroups::new(&q, 4);
-        let bnb = BranchAndBound::new(&r, &q, &cost, &grid, &tables, &groups).unwrap();
+        let prepared = Prepared::new(&r, &q, &cost);
+        let (tables, groups) = (&prepared.tables, &prepared.groups);
+        let bnb = BranchAndBound::new(&r, &q, &cost, &grid, tables, groups).unwrap();
         let mut c = Correlator::new(&r, &q, &cost).unwrap();
         let n = grid.counts;
         let costs: Vec<f64> = (0..grid.len())
@@ -790,7 +1025,16 @@ mod tests {
             .collect();
         let best = costs.iter().cloned().fold(f64::INFINITY, f64::min);
         assert!(best.is_finite());
-        for (size, yaw_size) in [(2, 1), (4, 1), (8, 1), (2, 2), (4, 5), (9, 5)] {
+        for (size, yaw_size) in [
+            (1, 1),
+            (2, 1),
+            (4, 1),
+            (8, 1),
+            (2, 2),
+            (4, 5),
+            (9, 5),
+            (16, 5),
+        ] {
             let (mut pruned, mut boxes) = (0, 0);
             for l in (0..n[3]).step_by(yaw_size) {
                 for z in (0..n[2]).step_by(size) {
@@ -804,9 +1048,6 @@ mod tests {
                                 (l + yaw_size).min(n[3]) - 1,
                             ];
                             let node = Node { lo, hi };
-                            if node.is_leaf() {
-                                continue;
-                            }
                             let (bound, _) = bnb.bound(&node);
                             let mut min = f64::INFINITY;
                             for ll in lo[3]..=hi[3] {

@@ -12,8 +12,9 @@
 //!   query point then contributes a term that depends on its own moved position only, which is
 //!   what lets [`crate::bnb`] bound the cost over a box of candidates and search exactly.
 //!
-//! Both compare ranges in the same direction, truncate the squared difference at `τ`, skip cells
-//! unknown on either side and normalize by the cells compared.
+//! Both compare ranges in the same direction, truncate the squared difference at `τ`, and take the
+//! mean over the query's known cells, a cell the reference does not see counting `τ²` (a full
+//! mismatch), so a candidate cannot win by seeing less and the sum stays additive.
 
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
@@ -48,16 +49,23 @@ pub struct CostConfig {
     /// cells match it within the truncation; otherwise the search reports that nothing matched
     /// (a best candidate far from everything is still a best candidate).
     pub min_inlier_fraction: f64,
+    /// The projective cost compares one query point per cube of this side, metres (the one
+    /// nearest the cube's centre; 0 keeps every point). An S-DEM samples 1° of directions, so
+    /// it holds a point every few millimetres on the floor under the sensor and every few
+    /// centimetres on far walls: the cubes even that out, and the grid search does not need
+    /// more to find the basin (the refinement uses every point).
+    pub search_voxel_m: f64,
 }
 
 impl Default for CostConfig {
     fn default() -> Self {
         Self {
             model: CostModel::Projective,
-            truncation_m: 0.10,
+            truncation_m: 0.05,
             min_overlap_cells: 200,
             min_overlap_fraction: 0.2,
             min_inlier_fraction: 0.1,
+            search_voxel_m: 0.08,
         }
     }
 }
@@ -75,6 +83,12 @@ impl CostConfig {
             return Err(Error::Invalid(format!(
                 "minimum overlap fraction {} must lie in [0, 1]",
                 self.min_overlap_fraction
+            )));
+        }
+        if !(self.search_voxel_m.is_finite() && self.search_voxel_m >= 0.0) {
+            return Err(Error::Invalid(format!(
+                "search voxel {} m must be a number >= 0",
+                self.search_voxel_m
             )));
         }
         if !(0.0..=1.0).contains(&self.min_inlier_fraction) {
@@ -102,9 +116,10 @@ impl CostConfig {
 /// The score of one candidate.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Correlation {
-    /// Mean truncated squared range difference over the compared cells, m² (the paper's `d`).
+    /// Mean truncated squared range difference over the query's known cells, a cell the
+    /// reference does not see counting as a full mismatch `τ²`, m² (the paper's `d`).
     pub cost: f64,
-    /// Number of cells compared.
+    /// Number of cells compared (known on both sides).
     pub overlap: usize,
     /// Of those, cells whose range difference lies within the truncation (the matched cells).
     pub inliers: usize,
@@ -112,10 +127,16 @@ pub struct Correlation {
 
 /// Accumulates eq. (1) cell by cell; every evaluator goes through it so all compute exactly the
 /// same number for the same candidate.
+///
+/// The sum is additive over the query's cells: a cell the reference does not see adds `τ²`, as
+/// much as a mismatch, rather than being left out. So a candidate cannot win by seeing less, and
+/// each cell's term depends on that cell alone, which is what gives the exact search its bound
+/// (a normalization by the cells compared would couple every term to every other).
 pub(crate) struct CostSum {
     sum: f64,
     count: usize,
     inliers: usize,
+    unseen: usize,
     truncation_sq: f32,
 }
 
@@ -125,6 +146,7 @@ impl CostSum {
             sum: 0.0,
             count: 0,
             inliers: 0,
+            unseen: 0,
             truncation_sq,
         }
     }
@@ -132,18 +154,37 @@ impl CostSum {
     #[inline]
     pub(crate) fn add(&mut self, a: f32, b: f32) {
         // Nagatani 2003, Sec. III-C, eq. (1): the difference of the two ranges in one direction,
-        // here squared and truncated (robust), summed over the cells known on both sides.
+        // here squared and truncated (robust), summed over the query's cells.
         let e = a - b;
-        let e2 = e * e;
+        self.add_squared(e * e);
+    }
+
+    /// A compared cell whose squared difference is `e2` (truncated here; `∞` for a mismatch).
+    #[inline]
+    pub(crate) fn add_squared(&mut self, e2: f32) {
         self.sum += e2.min(self.truncation_sq) as f64;
         self.count += 1;
         self.inliers += (e2 < self.truncation_sq) as usize;
     }
 
+    /// A query cell whose direction the reference does not see: a full mismatch.
+    #[inline]
+    pub(crate) fn add_unseen(&mut self) {
+        self.sum += self.truncation_sq as f64;
+        self.unseen += 1;
+    }
+
+    /// The sum so far (never decreases: every term is >= 0).
+    #[inline]
+    pub(crate) fn partial(&self) -> f64 {
+        self.sum
+    }
+
     pub(crate) fn finish(self, min_overlap: usize) -> Option<Correlation> {
-        // Eq. (1), normalized by the cells compared, so a candidate cannot win by seeing less.
+        // Eq. (1) as the mean over the query's cells; too little overlap is no candidate at all.
+        let total = self.count + self.unseen;
         (self.count >= min_overlap && self.count > 0).then(|| Correlation {
-            cost: self.sum / self.count as f64,
+            cost: self.sum / total as f64,
             overlap: self.count,
             inliers: self.inliers,
         })
@@ -157,11 +198,61 @@ pub fn correlate(virtual_sdem: &Sdem, local: &Sdem, cost: &CostConfig) -> Option
     for &cell in local.cells() {
         let c = cell as usize;
         let v = virtual_sdem.ranges()[c];
-        if !v.is_nan() {
+        if v.is_nan() {
+            acc.add_unseen();
+        } else {
             acc.add(v, local.ranges()[c]);
         }
     }
     acc.finish(cost.min_overlap(local.known_cells()))
+}
+
+/// The query points the projective cost compares: one per cube of side `voxel_m` (the point
+/// nearest the cube's centre), or every boundary point for `voxel_m = 0`; in S-DEM cell order.
+pub fn search_points(query: &Sdem, voxel_m: f64) -> Vec<[f32; 3]> {
+    if voxel_m <= 0.0 {
+        return query.points().to_vec();
+    }
+    let v = voxel_m as f32;
+    let mut chosen: crate::voxel::KeyMap<(u32, f32)> = Default::default();
+    for (i, p) in query.points().iter().enumerate() {
+        let key = p.map(|c| (c / v).floor() as i32);
+        let off = [0, 1, 2].map(|a| p[a] - (key[a] as f32 + 0.5) * v);
+        let d = off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
+        chosen
+            .entry(crate::voxel::Key(key))
+            .and_modify(|e| {
+                if d < e.1 {
+                    *e = (i as u32, d)
+                }
+            })
+            .or_insert((i as u32, d));
+    }
+    let mut kept: Vec<u32> = chosen.values().map(|e| e.0).collect();
+    kept.sort_unstable();
+    kept.iter().map(|&i| query.points()[i as usize]).collect()
+}
+
+/// Points per block of a capped evaluation: the sum is checked against the cap after each.
+const BLOCK: usize = 512;
+
+/// A fixed permutation of `0..n` that spreads neighbours apart: `i ↦ i · s mod n` with a stride
+/// `s` near `n / φ` coprime to `n` (every index once).
+pub(crate) fn scrambled_order(n: usize) -> Vec<usize> {
+    if n < 3 {
+        return (0..n).collect();
+    }
+    let gcd = |mut a: usize, mut b: usize| {
+        while b != 0 {
+            (a, b) = (b, a % b);
+        }
+        a
+    };
+    let mut stride = ((n as f64) * 0.618_033_988_75) as usize;
+    while gcd(stride, n) != 1 {
+        stride += 1;
+    }
+    (0..n).map(|i| (i * stride) % n).collect()
 }
 
 /// `Rz(yaw)` in single precision.
@@ -202,11 +293,15 @@ impl<'a> Correlator<'a> {
             CostModel::VirtualSdem => vec![f32::NAN; reference.grid().len()],
             CostModel::Projective => Vec::new(),
         };
-        let n = match cost.model {
-            CostModel::Projective => query.points().len(),
-            CostModel::VirtualSdem => 0,
+        let points = match cost.model {
+            CostModel::Projective => search_points(query, cost.search_voxel_m),
+            CostModel::VirtualSdem => Vec::new(),
         };
-        let column = |k: usize| -> Vec<f32> { query.points()[..n].iter().map(|p| p[k]).collect() };
+        let n = points.len();
+        // The points in a scrambled order, so that a partial sum is a fair sample of the whole
+        // and a capped evaluation can stop early (see `evaluate_capped`).
+        let order = scrambled_order(n);
+        let column = |k: usize| -> Vec<f32> { order.iter().map(|&i| points[i][k]).collect() };
         Ok(Self {
             query_xyz: [column(0), column(1), column(2)],
             moved: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
@@ -216,7 +311,10 @@ impl<'a> Correlator<'a> {
             query,
             model: cost.model,
             truncation_sq: cost.truncation_sq(),
-            min_overlap: cost.min_overlap(query.known_cells()),
+            min_overlap: match cost.model {
+                CostModel::Projective => cost.min_overlap(n),
+                CostModel::VirtualSdem => cost.min_overlap(query.known_cells()),
+            },
             min_range: reference.config().min_range_m as f32,
             zbuffer,
         })
@@ -227,12 +325,39 @@ impl<'a> Correlator<'a> {
         self.min_overlap
     }
 
+    /// The number of query cells each candidate is scored over: the search points of the
+    /// projective cost, the known cells of the virtual S-DEM cost.
+    pub fn compared_points(&self) -> usize {
+        match self.model {
+            CostModel::Projective => self.query_xyz[0].len(),
+            CostModel::VirtualSdem => self.query.known_cells(),
+        }
+    }
+
     /// The score of the candidate `(offset, yaw)`: query point `q` at `Rz(yaw) q + offset` in the
     /// reference's levelled frame.
     pub fn evaluate(&mut self, offset: &Vec3, yaw: f64) -> Option<Correlation> {
         match self.model {
-            CostModel::Projective => self.evaluate_projective(offset, &yaw_matrix(yaw)),
+            CostModel::Projective => {
+                self.evaluate_projective(offset, &yaw_matrix(yaw), f64::INFINITY)
+            }
             CostModel::VirtualSdem => self.evaluate_virtual(offset, &yaw_matrix(yaw)),
+        }
+    }
+
+    /// The score of `(offset, yaw)` unless it certainly exceeds `cap` (a mean cost, m²): the
+    /// sum is checked against the cap as it grows, point block by point block, and `None` is
+    /// returned as soon as it is above (every term is >= 0, so the full sum would be too), or
+    /// when the candidate compares too few cells. Below the cap, the result equals
+    /// [`Self::evaluate`]'s bit for bit: the terms are added in the same order.
+    ///
+    /// The exact search scores its candidates this way, against the best cost found so far.
+    pub fn evaluate_capped(&mut self, offset: &Vec3, yaw: f64, cap: f64) -> Option<Correlation> {
+        match self.model {
+            CostModel::Projective => self.evaluate_projective(offset, &yaw_matrix(yaw), cap),
+            CostModel::VirtualSdem => self
+                .evaluate_virtual(offset, &yaw_matrix(yaw))
+                .filter(|c| c.cost <= cap),
         }
     }
 
@@ -240,29 +365,49 @@ impl<'a> Correlator<'a> {
         &mut self,
         offset: &Vec3,
         rotation: &Matrix3<f32>,
+        cap: f64,
     ) -> Option<Correlation> {
         let grid = self.reference.grid();
-        let reference_ranges = self.reference.ranges();
+        let surfaces = self.reference.surfaces();
         let t = offset.cast::<f32>();
         let m = rotation;
         let [qx, qy, qz] = &self.query_xyz;
         let [mx, my, mz] = &mut self.moved;
-        // Written as plain loops over arrays so the compiler vectorizes them; the same
-        // arithmetic as `rotation * q + t`.
-        for i in 0..qx.len() {
-            let (x, y, z) = (qx[i], qy[i], qz[i]);
-            mx[i] = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
-            my[i] = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
-            mz[i] = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
-        }
-        grid.cells_of(mx, my, mz, &mut self.cells, &mut self.ranges);
+        let n = qx.len();
+        // The cap on the sum; `f64::INFINITY` when uncapped.
+        let cap_sum = cap * n as f64;
         let mut acc = CostSum::new(self.truncation_sq);
-        for (&cell, &r) in self.cells.iter().zip(&self.ranges) {
-            if cell != u32::MAX {
-                let reference_range = reference_ranges[cell as usize];
-                if !reference_range.is_nan() {
-                    acc.add(r, reference_range);
+        for start in (0..n).step_by(BLOCK) {
+            let end = (start + BLOCK).min(n);
+            // Written as plain loops over arrays so the compiler vectorizes them; the same
+            // arithmetic as `rotation * q + t`.
+            for i in start..end {
+                let (x, y, z) = (qx[i], qy[i], qz[i]);
+                mx[i] = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
+                my[i] = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
+                mz[i] = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
+            }
+            grid.cells_of(
+                &mx[start..end],
+                &my[start..end],
+                &mz[start..end],
+                &mut self.cells[start..end],
+                &mut self.ranges[start..end],
+            );
+            for i in start..end {
+                let cell = self.cells[i];
+                let found = if cell == u32::MAX {
+                    None
+                } else {
+                    surfaces.squared_distance(cell as usize, [mx[i], my[i], mz[i]], self.ranges[i])
+                };
+                match found {
+                    Some(e2) => acc.add_squared(e2),
+                    None => acc.add_unseen(),
                 }
+            }
+            if acc.partial() > cap_sum {
+                return None;
             }
         }
         acc.finish(self.min_overlap)
@@ -295,7 +440,9 @@ impl<'a> Correlator<'a> {
         let local_ranges = self.query.ranges();
         for &cell in self.query.cells() {
             let v = self.zbuffer[cell as usize];
-            if !v.is_nan() {
+            if v.is_nan() {
+                acc.add_unseen();
+            } else {
                 acc.add(v, local_ranges[cell as usize]);
             }
         }

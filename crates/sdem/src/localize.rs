@@ -257,8 +257,8 @@ pub fn localize(
     let grid = CandidateGrid::new(&config.window, config.step_m, yaws)?;
     let mut evaluator = Evaluator::new(reference, query, &config.cost, &grid)?;
     // Shared by the search for the best candidate and the one for the runner-up.
-    let prepared =
-        (config.mode == SearchMode::BranchAndBound).then(|| bnb::Prepared::new(reference, query));
+    let prepared = (config.mode == SearchMode::BranchAndBound)
+        .then(|| bnb::Prepared::new(reference, query, &config.cost));
     let (best, stats) = run_search(
         &mut evaluator,
         prepared.as_ref(),
@@ -266,33 +266,31 @@ pub fn localize(
         full_turn,
         f64::INFINITY,
     )?;
+    let mut correlator = Correlator::new(reference, query, &config.cost)?;
     let Some((cost, flat)) = best else {
         return Err(Error::Localize(format!(
-            "no candidate in the window shares {} cells with the query S-DEM ({} known); \
+            "no candidate in the window shares {} cells with the query S-DEM ({} compared); \
              check the window and the attitudes, or lower the minimum overlap",
-            config.cost.min_overlap(query.known_cells()),
-            query.known_cells()
+            correlator.min_overlap(),
+            correlator.compared_points()
         )));
     };
     let grid_index = grid.index(flat);
     let grid_offset = grid.offset(grid_index);
     let grid_heading = grid.yaw(grid_index);
     // Scores the best candidate again here and, for the diagnostics, its neighbours.
-    let mut correlator = Correlator::new(reference, query, &config.cost)?;
     let at_best = correlator
         .evaluate(&grid_offset, grid_heading)
         .ok_or_else(|| Error::Localize("the best candidate could not be scored again".into()))?;
     let overlap = at_best.overlap;
-    let needed_inliers = (config.cost.min_inlier_fraction * query.known_cells() as f64).ceil();
+    let compared = correlator.compared_points();
+    let needed_inliers = (config.cost.min_inlier_fraction * compared as f64).ceil();
     if (at_best.inliers as f64) < needed_inliers {
         return Err(Error::Localize(format!(
             "nothing in the window matches: at the best candidate only {} of the query's {} \
-             known cells lie within {} m of the reference (need {}); the scans may not overlap, \
-             or the motion lies outside the window",
-            at_best.inliers,
-            query.known_cells(),
-            config.cost.truncation_m,
-            needed_inliers
+             compared cells lie within {} m of the reference (need {}); the scans may not \
+             overlap, or the motion lies outside the window",
+            at_best.inliers, compared, config.cost.truncation_m, needed_inliers
         )));
     }
     let grid_rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), grid_heading);
@@ -358,7 +356,7 @@ pub fn localize(
     };
     let diagnostics = diagnose(
         config,
-        query.known_cells(),
+        compared,
         &at_best,
         grid_offset,
         runner_up,

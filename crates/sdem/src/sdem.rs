@@ -257,7 +257,7 @@ impl GridSpec {
 ///
 /// Besides the range grid it keeps the exact levelled point behind each known cell (its
 /// *boundary point*, paper Sec. III-C), which virtual S-DEMs re-project.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Sdem {
     spec: GridSpec,
     config: SdemConfig,
@@ -267,6 +267,178 @@ pub struct Sdem {
     points: Vec<[f32; 3]>,
     /// The cell of each boundary point, ascending.
     cells: Vec<u32>,
+    /// The surface model, made on first use (a function of the fields above).
+    surface: std::sync::OnceLock<CellSurfaces>,
+}
+
+impl PartialEq for Sdem {
+    fn eq(&self, other: &Self) -> bool {
+        self.spec == other.spec
+            && self.config == other.config
+            && self.cells == other.cells
+            && self.points == other.points
+            && self
+                .ranges
+                .iter()
+                .zip(&other.ranges)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+    }
+}
+
+/// The surface in each known cell of an S-DEM, as a plane through its boundary point, with the
+/// ranges along the cell's directions at which a point may be compared with it.
+///
+/// A 1° cell of a floor seen at a glancing angle spans decimetres of range; comparing a point's
+/// range with the cell's one return would count that spread as error. Measured from the cell's
+/// plane (its normal from the neighbouring cells' points), the same point is as far as it really
+/// is from the surface: the range difference times the cosine of the angle of incidence.
+#[derive(Debug, Clone)]
+pub struct CellSurfaces {
+    /// Per cell; the normal is NaN where the cell is unknown.
+    pub(crate) cells: Vec<CellPlane>,
+    /// The same, one field per array (`[nx, ny, nz, d, lo, hi]`), for scans along rows.
+    pub(crate) columns: [Vec<f32>; 6],
+}
+
+/// The plane of one cell.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct CellPlane {
+    /// Unit normal, pointing away from the sensor (NaN: unknown cell).
+    pub n: [f32; 3],
+    /// `n · p` (> 0) for the cell's boundary point `p`.
+    pub d: f32,
+    /// A point of the cell's directions is compared with the plane only at ranges in
+    /// `[lo, hi]`: the plane's ranges over the cell's corners (kept within [`PLANE_REACH_M`] of
+    /// the return), widened by [`PLANE_GATE_M`]. Beyond, it lies far along the ray from anything
+    /// the scan saw, whatever its distance to the plane: a mismatch.
+    pub lo: f32,
+    /// See `lo`.
+    pub hi: f32,
+}
+
+/// The plane's ranges in a cell are kept within this of the cell's return, metres: beyond it the
+/// plane is extrapolated past what the scan saw.
+pub const PLANE_REACH_M: f32 = 0.10;
+
+/// A point is compared with a cell's plane at ranges up to this beyond the plane's interval in
+/// the cell, metres.
+pub const PLANE_GATE_M: f32 = 0.10;
+
+impl CellSurfaces {
+    /// The squared distance of `x` (at range `range = |x|`, in `cell`'s directions) from the
+    /// cell's plane, `∞` where the range is out of the cell's gate, `None` for an unknown cell.
+    #[inline(always)]
+    pub(crate) fn squared_distance(&self, cell: usize, x: [f32; 3], range: f32) -> Option<f32> {
+        let c = &self.cells[cell];
+        if c.n[0].is_nan() {
+            return None;
+        }
+        if !(range >= c.lo && range <= c.hi) {
+            return Some(f32::INFINITY);
+        }
+        let e = c.n[0] * x[0] + c.n[1] * x[1] + c.n[2] * x[2] - c.d;
+        Some(e * e)
+    }
+
+    fn new(sdem: &Sdem) -> Self {
+        let spec = &sdem.spec;
+        let (n_az, n_el) = (spec.azimuth_cells() as i64, spec.elevation_cells() as i64);
+        let full_circle = spec.full_circle;
+        let unknown = CellPlane {
+            n: [f32::NAN; 3],
+            d: f32::NAN,
+            lo: f32::NAN,
+            hi: f32::NAN,
+        };
+        let mut cells = vec![unknown; spec.len()];
+        let mut index = vec![u32::MAX; spec.len()];
+        for (i, &c) in sdem.cells.iter().enumerate() {
+            index[c as usize] = i as u32;
+        }
+        let point_at = |e: i64, a: i64| -> Option<Vec3> {
+            if e < 0 || e >= n_el {
+                return None;
+            }
+            let a = if full_circle {
+                a.rem_euclid(n_az)
+            } else if a < 0 || a >= n_az {
+                return None;
+            } else {
+                a
+            };
+            let i = index[(e * n_az + a) as usize];
+            (i != u32::MAX).then(|| {
+                let p = sdem.points[i as usize];
+                Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64)
+            })
+        };
+        let res = spec.resolution();
+        for (i, &cell) in sdem.cells.iter().enumerate() {
+            let (e, a) = (cell as i64 / n_az, cell as i64 % n_az);
+            let p = sdem.points[i];
+            let p = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let range = p.norm();
+            // Neighbours on the same surface: within a few cells' spread of this range.
+            let near =
+                |q: Option<Vec3>| q.filter(|q| (q.norm() - range).abs() < 0.05 + 0.1 * range);
+            let tangent = |a: Option<Vec3>, b: Option<Vec3>| match (near(a), near(b)) {
+                (Some(a), Some(b)) => Some(b - a),
+                (Some(a), None) => Some(p - a),
+                (None, Some(b)) => Some(b - p),
+                (None, None) => None,
+            };
+            let along = tangent(point_at(e, a - 1), point_at(e, a + 1));
+            let across = tangent(point_at(e - 1, a), point_at(e + 1, a));
+            let ray = p / range;
+            let mut normal = match (along, across) {
+                (Some(u), Some(v)) => {
+                    let n = u.cross(&v);
+                    let len = n.norm();
+                    if len > 1e-12 {
+                        n / len
+                    } else {
+                        ray
+                    }
+                }
+                // A plane facing the sensor where the neighbours do not tell.
+                _ => ray,
+            };
+            if normal.dot(&ray) < 0.0 {
+                normal = -normal;
+            }
+            let d = normal.dot(&p);
+            // The plane's range at the cell's corners, kept near the return.
+            let (az0, el0) = spec.cell_center(cell as usize);
+            let (mut lo, mut hi) = (range, range);
+            for (da, de) in [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+                let u = crate::geometry::direction(az0 + da * res, el0 + de * res);
+                let nu = normal.dot(&u);
+                let r = if nu > 1e-9 { d / nu } else { f64::INFINITY };
+                lo = lo.min(r);
+                hi = hi.max(r);
+            }
+            let reach = PLANE_REACH_M as f64;
+            let gate = PLANE_GATE_M as f64;
+            cells[cell as usize] = CellPlane {
+                n: [normal.x as f32, normal.y as f32, normal.z as f32],
+                d: d as f32,
+                lo: (lo.max(range - reach) - gate) as f32,
+                hi: (hi.min(range + reach) + gate) as f32,
+            };
+        }
+        let columns = [0, 1, 2, 3, 4, 5].map(|k| {
+            cells
+                .iter()
+                .map(|c| match k {
+                    0..=2 => c.n[k],
+                    3 => c.d,
+                    4 => c.lo,
+                    _ => c.hi,
+                })
+                .collect()
+        });
+        Self { cells, columns }
+    }
 }
 
 impl Sdem {
@@ -334,6 +506,7 @@ impl Sdem {
             ranges,
             points: kept_points,
             cells,
+            surface: std::sync::OnceLock::new(),
         }
     }
 
@@ -383,6 +556,11 @@ impl Sdem {
     /// Number of known cells.
     pub fn known_cells(&self) -> usize {
         self.cells.len()
+    }
+
+    /// The surface model of the known cells (made once, on first use).
+    pub fn surfaces(&self) -> &CellSurfaces {
+        self.surface.get_or_init(|| CellSurfaces::new(self))
     }
 }
 
