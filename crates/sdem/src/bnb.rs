@@ -27,7 +27,7 @@
 //! Query points are grouped (by cubes of 2, 4, 8 … cm) at coarser levels, so large boxes are
 //! bounded from a few hundred groups instead of every point: a group's reach covers its members'.
 
-use crate::cost::{scrambled_order, search_points, Correlator, CostConfig};
+use crate::cost::{scrambled_order, search_points, Capped, Correlator, CostConfig};
 use crate::geometry::fast_atan2;
 use crate::geometry::FAST_ATAN2_MAX_ERROR;
 use crate::sdem::floor_i32;
@@ -404,10 +404,25 @@ impl Ord for Pending {
 enum Outcome {
     /// A candidate scored at or below the limit.
     Leaf(Scored),
+    /// A candidate above the limit: its cost is at least this.
+    LeafAbove(Node, f64),
     /// A box that may hold a candidate below the limit.
     Open(Pending),
-    /// Nothing below the limit (a pruned box, or a candidate above it or without overlap).
+    /// A box whose bound lies above the limit.
+    Pruned(Pending),
+    /// Nothing at all (a candidate left out, or without overlap).
     Closed,
+}
+
+/// What a search set aside for a second one with a higher cap (the runner-up, see
+/// [`runner_up`]): every box it dropped and every candidate it scored or cut short whose bound
+/// or cost lay within `ratio` × the best of the moment. With it, the second search starts where
+/// the first stopped instead of bounding the whole window again.
+pub(crate) struct Reserve {
+    ratio: f64,
+    boxes: Vec<Pending>,
+    /// Candidates, with a lower bound on their cost (their cost, when scored).
+    leaves: Vec<(Node, f64)>,
 }
 
 /// The search state.
@@ -423,6 +438,8 @@ pub(crate) struct BranchAndBound<'a> {
     cap: f64,
     best: Option<Scored>,
     stats: BranchAndBoundStats,
+    /// Set aside for a second search, when asked.
+    reserve: Option<Reserve>,
 }
 
 impl<'a> BranchAndBound<'a> {
@@ -446,6 +463,7 @@ impl<'a> BranchAndBound<'a> {
             cap: f64::INFINITY,
             best: None,
             stats: BranchAndBoundStats::default(),
+            reserve: None,
         })
     }
 
@@ -454,7 +472,7 @@ impl<'a> BranchAndBound<'a> {
     /// Best first: the box with the lowest bound is expanded next, so no box whose bound lies
     /// above the minimum is ever expanded. A first dive (always into the most promising child)
     /// finds a good candidate early, against which every later box and candidate is cut short.
-    pub fn run(mut self) -> (Option<Scored>, BranchAndBoundStats) {
+    pub fn run(mut self) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
         let c = self.grid.counts;
         let root = Node {
             lo: [0; 4],
@@ -465,7 +483,7 @@ impl<'a> BranchAndBound<'a> {
             let score = self.score_leaf(&mut correlator, &root, self.cap);
             self.stats.leaves_evaluated += 1;
             self.stats.leaves_completed += score.is_some() as usize;
-            return (score, self.stats);
+            return (score, self.stats, None);
         }
         let mut queue = std::collections::BinaryHeap::new();
         // The dive.
@@ -482,9 +500,76 @@ impl<'a> BranchAndBound<'a> {
             current = open.next();
             queue.extend(open);
         }
-        // Best first.
+        self.best_first(queue)
+    }
+
+    /// A search for the best candidate below the cap among what `reserve` holds (the grid may
+    /// now leave out candidates the first search had).
+    fn run_from(mut self, reserve: Reserve) -> (Option<Scored>, BranchAndBoundStats) {
+        let cap = self.cap;
+        let leaves: Vec<Node> = reserve
+            .leaves
+            .iter()
+            .filter(|(node, lb)| *lb <= cap * (1.0 + 1e-9) + 1e-15 && !self.grid.excluded(node.lo))
+            .map(|(node, _)| *node)
+            .collect();
+        let this = &self;
+        let scored: Vec<Option<Scored>> = leaves
+            .par_iter()
+            .map_init(
+                || this.correlator(),
+                |correlator, node| this.score_leaf(correlator, node, cap),
+            )
+            .collect();
+        self.stats.leaves_evaluated += leaves.len();
+        for s in scored.into_iter().flatten() {
+            self.stats.leaves_completed += 1;
+            if self.best.is_none_or(|b| better(&s, &b)) {
+                self.best = Some(s);
+            }
+        }
+        let boxes: Vec<Pending> = reserve
+            .boxes
+            .into_iter()
+            .filter(|p| !self.prunable(p.bound) && !self.grid.box_excluded(p.node.lo, p.node.hi))
+            .collect();
+        // A box whose bound the first search cut short (its estimate is then ∞) holds only a
+        // partial sum: bounded again against this search's limit, most drop out.
+        let limit = self.limit();
+        let this = &self;
+        let boxes: Vec<Pending> = boxes
+            .into_par_iter()
+            .map(|p| {
+                if p.estimate.is_finite() {
+                    return p;
+                }
+                let mask = p.saturated.as_deref().map(Vec::as_slice);
+                let (bound, estimate, saturated) = this.bound_below(&p.node, limit, mask);
+                Pending {
+                    bound,
+                    estimate,
+                    node: p.node,
+                    saturated: saturated.map(std::sync::Arc::new).or(p.saturated),
+                }
+            })
+            .collect();
+        self.stats.nodes_bounded += boxes.iter().filter(|p| p.estimate.is_finite()).count();
+        let queue: std::collections::BinaryHeap<Pending> = boxes
+            .into_iter()
+            .filter(|p| !self.prunable(p.bound))
+            .collect();
+        let (best, stats, _) = self.best_first(queue);
+        (best, stats)
+    }
+
+    /// Expands the queue's boxes, lowest bound first, until every box left is above the best.
+    fn best_first(
+        mut self,
+        mut queue: std::collections::BinaryHeap<Pending>,
+    ) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
         while let Some(top) = queue.pop() {
             if self.prunable(top.bound) {
+                queue.push(top);
                 break;
             }
             let mut batch = vec![top];
@@ -496,10 +581,47 @@ impl<'a> BranchAndBound<'a> {
                     _ => break,
                 }
             }
-            let open = self.expand(&batch);
-            queue.extend(open.into_iter().filter(|p| !self.prunable(p.bound)));
+            for p in self.expand(&batch) {
+                if self.prunable(p.bound) {
+                    self.set_aside_box(p);
+                } else {
+                    queue.push(p);
+                }
+            }
         }
-        (self.best, self.stats)
+        for p in queue {
+            self.set_aside_box(p);
+        }
+        // Only what lies within the ratio of the final best is kept.
+        let limit = self.limit();
+        let mut reserve = self.reserve.take();
+        if let Some(r) = reserve.as_mut() {
+            let keep = r.ratio * limit * (1.0 + 1e-9) + 1e-15;
+            r.boxes.retain(|p| p.bound <= keep);
+            r.leaves.retain(|l| l.1 <= keep);
+        }
+        (self.best, self.stats, reserve)
+    }
+
+    /// Keeps a box dropped against the current best for a second search, when it may hold a
+    /// candidate within the reserve's ratio of the best.
+    fn set_aside_box(&mut self, p: Pending) {
+        let limit = self.limit();
+        if let Some(r) = self.reserve.as_mut() {
+            if p.bound <= r.ratio * limit * (1.0 + 1e-9) + 1e-15 {
+                r.boxes.push(p);
+            }
+        }
+    }
+
+    /// Keeps a candidate for a second search (see [`Self::set_aside_box`]).
+    fn set_aside_leaf(&mut self, node: Node, lower_bound: f64) {
+        let limit = self.limit();
+        if let Some(r) = self.reserve.as_mut() {
+            if lower_bound <= r.ratio * limit * (1.0 + 1e-9) + 1e-15 {
+                r.leaves.push((node, lower_bound));
+            }
+        }
     }
 
     /// The cost below which a candidate is of interest: the best so far, or the cap.
@@ -517,17 +639,27 @@ impl<'a> BranchAndBound<'a> {
     }
 
     fn score_leaf(&self, correlator: &mut Correlator, node: &Node, limit: f64) -> Option<Scored> {
+        match self.try_leaf(correlator, node, limit) {
+            Outcome::Leaf(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// Scores one candidate against the limit.
+    fn try_leaf(&self, correlator: &mut Correlator, node: &Node, limit: f64) -> Outcome {
         let idx = node.lo;
         if self.grid.excluded(idx) {
-            return None;
+            return Outcome::Closed;
         }
         // A little above the limit, so a candidate that ties with the best (same cost, lower
         // index) is scored to the end.
         let cap = limit * (1.0 + 1e-9) + 1e-15;
-        correlator
-            .evaluate_capped(&self.grid.offset(idx), self.grid.yaw(idx), cap)
-            .map(|c| (c.cost, self.grid.flat(idx)))
-            .filter(|s| s.0 <= self.cap)
+        match correlator.evaluate_within(&self.grid.offset(idx), self.grid.yaw(idx), cap) {
+            Capped::Scored(c) if c.cost <= self.cap => Outcome::Leaf((c.cost, self.grid.flat(idx))),
+            Capped::Scored(c) => Outcome::LeafAbove(*node, c.cost),
+            Capped::Above(partial) => Outcome::LeafAbove(*node, partial),
+            Capped::NoOverlap => Outcome::Closed,
+        }
     }
 
     /// Bounds or scores the children of `nodes` in parallel against the current limit; updates
@@ -551,21 +683,19 @@ impl<'a> BranchAndBound<'a> {
                 |correlator: &mut Option<Correlator>, (child, mask)| {
                     if child.is_leaf() {
                         let correlator = correlator.get_or_insert_with(|| this.correlator());
-                        match this.score_leaf(correlator, child, limit) {
-                            Some(s) => Outcome::Leaf(s),
-                            None => Outcome::Closed,
-                        }
+                        this.try_leaf(correlator, child, limit)
                     } else {
                         let (bound, estimate, saturated) = this.bound_below(child, limit, *mask);
+                        let pending = Pending {
+                            bound,
+                            estimate,
+                            node: *child,
+                            saturated: saturated.map(std::sync::Arc::new),
+                        };
                         if bound > limit * (1.0 + 1e-9) + 1e-15 {
-                            Outcome::Closed
+                            Outcome::Pruned(pending)
                         } else {
-                            Outcome::Open(Pending {
-                                bound,
-                                estimate,
-                                node: *child,
-                                saturated: saturated.map(std::sync::Arc::new),
-                            })
+                            Outcome::Open(pending)
                         }
                     }
                 },
@@ -582,10 +712,17 @@ impl<'a> BranchAndBound<'a> {
                 Outcome::Leaf(s) => {
                     self.stats.leaves_completed += 1;
                     if self.best.is_none_or(|b| better(&s, &b)) {
-                        self.best = Some(s);
+                        if let Some(old) = self.best.replace(s) {
+                            let node = self.grid.index(old.1);
+                            self.set_aside_leaf(Node { lo: node, hi: node }, old.0);
+                        }
+                    } else {
+                        self.set_aside_leaf(*child, s.0);
                     }
                 }
+                Outcome::LeafAbove(node, lower_bound) => self.set_aside_leaf(node, lower_bound),
                 Outcome::Open(p) => open.push(p),
+                Outcome::Pruned(p) => self.set_aside_box(p),
                 Outcome::Closed => {}
             }
         }
@@ -956,6 +1093,9 @@ impl Prepared {
 /// Runs the exact search; see the module documentation. With a finite `cap`, only candidates
 /// costing at most `cap` are looked for (the minimum among them, or `None`): a much cheaper
 /// question when the cap is low.
+///
+/// With `reserve_ratio`, the search also returns what it set aside for [`runner_up`]: the boxes
+/// and candidates that may cost up to that multiple of the best.
 pub(crate) fn search(
     prepared: &Prepared,
     reference: &Sdem,
@@ -963,11 +1103,36 @@ pub(crate) fn search(
     cost: &CostConfig,
     grid: &CandidateGrid,
     cap: f64,
+    reserve_ratio: Option<f64>,
+) -> crate::Result<(Option<Scored>, BranchAndBoundStats, Option<Reserve>)> {
+    let (tables, groups) = (&prepared.tables, &prepared.groups);
+    let mut bnb = BranchAndBound::new(reference, query, cost, grid, tables, groups)?;
+    bnb.cap = cap;
+    bnb.reserve = reserve_ratio.map(|ratio| Reserve {
+        ratio,
+        boxes: Vec::new(),
+        leaves: Vec::new(),
+    });
+    Ok(bnb.run())
+}
+
+/// The best candidate of `grid` (which leaves out the first search's peak) costing at most
+/// `cap`, searched among what the first search set aside: the same answer as a search of the
+/// whole grid with that cap, since every box and candidate the first search dropped below the
+/// cap is in the reserve (`cap` must be at most the reserve's ratio × the first search's best).
+pub(crate) fn runner_up(
+    prepared: &Prepared,
+    reference: &Sdem,
+    query: &Sdem,
+    cost: &CostConfig,
+    grid: &CandidateGrid,
+    cap: f64,
+    reserve: Reserve,
 ) -> crate::Result<(Option<Scored>, BranchAndBoundStats)> {
     let (tables, groups) = (&prepared.tables, &prepared.groups);
     let mut bnb = BranchAndBound::new(reference, query, cost, grid, tables, groups)?;
     bnb.cap = cap;
-    Ok(bnb.run())
+    Ok(bnb.run_from(reserve))
 }
 
 #[cfg(test)]
@@ -1077,5 +1242,70 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The runner-up search, continued from what the first search set aside, finds the same
+    /// candidate as the exhaustive search of the grid without the peak's neighbourhood, with the
+    /// same cap: for several ratios (so the cap sits above a few, many or no candidates).
+    #[test]
+    fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
+        let scene = sim::paper_room();
+        let sensor = SensorConfig {
+            tilt_step_deg: 2.0,
+            pan_step_deg: 2.0,
+            ..Default::default()
+        };
+        let grid_cfg = SdemConfig {
+            resolution_deg: 2.0,
+            ..Default::default()
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let mut at = |p: &Pose| {
+            let s = sim::scan(&scene, &sensor, p, 0.0, &mut rng);
+            let a = s.mean_attitude();
+            Sdem::from_points(&s.points_in_sensor(), &a.rotation(), &grid_cfg).unwrap()
+        };
+        let r = at(&Pose::identity());
+        let truth = Vec3::new(0.12, -0.08, 0.03);
+        let q = at(&pose_from_parts(
+            truth,
+            Attitude::from_degrees(0.0, 0.0, 2.0),
+        ));
+        let cost = CostConfig::default();
+        let window = SearchWindow::around(&truth, [0.12, 0.12, 0.04]);
+        let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
+        let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
+        let prepared = Prepared::new(&r, &q, &cost);
+        let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
+        let costs: Vec<Option<f64>> = (0..grid.len())
+            .map(|f| {
+                let i = grid.index(f);
+                correlator
+                    .evaluate(&grid.offset(i), grid.yaw(i))
+                    .map(|c| c.cost)
+            })
+            .collect();
+        let mut found = 0;
+        for ratio in [1.05, 1.3, 2.0, 5.0, 20.0] {
+            let (best, _, reserve) =
+                search(&prepared, &r, &q, &cost, &grid, f64::INFINITY, Some(ratio)).unwrap();
+            let (best_cost, best_flat) = best.unwrap();
+            let mut outside = grid.clone();
+            outside.exclude = Some((grid.offset(grid.index(best_flat)), 0.03));
+            let cap = ratio * best_cost;
+            let (second, _) =
+                runner_up(&prepared, &r, &q, &cost, &outside, cap, reserve.unwrap()).unwrap();
+            let oracle = (0..grid.len())
+                .filter(|&f| !outside.excluded(grid.index(f)))
+                .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))
+                .fold(None, |b: Option<Scored>, s| match b {
+                    Some(b) if !better(&s, &b) => Some(b),
+                    _ => Some(s),
+                });
+            assert_eq!(second, oracle, "ratio {ratio}");
+            found += oracle.is_some() as usize;
+        }
+        // Not vacuous: the higher caps do hold candidates.
+        assert!(found >= 2, "only {found} of the caps held a runner-up");
     }
 }

@@ -255,6 +255,17 @@ pub(crate) fn scrambled_order(n: usize) -> Vec<usize> {
     (0..n).map(|i| (i * stride) % n).collect()
 }
 
+/// A capped evaluation's answer (see [`Correlator::evaluate_capped`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum Capped {
+    /// At or below the cap.
+    Scored(Correlation),
+    /// Above the cap: the mean cost reached when the sum was cut short (at most the full cost).
+    Above(f64),
+    /// Too few cells compared: no candidate.
+    NoOverlap,
+}
+
 /// `Rz(yaw)` in single precision.
 pub(crate) fn yaw_matrix(yaw: f64) -> Matrix3<f32> {
     let (s, c) = yaw.sin_cos();
@@ -339,7 +350,10 @@ impl<'a> Correlator<'a> {
     pub fn evaluate(&mut self, offset: &Vec3, yaw: f64) -> Option<Correlation> {
         match self.model {
             CostModel::Projective => {
-                self.evaluate_projective(offset, &yaw_matrix(yaw), f64::INFINITY)
+                match self.evaluate_projective(offset, &yaw_matrix(yaw), f64::INFINITY) {
+                    Capped::Scored(c) => Some(c),
+                    Capped::Above(_) | Capped::NoOverlap => None,
+                }
             }
             CostModel::VirtualSdem => self.evaluate_virtual(offset, &yaw_matrix(yaw)),
         }
@@ -353,20 +367,27 @@ impl<'a> Correlator<'a> {
     ///
     /// The exact search scores its candidates this way, against the best cost found so far.
     pub fn evaluate_capped(&mut self, offset: &Vec3, yaw: f64, cap: f64) -> Option<Correlation> {
-        match self.model {
-            CostModel::Projective => self.evaluate_projective(offset, &yaw_matrix(yaw), cap),
-            CostModel::VirtualSdem => self
-                .evaluate_virtual(offset, &yaw_matrix(yaw))
-                .filter(|c| c.cost <= cap),
+        match self.evaluate_within(offset, yaw, cap) {
+            Capped::Scored(c) => Some(c),
+            Capped::Above(_) | Capped::NoOverlap => None,
         }
     }
 
-    fn evaluate_projective(
-        &mut self,
-        offset: &Vec3,
-        rotation: &Matrix3<f32>,
-        cap: f64,
-    ) -> Option<Correlation> {
+    /// [`Self::evaluate_capped`], saying why there is no score: above the cap (with the mean
+    /// cost reached when the sum was cut short, a lower bound on the full cost), or too little
+    /// overlap.
+    pub(crate) fn evaluate_within(&mut self, offset: &Vec3, yaw: f64, cap: f64) -> Capped {
+        match self.model {
+            CostModel::Projective => self.evaluate_projective(offset, &yaw_matrix(yaw), cap),
+            CostModel::VirtualSdem => match self.evaluate_virtual(offset, &yaw_matrix(yaw)) {
+                Some(c) if c.cost <= cap => Capped::Scored(c),
+                Some(c) => Capped::Above(c.cost),
+                None => Capped::NoOverlap,
+            },
+        }
+    }
+
+    fn evaluate_projective(&mut self, offset: &Vec3, rotation: &Matrix3<f32>, cap: f64) -> Capped {
         let grid = self.reference.grid();
         let surfaces = self.reference.surfaces();
         let t = offset.cast::<f32>();
@@ -407,10 +428,13 @@ impl<'a> Correlator<'a> {
                 }
             }
             if acc.partial() > cap_sum {
-                return None;
+                return Capped::Above(acc.partial() / n as f64);
             }
         }
-        acc.finish(self.min_overlap)
+        match acc.finish(self.min_overlap) {
+            Some(c) => Capped::Scored(c),
+            None => Capped::NoOverlap,
+        }
     }
 
     fn evaluate_virtual(&mut self, offset: &Vec3, rotation: &Matrix3<f32>) -> Option<Correlation> {

@@ -259,12 +259,16 @@ pub fn localize(
     // Shared by the search for the best candidate and the one for the runner-up.
     let prepared = (config.mode == SearchMode::BranchAndBound)
         .then(|| bnb::Prepared::new(reference, query, &config.cost));
-    let (best, stats) = run_search(
+    // The exact search sets aside what may cost up to the ambiguity ratio × the best, so the
+    // runner-up search continues from there instead of bounding the window again.
+    let reserve_ratio = config.runner_up.then_some(config.ambiguous_cost_ratio);
+    let (best, stats, reserve) = run_search(
         &mut evaluator,
         prepared.as_ref(),
         config,
         full_turn,
         f64::INFINITY,
+        reserve_ratio,
     )?;
     let mut correlator = Correlator::new(reference, query, &config.cost)?;
     let Some((cost, flat)) = best else {
@@ -332,16 +336,27 @@ pub fn localize(
     let runner_up = if config.runner_up {
         let mut outside = grid.clone();
         outside.exclude = Some((grid_offset, config.peak_radius_m));
-        let mut e = Evaluator::new(reference, query, &config.cost, &outside)?;
         // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
         // the exact search cheap.
-        let (second, _) = run_search(
-            &mut e,
-            prepared.as_ref(),
-            config,
-            full_turn,
-            config.ambiguous_cost_ratio * cost,
-        )?;
+        let cap = config.ambiguous_cost_ratio * cost;
+        let second = match (reserve, prepared.as_ref()) {
+            (Some(reserve), Some(prepared)) => {
+                bnb::runner_up(
+                    prepared,
+                    reference,
+                    query,
+                    &config.cost,
+                    &outside,
+                    cap,
+                    reserve,
+                )?
+                .0
+            }
+            _ => {
+                let mut e = Evaluator::new(reference, query, &config.cost, &outside)?;
+                run_search(&mut e, prepared.as_ref(), config, full_turn, cap, None)?.0
+            }
+        };
         second.map(|(c, flat)| {
             let idx = outside.index(flat);
             (c, outside.offset(idx), outside.yaw(idx))
@@ -528,28 +543,32 @@ fn run_search(
     config: &LocalizeConfig,
     full_turn: bool,
     cap: f64,
-) -> Result<(Option<Scored>, BranchAndBoundStats)> {
+    reserve_ratio: Option<f64>,
+) -> Result<(Option<Scored>, BranchAndBoundStats, Option<bnb::Reserve>)> {
     let capped = |best: Option<Scored>| best.filter(|s| s.0 <= cap);
     Ok(match config.mode {
         SearchMode::Exhaustive => (
             capped(evaluator.exhaustive()),
             BranchAndBoundStats::default(),
+            None,
         ),
         SearchMode::CoarseToFine => (
             capped(evaluator.coarse_to_fine(config.coarse_step_m, config.keep, full_turn)),
             BranchAndBoundStats::default(),
+            None,
         ),
         SearchMode::BranchAndBound => {
-            let (best, stats) = bnb::search(
+            let (best, stats, reserve) = bnb::search(
                 prepared.expect("localize prepares the tables for branch-and-bound"),
                 evaluator.reference,
                 evaluator.query,
                 evaluator.cost,
                 evaluator.grid,
                 cap,
+                reserve_ratio,
             )?;
             evaluator.evaluated += stats.leaves_evaluated;
-            (best, stats)
+            (best, stats, reserve)
         }
     })
 }
@@ -826,6 +845,7 @@ mod tests {
         };
         let found = localize_in(&sim::corridor(30.0).unwrap(), 21);
         let d = &found.diagnostics;
+        println!("corridor: cost {:.3e}, {d:?}", found.cost);
         assert!(d.ambiguous, "{d:?}");
         let axis = d.weakest_direction.unwrap();
         assert!(
@@ -837,6 +857,7 @@ mod tests {
 
         let found = localize_in(&sim::paper_room(), 23);
         let d = &found.diagnostics;
+        println!("room: cost {:.3e}, {d:?}", found.cost);
         assert!(!d.ambiguous, "{d:?}");
         assert!(d.runner_up_cost_at_least.unwrap() > found.cost, "{d:?}");
         assert!(d.overlap_fraction > 0.5 && d.inlier_fraction > 0.5, "{d:?}");
