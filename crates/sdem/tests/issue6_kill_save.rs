@@ -123,13 +123,8 @@ fn check_intact(folder: &Path) -> usize {
 #[test]
 fn a_save_killed_at_any_moment_leaves_the_previous_map_intact() {
     let exe = std::env::current_exe().unwrap();
-    let mut outcomes = Vec::new();
-    // Kill times from early (during the first node files) to late, a few ms apart, so the
-    // kills land in every part of a save.
-    let delays_ms: Vec<u64> = (0..16).map(|k| 15 + 23 * k).collect();
-    for &delay in &delays_ms {
-        let dir = tempfile::tempdir().unwrap();
-        let mut child = Command::new(&exe)
+    let spawn = |dir: &Path| {
+        Command::new(&exe)
             .args([
                 "--ignored",
                 "--exact",
@@ -137,11 +132,32 @@ fn a_save_killed_at_any_moment_leaves_the_previous_map_intact() {
                 "--nocapture",
                 "--test-threads=1",
             ])
-            .env(CHILD_ENV, dir.path())
+            .env(CHILD_ENV, dir)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
-            .unwrap();
+            .unwrap()
+    };
+    // How long the saves take on this machine, uninterrupted (from the first node file on).
+    let run_ms = {
+        let dir = tempfile::tempdir().unwrap();
+        let mut child = spawn(dir.path());
+        let start = Instant::now();
+        while !dir.path().join("nodes").exists() && start.elapsed() < Duration::from_secs(60) {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        let from = Instant::now();
+        child.wait().unwrap();
+        assert_eq!(check_intact(dir.path()), NODES);
+        from.elapsed().as_millis().max(20) as u64
+    };
+    let mut outcomes = Vec::new();
+    // Kill times from early (during the first node files) to late, spread over the run, so the
+    // kills land in every part of a save whatever the machine's speed.
+    let delays_ms: Vec<u64> = (0..16).map(|k| run_ms * (2 + 6 * k) / 100).collect();
+    for &delay in &delays_ms {
+        let dir = tempfile::tempdir().unwrap();
+        let mut child = spawn(dir.path());
         let stdout = child.stdout.take().unwrap();
         let reader = std::thread::spawn(move || {
             BufReader::new(stdout)
