@@ -12,9 +12,13 @@
 //!   query point then contributes a term that depends on its own moved position only, which is
 //!   what lets [`crate::bnb`] bound the cost over a box of candidates and search exactly.
 //!
-//! Both compare ranges in the same direction, truncate the squared difference at `τ`, and take the
-//! mean over the query's known cells, a cell the reference does not see counting `τ²` (a full
-//! mismatch), so a candidate cannot win by seeing less and the sum stays additive.
+//! The projective form measures each moved query point's distance to the plane of the reference
+//! cell it falls in (the cell's return and a normal from its neighbours), within a range gate of
+//! the cell's return: the paper's range difference times the cosine of incidence, which a 1° cell
+//! of a glancing floor does not blow up to decimetres. The virtual form compares ranges per cell.
+//! Both truncate the squared difference at `τ` and take the mean over the query's compared points
+//! (its known cells), a cell the reference does not see counting `τ²` (a full mismatch), so a
+//! candidate cannot win by seeing less and the sum stays additive.
 
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
@@ -120,8 +124,8 @@ impl CostConfig {
 /// The score of one candidate.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Correlation {
-    /// Mean truncated squared range difference over the query's known cells, a cell the
-    /// reference does not see counting as a full mismatch `τ²`, m² (the paper's `d`).
+    /// Mean truncated squared difference over the query's compared points (its known cells), a
+    /// cell the reference does not see counting as a full mismatch `τ²`, m² (the paper's `d`).
     pub cost: f64,
     /// Number of cells compared (known on both sides).
     pub overlap: usize,
