@@ -1145,11 +1145,9 @@ mod tests {
     use crate::sim;
     use rand::SeedableRng;
 
-    /// The bound of every box is at most the smallest cost of its candidates (the property the
-    /// exactness rests on), at every box size, with and without a heading interval; and it is
-    /// tight enough near the optimum to prune most small boxes.
-    #[test]
-    fn bound_never_exceeds_the_boxes_minimum() {
+    /// A scan at the origin of the paper's room and one at `truth` turned by `yaw_deg`, both
+    /// coarse (2° sweeps and cells, to keep the brute-force checks quick).
+    fn coarse_pair(seed: u64, truth: Vec3, yaw_deg: f64) -> (Sdem, Sdem) {
         let scene = sim::paper_room();
         let sensor = SensorConfig {
             tilt_step_deg: 2.0,
@@ -1160,18 +1158,27 @@ mod tests {
             resolution_deg: 2.0,
             ..Default::default()
         };
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let mut at = |p: &Pose| {
             let s = sim::scan(&scene, &sensor, p, 0.0, &mut rng);
             let a = s.mean_attitude();
             Sdem::from_points(&s.points_in_sensor(), &a.rotation(), &grid_cfg).unwrap()
         };
         let r = at(&Pose::identity());
-        let truth = Vec3::new(0.22, 0.36, 0.05);
         let q = at(&pose_from_parts(
             truth,
-            Attitude::from_degrees(0.0, 0.0, 1.0),
+            Attitude::from_degrees(0.0, 0.0, yaw_deg),
         ));
+        (r, q)
+    }
+
+    /// The bound of every box is at most the smallest cost of its candidates (the property the
+    /// exactness rests on), at every box size, with and without a heading interval; and it is
+    /// tight enough near the optimum to prune most small boxes.
+    #[test]
+    fn bound_never_exceeds_the_boxes_minimum() {
+        let truth = Vec3::new(0.22, 0.36, 0.05);
+        let (r, q) = coarse_pair(1, truth, 1.0);
         let cost = CostConfig::default();
         let window = SearchWindow::around(&truth, [0.08, 0.08, 0.04]);
         let yaws: Vec<f64> = (-2..=2).map(|k| (k as f64).to_radians()).collect();
@@ -1249,28 +1256,8 @@ mod tests {
     /// same cap: for several ratios (so the cap sits above a few, many or no candidates).
     #[test]
     fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
-        let scene = sim::paper_room();
-        let sensor = SensorConfig {
-            tilt_step_deg: 2.0,
-            pan_step_deg: 2.0,
-            ..Default::default()
-        };
-        let grid_cfg = SdemConfig {
-            resolution_deg: 2.0,
-            ..Default::default()
-        };
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
-        let mut at = |p: &Pose| {
-            let s = sim::scan(&scene, &sensor, p, 0.0, &mut rng);
-            let a = s.mean_attitude();
-            Sdem::from_points(&s.points_in_sensor(), &a.rotation(), &grid_cfg).unwrap()
-        };
-        let r = at(&Pose::identity());
         let truth = Vec3::new(0.12, -0.08, 0.03);
-        let q = at(&pose_from_parts(
-            truth,
-            Attitude::from_degrees(0.0, 0.0, 2.0),
-        ));
+        let (r, q) = coarse_pair(4, truth, 2.0);
         let cost = CostConfig::default();
         let window = SearchWindow::around(&truth, [0.12, 0.12, 0.04]);
         let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
