@@ -428,8 +428,6 @@ pub(crate) struct Reserve {
 /// The search state.
 pub(crate) struct BranchAndBound<'a> {
     reference: &'a Sdem,
-    query: &'a Sdem,
-    cost: &'a CostConfig,
     grid: &'a CandidateGrid,
     tables: &'a RangeTables,
     groups: &'a QueryGroups,
@@ -440,6 +438,8 @@ pub(crate) struct BranchAndBound<'a> {
     stats: BranchAndBoundStats,
     /// Set aside for a second search, when asked.
     reserve: Option<Reserve>,
+    /// Cloned for each worker that scores candidates.
+    prototype: Correlator<'a>,
 }
 
 impl<'a> BranchAndBound<'a> {
@@ -451,11 +451,9 @@ impl<'a> BranchAndBound<'a> {
         tables: &'a RangeTables,
         groups: &'a QueryGroups,
     ) -> crate::Result<Self> {
-        Correlator::new(reference, query, cost)?;
         Ok(Self {
+            prototype: Correlator::new(reference, query, cost)?,
             reference,
-            query,
-            cost,
             grid,
             tables,
             groups,
@@ -635,7 +633,7 @@ impl<'a> BranchAndBound<'a> {
     }
 
     fn correlator(&self) -> Correlator<'a> {
-        Correlator::new(self.reference, self.query, self.cost).expect("validated in new()")
+        self.prototype.clone()
     }
 
     fn score_leaf(&self, correlator: &mut Correlator, node: &Node, limit: f64) -> Option<Scored> {

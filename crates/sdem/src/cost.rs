@@ -282,6 +282,10 @@ pub(crate) fn yaw_matrix(yaw: f64) -> Matrix3<f32> {
 
 /// Scores candidates of one reference/query pair without allocating. For the virtual-S-DEM model
 /// `evaluate(t, 0)` equals `correlate(&reference.virtual_at(t), query)`.
+///
+/// Parallel searches give each worker a clone of one correlator: cloning copies the chosen query
+/// points, where [`Correlator::new`] chooses them again.
+#[derive(Clone)]
 pub struct Correlator<'a> {
     reference: &'a Sdem,
     query: &'a Sdem,

@@ -293,6 +293,8 @@ pub(crate) struct Evaluator<'a> {
     pub memo: HashMap<usize, Option<Correlation>>,
     /// Candidates scored so far.
     pub evaluated: usize,
+    /// Cloned for each worker.
+    prototype: Correlator<'a>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -302,8 +304,8 @@ impl<'a> Evaluator<'a> {
         cost: &'a CostConfig,
         grid: &'a CandidateGrid,
     ) -> Result<Self> {
-        Correlator::new(reference, query, cost)?;
         Ok(Self {
+            prototype: Correlator::new(reference, query, cost)?,
             reference,
             query,
             cost,
@@ -314,7 +316,7 @@ impl<'a> Evaluator<'a> {
     }
 
     fn correlator(&self) -> Correlator<'a> {
-        Correlator::new(self.reference, self.query, self.cost).expect("validated in new()")
+        self.prototype.clone()
     }
 
     /// Scores (or recalls) each candidate; returns those with enough overlap.
