@@ -938,13 +938,11 @@ fn reach_bound(
     let (r_lo, r_hi) = (g.range - g.radius, g.range + g.radius);
     // The centre's own cell: the estimate (the squared distance there), and for a point on a
     // surface often a bound of 0 at once.
-    let centre = tables.cell(g.ec, g.ac).map(|c| &planes.cells[c]);
-    let estimate = centre
-        .filter(|c| c.lo <= g.range && g.range <= c.hi)
-        .map_or(truncation_sq, |c| {
-            let e = c.n[0] * g.x[0] + c.n[1] * g.x[1] + c.n[2] * g.x[2] - c.d;
-            (e * e).min(truncation_sq)
-        });
+    let centre_cell = tables.cell(g.ec, g.ac);
+    let centre = centre_cell.map(|c| &planes.cells[c]);
+    let estimate = centre_cell
+        .and_then(|c| planes.squared_distance(c, g.x, g.range))
+        .map_or(truncation_sq, |e2| e2.min(truncation_sq));
     if g.holds_origin {
         // Any direction, any range: the reference's whole extent.
         let (min, max) = tables.global;
@@ -998,11 +996,11 @@ fn reach_bound(
             + g.spread;
         let distance = (nx * g.x[0] + ny * g.x[1] + nz * g.x[2] - c.d).abs();
         let v = (distance - along_normal).max(0.0);
-        v * v
+        (v * v).min(truncation_sq)
     };
     let mut best = truncation_sq;
     if let Some(c) = centre {
-        best = term(c).min(truncation_sq);
+        best = term(c);
         if best == 0.0 {
             return (0.0, estimate);
         }
@@ -1011,57 +1009,17 @@ fn reach_bound(
         // A single cell: the centre's (or one outside the grid).
         return (best, estimate);
     }
-    let [cx, cy, cz, cd, clo, chi] = &planes.columns;
     // Columns a0..=a1 of a row, as at most two runs of the stored row (wrapping once).
     let runs = if a1 < n_az {
         [(a0, a1 + 1), (0, 0)]
     } else {
         [(a0, n_az), (0, a1 + 1 - n_az)]
     };
-    const LANES: usize = 8;
     for e in e0..=e1 {
         let row = (e * n_az) as usize;
         for &(from, to) in &runs {
-            let (from, to) = (row + from as usize, row + to as usize);
-            let mut lanes = [truncation_sq; LANES];
-            // The same arithmetic as `term`, written so LANES cells at a time vectorize.
-            let cell = |nx: f32, ny: f32, nz: f32, d: f32, lo: f32, hi: f32| -> f32 {
-                let radial = (nx * g.arm[0] + ny * g.arm[1]).abs();
-                let tangential = (ny * g.arm[0] - nx * g.arm[1]).abs();
-                let along_normal = half.x * nx.abs()
-                    + half.y * ny.abs()
-                    + half.z * nz.abs()
-                    + one_minus_cos * radial
-                    + sin * tangential
-                    + g.spread;
-                let distance = (nx * g.x[0] + ny * g.x[1] + nz * g.x[2] - d).abs();
-                let v = distance - along_normal;
-                let v = if v > 0.0 { v } else { 0.0 };
-                if lo <= r_hi && hi >= r_lo {
-                    v * v
-                } else {
-                    truncation_sq
-                }
-            };
-            let (xs, ys, zs) = (&cx[from..to], &cy[from..to], &cz[from..to]);
-            let (ds, los, his) = (&cd[from..to], &clo[from..to], &chi[from..to]);
-            let full = xs.len() / LANES * LANES;
-            for k in (0..full).step_by(LANES) {
-                let (x8, y8, z8) = (&xs[k..k + LANES], &ys[k..k + LANES], &zs[k..k + LANES]);
-                let (d8, lo8, hi8) = (&ds[k..k + LANES], &los[k..k + LANES], &his[k..k + LANES]);
-                for l in 0..LANES {
-                    let t = cell(x8[l], y8[l], z8[l], d8[l], lo8[l], hi8[l]);
-                    lanes[l] = if t < lanes[l] { t } else { lanes[l] };
-                }
-            }
-            for k in full..xs.len() {
-                let t = cell(xs[k], ys[k], zs[k], ds[k], los[k], his[k]);
-                lanes[0] = if t < lanes[0] { t } else { lanes[0] };
-            }
-            for v in lanes {
-                if v < best {
-                    best = v;
-                }
+            for c in &planes.cells[row + from as usize..row + to as usize] {
+                best = best.min(term(c));
             }
         }
         if best == 0.0 {

@@ -296,8 +296,6 @@ impl PartialEq for Sdem {
 pub struct CellSurfaces {
     /// Per cell; the normal is NaN where the cell is unknown.
     pub(crate) cells: Vec<CellPlane>,
-    /// The same, one field per array (`[nx, ny, nz, d, lo, hi]`), for scans along rows.
-    pub(crate) columns: [Vec<f32>; 6],
 }
 
 /// The plane of one cell.
@@ -426,18 +424,7 @@ impl CellSurfaces {
                 hi: (hi.min(range + reach) + gate) as f32,
             };
         }
-        let columns = [0, 1, 2, 3, 4, 5].map(|k| {
-            cells
-                .iter()
-                .map(|c| match k {
-                    0..=2 => c.n[k],
-                    3 => c.d,
-                    4 => c.lo,
-                    _ => c.hi,
-                })
-                .collect()
-        });
-        Self { cells, columns }
+        Self { cells }
     }
 }
 
