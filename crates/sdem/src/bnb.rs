@@ -352,10 +352,12 @@ pub struct BranchAndBoundStats {
     pub nodes_bounded: usize,
     /// Single candidates scored (each stops as soon as its sum exceeds the best so far).
     pub leaves_evaluated: usize,
-    /// Of those, candidates scored to the end (the others stopped early).
-    pub leaves_completed: usize,
-    /// Boxes expanded (their bound lay below the best cost).
-    pub nodes_expanded: usize,
+}
+
+/// `limit` with a margin far above rounding: bounds are computed with slack, costs exactly, and a
+/// candidate that ties with the best (same cost, lower index) must still be scored to the end.
+fn with_margin(limit: f64) -> f64 {
+    limit * (1.0 + 1e-9) + 1e-15
 }
 
 /// A box is bounded from the coarsest grouping whose typical group radius is at most this
@@ -480,7 +482,6 @@ impl<'a> BranchAndBound<'a> {
             let mut correlator = self.correlator();
             let score = self.score_leaf(&mut correlator, &root, self.cap);
             self.stats.leaves_evaluated += 1;
-            self.stats.leaves_completed += score.is_some() as usize;
             return (score, self.stats, None);
         }
         let mut queue = std::collections::BinaryHeap::new();
@@ -508,7 +509,7 @@ impl<'a> BranchAndBound<'a> {
         let leaves: Vec<Node> = reserve
             .leaves
             .iter()
-            .filter(|(node, lb)| *lb <= cap * (1.0 + 1e-9) + 1e-15 && !self.grid.excluded(node.lo))
+            .filter(|(node, lb)| *lb <= with_margin(cap) && !self.grid.excluded(node.lo))
             .map(|(node, _)| *node)
             .collect();
         let this = &self;
@@ -521,7 +522,6 @@ impl<'a> BranchAndBound<'a> {
             .collect();
         self.stats.leaves_evaluated += leaves.len();
         for s in scored.into_iter().flatten() {
-            self.stats.leaves_completed += 1;
             if self.best.is_none_or(|b| better(&s, &b)) {
                 self.best = Some(s);
             }
@@ -594,7 +594,7 @@ impl<'a> BranchAndBound<'a> {
         let limit = self.limit();
         let mut reserve = self.reserve.take();
         if let Some(r) = reserve.as_mut() {
-            let keep = r.ratio * limit * (1.0 + 1e-9) + 1e-15;
+            let keep = with_margin(r.ratio * limit);
             r.boxes.retain(|p| p.bound <= keep);
             r.leaves.retain(|l| l.1 <= keep);
         }
@@ -606,7 +606,7 @@ impl<'a> BranchAndBound<'a> {
     fn set_aside_box(&mut self, p: Pending) {
         let limit = self.limit();
         if let Some(r) = self.reserve.as_mut() {
-            if p.bound <= r.ratio * limit * (1.0 + 1e-9) + 1e-15 {
+            if p.bound <= with_margin(r.ratio * limit) {
                 r.boxes.push(p);
             }
         }
@@ -616,7 +616,7 @@ impl<'a> BranchAndBound<'a> {
     fn set_aside_leaf(&mut self, node: Node, lower_bound: f64) {
         let limit = self.limit();
         if let Some(r) = self.reserve.as_mut() {
-            if lower_bound <= r.ratio * limit * (1.0 + 1e-9) + 1e-15 {
+            if lower_bound <= with_margin(r.ratio * limit) {
                 r.leaves.push((node, lower_bound));
             }
         }
@@ -628,8 +628,7 @@ impl<'a> BranchAndBound<'a> {
     }
 
     fn prunable(&self, bound: f64) -> bool {
-        // A margin far above rounding: bounds are computed with slack, costs exactly.
-        bound > self.limit() * (1.0 + 1e-9) + 1e-15
+        bound > with_margin(self.limit())
     }
 
     fn correlator(&self) -> Correlator<'a> {
@@ -649,9 +648,7 @@ impl<'a> BranchAndBound<'a> {
         if self.grid.excluded(idx) {
             return Outcome::Closed;
         }
-        // A little above the limit, so a candidate that ties with the best (same cost, lower
-        // index) is scored to the end.
-        let cap = limit * (1.0 + 1e-9) + 1e-15;
+        let cap = with_margin(limit);
         match correlator.evaluate_within(&self.grid.offset(idx), self.grid.yaw(idx), cap) {
             Capped::Scored(c) if c.cost <= self.cap => Outcome::Leaf((c.cost, self.grid.flat(idx))),
             Capped::Scored(c) => Outcome::LeafAbove(*node, c.cost),
@@ -663,7 +660,6 @@ impl<'a> BranchAndBound<'a> {
     /// Bounds or scores the children of `nodes` in parallel against the current limit; updates
     /// the best candidate and returns the boxes still open.
     fn expand(&mut self, parents: &[Pending]) -> Vec<Pending> {
-        self.stats.nodes_expanded += parents.len();
         let children: Vec<(Node, Option<&[u64]>)> = parents
             .iter()
             .flat_map(|p| {
@@ -690,7 +686,7 @@ impl<'a> BranchAndBound<'a> {
                             node: *child,
                             saturated: saturated.map(std::sync::Arc::new),
                         };
-                        if bound > limit * (1.0 + 1e-9) + 1e-15 {
+                        if bound > with_margin(limit) {
                             Outcome::Pruned(pending)
                         } else {
                             Outcome::Open(pending)
@@ -708,7 +704,6 @@ impl<'a> BranchAndBound<'a> {
             }
             match outcome {
                 Outcome::Leaf(s) => {
-                    self.stats.leaves_completed += 1;
                     if self.best.is_none_or(|b| better(&s, &b)) {
                         if let Some(old) = self.best.replace(s) {
                             let node = self.grid.index(old.1);
