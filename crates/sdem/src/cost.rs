@@ -53,8 +53,8 @@ pub struct CostConfig {
     pub min_overlap_cells: usize,
     /// … and at least this fraction of the cells the query is scored over.
     pub min_overlap_fraction: f64,
-    /// The best candidate is accepted only when at least this fraction of the query's known
-    /// cells match it within the truncation; otherwise the search reports that nothing matched
+    /// The best candidate is accepted only when at least this fraction of the query's compared
+    /// points match it within the truncation; otherwise the search reports that nothing matched
     /// (a best candidate far from everything is still a best candidate).
     pub min_inlier_fraction: f64,
     /// The projective cost compares one query point per cube of this side, metres (the one
@@ -129,7 +129,7 @@ pub struct Correlation {
     pub cost: f64,
     /// Number of cells compared (known on both sides).
     pub overlap: usize,
-    /// Of those, cells whose range difference lies within the truncation (the matched cells).
+    /// Of those, cells whose difference lies within the truncation (the matched cells).
     pub inliers: usize,
 }
 

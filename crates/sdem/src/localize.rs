@@ -140,9 +140,10 @@ pub struct Localization {
 /// How far a localization can be trusted.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Diagnostics {
-    /// Cells compared at the best candidate over the query's known cells.
+    /// Cells compared at the best candidate over the query points compared (one per search
+    /// cube, see [`CostConfig::search_voxel_m`]).
     pub overlap_fraction: f64,
-    /// Cells within the truncation at the best candidate over the query's known cells.
+    /// Cells within the truncation at the best candidate over the query points compared.
     pub inlier_fraction: f64,
     /// The smallest cost outside the peak's neighbourhood, when it lies below
     /// [`LocalizeConfig::ambiguous_cost_ratio`] × the best (the runner-up search looks no
