@@ -361,9 +361,9 @@ fn with_margin(limit: f64) -> f64 {
 }
 
 /// A box is bounded from the coarsest grouping whose typical group radius is at most this
-/// fraction of the box's reach. Measured on the paper's pair: at 0.5, 2,131 boxes and 237
-/// candidates; at 0.1, 1,206 and 164 (larger groups widen every ball, which costs more boxes than
-/// it saves per box).
+/// fraction of the box's reach. Measured with the plane bound (8 cm search cubes; boxes bounded on
+/// bench pair 3 / the paper's pair with ±10° of heading): 0.1 → 7,796 / 5,744, 0.3 → 7,796 /
+/// 6,136, 0.6 → 12,228 / 9,512, and no faster at 0.2–0.3 (larger groups widen every reach).
 const GROUP_REACH_FRACTION: f64 = 0.1;
 
 /// Boxes expanded together, their children bounded in parallel.
@@ -916,7 +916,9 @@ struct Reach {
 }
 
 /// Cones of up to this many cells are bounded cell by cell, from each cell's plane; larger ones
-/// from the range tables alone (whether any cell could compare the members at all).
+/// from the range tables alone (whether any cell could compare the members at all). Boxes bounded
+/// on bench pair 3 / the paper's pair with ±10° of heading: 16 → 23,236 / 20,032, 64 → 11,444 /
+/// 7,928, 256 → 7,796 / 5,744, 1,024 → 8,052 / 5,424 (no faster).
 const MAX_CONE_CELLS: i32 = 256;
 
 /// A lower bound on the term of every member of a ball over the box (see
