@@ -23,7 +23,8 @@ pub struct Args {
     #[arg(long)]
     out: PathBuf,
     /// A TOML file with the loop's settings (the fields of config.toml, which every run writes;
-    /// missing keys take the defaults).
+    /// missing keys take the defaults). Without it, the defaults, with the S-DEM's resolution
+    /// matched to the scanner's angular step when the dataset has a sensor.toml.
     #[arg(long)]
     config: Option<PathBuf>,
     /// Grid step of the search, metres [default: 0.02, or the config file's].
@@ -115,7 +116,13 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         let mut config = match &args.config {
             Some(path) => sdem::io::read_slam_config(path)?,
-            None => SlamConfig::default(),
+            None => {
+                let mut config = SlamConfig::default();
+                if let Some(sensor) = &dataset.sensor {
+                    config.sdem.resolution_deg = sensor.matched_sdem_resolution_deg();
+                }
+                config
+            }
         };
         if let Some(step) = args.step {
             if !(step.is_finite() && step > 0.0) {

@@ -125,10 +125,21 @@ fn import_3dtk_converts_frames_and_filters_points() {
         .iter()
         .map(|v| v.as_str().unwrap())
         .collect();
-    for file in ["odometry.txt", "attitude.csv", "poses_slam6d.txt"] {
+    for file in [
+        "odometry.txt",
+        "attitude.csv",
+        "sensor.toml",
+        "poses_slam6d.txt",
+    ] {
         assert!(written.contains(&file), "{summary}");
         assert!(out.join(file).is_file(), "{file}");
     }
+    // The nodding scanner's steps, for `sdem slam` to match its S-DEM to.
+    let sensor = std::fs::read_to_string(out.join("sensor.toml")).unwrap();
+    assert!(
+        sensor.contains("pan_step_deg = 0.5") && sensor.contains("tilt_step_deg = 0.517"),
+        "{sensor}"
+    );
     assert!(!out.join("poses_truth.txt").exists());
     for i in 0..3 {
         assert!(out.join(format!("scans/{i:06}.ply")).is_file());

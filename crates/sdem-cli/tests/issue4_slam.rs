@@ -240,3 +240,59 @@ fn bad_datasets_are_refused_with_the_file_named() {
     let err = fails(dir.path(), &["slam", "data", "--out", "o5", "--step", "-1"]);
     assert!(err.contains("--step"), "{err}");
 }
+
+/// Without `--config`, the S-DEM's cells match the scanner's step from `sensor.toml`; a config
+/// file's resolution wins over it.
+#[test]
+fn slam_matches_the_sdem_to_the_sensor_step() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), 2);
+    let sensor_path = dir.path().join("data/sensor.toml");
+    let sensor = std::fs::read_to_string(&sensor_path).unwrap();
+    assert!(sensor.contains("tilt_step_deg = 1.0"), "{sensor}");
+    let coarse = sensor
+        .replace("tilt_step_deg = 1.0", "tilt_step_deg = 1.5")
+        .replace("pan_step_deg = 1.0", "pan_step_deg = 1.2");
+    std::fs::write(&sensor_path, coarse).unwrap();
+    let resolution = |out: &str| -> f64 {
+        let config = std::fs::read_to_string(dir.path().join(out).join("config.toml")).unwrap();
+        let line = config
+            .lines()
+            .find(|l| l.starts_with("resolution_deg"))
+            .unwrap_or_else(|| panic!("{config}"));
+        line.split('=').nth(1).unwrap().trim().parse().unwrap()
+    };
+    run_ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "matched",
+            "--max-scans",
+            "2",
+            "--no-pictures",
+        ],
+    );
+    assert_eq!(resolution("matched"), 1.5);
+    std::fs::write(
+        dir.path().join("mine.toml"),
+        "[sdem]\nresolution_deg = 2.0\n",
+    )
+    .unwrap();
+    run_ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "mine",
+            "--config",
+            "mine.toml",
+            "--max-scans",
+            "2",
+            "--no-pictures",
+        ],
+    );
+    assert_eq!(resolution("mine"), 2.0);
+}

@@ -72,6 +72,16 @@ fn sample_count(min: f64, max: f64, step: f64) -> usize {
 }
 
 impl SensorConfig {
+    /// The S-DEM resolution that matches this scanner: its coarser angular step (tilt or pan),
+    /// shrunk so that a whole number of cells makes a full turn. A cell then holds about one
+    /// return. Coarser cells keep only the nearest of several returns and thin the scan out;
+    /// on the 3DTK scans (0.5° beams, 0.517° lines) 1° cells left the match 3.1° in pitch from
+    /// slam6D on scan 1, 0.5165° cells 0.18°.
+    pub fn matched_sdem_resolution_deg(&self) -> f64 {
+        let step = self.tilt_step_deg.max(self.pan_step_deg);
+        360.0 / (360.0 / step - 1e-9).ceil()
+    }
+
     /// Checks every field for a usable value; the message names the field and the fix.
     pub fn validate(&self) -> Result<()> {
         let finite = [
@@ -354,6 +364,27 @@ impl Sweep {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+
+    #[test]
+    fn the_matched_sdem_resolution_is_the_coarser_step_dividing_a_turn() {
+        let paper = SensorConfig::default();
+        assert_eq!(paper.matched_sdem_resolution_deg(), 1.0);
+        let nodding = SensorConfig {
+            tilt_step_deg: 0.517,
+            pan_step_deg: 0.5,
+            ..SensorConfig::default()
+        };
+        let r = nodding.matched_sdem_resolution_deg();
+        // 697 cells of 0.5165° make a turn; never coarser than the scanner's coarser step.
+        assert_relative_eq!(r * 697.0, 360.0, epsilon = 1e-9);
+        assert!(r <= 0.517 && r > 0.516, "{r}");
+        let fine = SensorConfig {
+            tilt_step_deg: 0.25,
+            pan_step_deg: 0.25,
+            ..SensorConfig::default()
+        };
+        assert_eq!(fine.matched_sdem_resolution_deg(), 0.25);
+    }
 
     #[test]
     fn paper_sweep_has_86_lines_of_181_beams() {

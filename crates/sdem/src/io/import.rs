@@ -20,6 +20,8 @@
 //!   the robot's initial estimate, i.e. its odometry. It is converted as above and written as
 //!   `odometry.txt`, and the roll, pitch and yaw of the converted rotation (sdem's
 //!   `R = Rz·Ry·Rx`) as `attitude.csv`, since 3DTK data has no separate gyro/compass reading.
+//! - **`sensor.toml`**: the scanner's geometry as measured from the example scans
+//!   ([`uos_sensor`]).
 //!   A `.pose` must exist for every imported `.3d`.
 //! - **`scanNNN.frames`** (slam6D's output; one line per registration step, a 4×4 matrix in
 //!   OpenGL column-major order in cm, then a flag), when a frames folder is given or found
@@ -45,11 +47,12 @@ use super::dataset::{check_no_stale_file, ODOMETRY_FILE, SLAM6D_FILE};
 use super::poses::{parse_row_major_pose, to_rotation};
 use super::{
     clear_dataset, numbered_lines, parse_finite, read_bytes, read_kitti_poses, read_points,
-    read_text, write_atomic, write_attitude_csv, write_points_ply, write_poses, ATTITUDE_FILE,
-    DATASET_ENTRIES, SCANS_DIR, TRUTH_FILE,
+    read_text, write_atomic, write_attitude_csv, write_points_ply, write_poses, write_sensor_toml,
+    ATTITUDE_FILE, DATASET_ENTRIES, SCANS_DIR, SENSOR_FILE, TRUTH_FILE,
 };
 use crate::error::{Error, Result};
 use crate::geometry::{attitude_of, Attitude, Pose, Vec3};
+use crate::sensor::SensorConfig;
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -61,6 +64,26 @@ pub const UOS_MAX_RANGE_M: f64 = 30.0;
 /// 3DTK points nearer than this (metres) are dropped on import: returns from the robot itself and
 /// invalid ones.
 pub const UOS_MIN_RANGE_M: f64 = 0.2;
+
+/// The scanner behind 3DTK's example scans, measured from the files (see
+/// `../shared/data/3dtk-dat/README.txt`): a nodded 2D LRF, 360 beams 0.5° apart over 180° per
+/// line, 226 lines pitched from −48.7° to +67.6° (0.517° apart). The range noise is not stated
+/// anywhere; a SICK LMS's 1 cm is assumed. Written as the dataset's `sensor.toml`, so that `sdem
+/// slam` matches its S-DEM to the scanner's step.
+pub fn uos_sensor() -> SensorConfig {
+    SensorConfig {
+        tilt_min_deg: -48.7,
+        tilt_max_deg: 67.6,
+        tilt_step_deg: 0.517,
+        pan_min_deg: -90.0,
+        pan_max_deg: 90.0,
+        pan_step_deg: 0.5,
+        max_range_m: UOS_MAX_RANGE_M,
+        min_range_m: UOS_MIN_RANGE_M,
+        range_noise_m: 0.01,
+        ..SensorConfig::default()
+    }
+}
 
 /// The folder name under which the 3DTK example data keeps slam6D's `.frames` files.
 const DEFAULT_FRAMES_DIR: &str = "slam6d_frames_2009";
@@ -672,6 +695,8 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
         summary.written.push(ODOMETRY_FILE.into());
         write_attitude_csv(&out.join(ATTITUDE_FILE), &attitudes)?;
         summary.written.push(ATTITUDE_FILE.into());
+        write_sensor_toml(&out.join(SENSOR_FILE), &uos_sensor())?;
+        summary.written.push(SENSOR_FILE.into());
         if let Some(slam6d) = &slam6d {
             write_poses(&out.join(SLAM6D_FILE), slam6d)?;
             summary.written.push(SLAM6D_FILE.into());
