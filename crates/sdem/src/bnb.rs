@@ -773,8 +773,11 @@ impl<'a> BranchAndBound<'a> {
         // Point by point (level 0), the points saturated in the parent box are skipped.
         let parent_saturated = parent_saturated.filter(|_| level == 0);
         let mut saturated = (level == 0).then(|| vec![0u64; balls.cx.len().div_ceil(64)]);
+        // The prediction's term is smallest where the box comes nearest the prediction.
+        let prior = self.prototype.prior_bound(&lo, &hi);
+        let prior_at_centre = self.prototype.prior_cost(&centre);
         let limit_sum = if limit.is_finite() {
-            limit * (1.0 + 1e-9) * total + 1e-12
+            (limit * (1.0 + 1e-9) - prior) * total + 1e-12
         } else {
             f64::INFINITY
         };
@@ -883,10 +886,14 @@ impl<'a> BranchAndBound<'a> {
                 }
             }
             if bound_sum > limit_sum {
-                return (bound_sum / total, f64::INFINITY, None);
+                return (bound_sum / total + prior, f64::INFINITY, None);
             }
         }
-        (bound_sum / total, estimate_sum / total, saturated)
+        (
+            bound_sum / total + prior,
+            estimate_sum / total + prior_at_centre,
+            saturated,
+        )
     }
 }
 

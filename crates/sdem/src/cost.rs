@@ -49,7 +49,10 @@ pub struct CostConfig {
     /// heading the exact search bounded 1.6× as many boxes at 8 cm and 2.9× at 12 cm (the
     /// outliers' `τ²` dominate the optimum's cost), and was no faster at 3 cm.
     pub truncation_m: f64,
-    /// A candidate must compare at least this many cells.
+    /// A candidate must compare at least this many cells. 100: with one point per
+    /// [`Self::search_voxel_m`] cube a scan in the ditch compares only ~400 points, and at 200 the
+    /// true pose of a robot at the ditch's mouth (pair 45 of `sdem bench --faults`, 116 cells
+    /// seen by both) was no candidate at all, so a wrong one 13 cm away won.
     pub min_overlap_cells: usize,
     /// … and at least this fraction of the cells the query is scored over.
     pub min_overlap_fraction: f64,
@@ -63,6 +66,70 @@ pub struct CostConfig {
     /// centimetres on far walls: the cubes even that out, and the grid search does not need
     /// more to find the basin (the refinement uses every point).
     pub search_voxel_m: f64,
+    /// The motion's prediction (odometry, or the last motion repeated), added to eq. (1) as a
+    /// weak quadratic term; `None` (the default) scores the scans alone. Set per localization,
+    /// not saved with a configuration.
+    #[serde(skip)]
+    pub prior: Option<OffsetPrior>,
+}
+
+/// A prediction of the offset a localization estimates, and how far to trust it.
+///
+/// Added to eq. (1) as `(τ² / n) · |t − offset|² / σ²` (`n` the compared points): the prediction
+/// counts as much as *one* more point whose error is `τ` at one `σ`. Against the hundreds or
+/// thousands of points a scan compares it moves no minimum the scans decide; where they decide
+/// nothing — a ditch or corridor along its axis, whose cost is flat to the last digit — it keeps
+/// the estimate at the prediction instead of wherever the grid or the window edge happens to
+/// leave it (Cartographer's scan matchers weigh their prediction the same way). The refinement
+/// weighs it as one more residual of the same kind.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OffsetPrior {
+    /// The predicted offset (query origin minus reference origin, levelled axes), metres.
+    pub offset: [f64; 3],
+    /// Its standard deviation, metres (each axis).
+    pub sigma_m: f64,
+}
+
+impl OffsetPrior {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<()> {
+        if !self.offset.iter().all(|v| v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the predicted offset {:?} m must be finite",
+                self.offset
+            )));
+        }
+        if !(self.sigma_m.is_finite() && self.sigma_m > 0.0) {
+            return Err(Error::Invalid(format!(
+                "the prediction's standard deviation {} m must be a positive number",
+                self.sigma_m
+            )));
+        }
+        Ok(())
+    }
+
+    /// `|t − offset|²`, m².
+    pub fn squared_distance(&self, t: &Vec3) -> f64 {
+        (0..3).map(|a| (t[a] - self.offset[a]).powi(2)).sum()
+    }
+
+    /// The smallest `|t − offset|²` over the box `lo ≤ t ≤ hi`.
+    pub fn squared_distance_to_box(&self, lo: &Vec3, hi: &Vec3) -> f64 {
+        (0..3)
+            .map(|a| {
+                let o = self.offset[a];
+                let d = if o < lo[a] {
+                    lo[a] - o
+                } else if o > hi[a] {
+                    o - hi[a]
+                } else {
+                    0.0
+                };
+                d * d
+            })
+            .sum()
+    }
 }
 
 impl Default for CostConfig {
@@ -70,10 +137,11 @@ impl Default for CostConfig {
         Self {
             model: CostModel::Projective,
             truncation_m: 0.05,
-            min_overlap_cells: 200,
+            min_overlap_cells: 100,
             min_overlap_fraction: 0.2,
             min_inlier_fraction: 0.1,
             search_voxel_m: 0.08,
+            prior: None,
         }
     }
 }
@@ -105,6 +173,9 @@ impl CostConfig {
                 self.min_inlier_fraction
             )));
         }
+        if let Some(prior) = &self.prior {
+            prior.validate()?;
+        }
         Ok(())
     }
 
@@ -125,7 +196,8 @@ impl CostConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Correlation {
     /// Mean truncated squared difference over the query's compared points (its known cells), a
-    /// cell the reference does not see counting as a full mismatch `τ²`, m² (the paper's `d`).
+    /// cell the reference does not see counting as a full mismatch `τ²`, m² (the paper's `d`),
+    /// plus the prediction's term when there is one ([`OffsetPrior`]).
     pub cost: f64,
     /// Number of cells compared (known on both sides).
     pub overlap: usize,
@@ -300,6 +372,8 @@ pub struct Correlator<'a> {
     moved: [Vec<f32>; 3],
     cells: Vec<u32>,
     ranges: Vec<f32>,
+    /// The prediction and its weight in cost units per m² (see [`OffsetPrior`]).
+    prior: Option<(OffsetPrior, f64)>,
 }
 
 impl<'a> Correlator<'a> {
@@ -321,6 +395,14 @@ impl<'a> Correlator<'a> {
             CostModel::VirtualSdem => Vec::new(),
         };
         let n = points.len();
+        let compared = match cost.model {
+            CostModel::Projective => n,
+            CostModel::VirtualSdem => query.known_cells(),
+        };
+        let prior = cost.prior.map(|p| {
+            let weight = cost.truncation_m.powi(2) / (compared.max(1) as f64 * p.sigma_m.powi(2));
+            (p, weight)
+        });
         // The points in a scrambled order, so that a partial sum is a fair sample of the whole
         // and a capped evaluation can stop early (see `evaluate_capped`).
         let order = scrambled_order(n);
@@ -340,7 +422,23 @@ impl<'a> Correlator<'a> {
             },
             min_range: reference.config().min_range_m as f32,
             zbuffer,
+            prior,
         })
+    }
+
+    /// The prediction's term at `offset` (0 without one), m².
+    #[inline]
+    pub fn prior_cost(&self, offset: &Vec3) -> f64 {
+        self.prior
+            .as_ref()
+            .map_or(0.0, |(p, w)| w * p.squared_distance(offset))
+    }
+
+    /// The smallest prediction term over the box of offsets `lo ≤ t ≤ hi` (0 without one).
+    pub(crate) fn prior_bound(&self, lo: &Vec3, hi: &Vec3) -> f64 {
+        self.prior
+            .as_ref()
+            .map_or(0.0, |(p, w)| w * p.squared_distance_to_box(lo, hi))
     }
 
     /// The overlap a candidate needs.
@@ -400,6 +498,7 @@ impl<'a> Correlator<'a> {
     }
 
     fn evaluate_projective(&mut self, offset: &Vec3, rotation: &Matrix3<f32>, cap: f64) -> Capped {
+        let prior = self.prior_cost(offset);
         let grid = self.reference.grid();
         let surfaces = self.reference.surfaces();
         let t = offset.cast::<f32>();
@@ -407,8 +506,11 @@ impl<'a> Correlator<'a> {
         let [qx, qy, qz] = &self.query_xyz;
         let [mx, my, mz] = &mut self.moved;
         let n = qx.len();
-        // The cap on the sum; `f64::INFINITY` when uncapped.
-        let cap_sum = cap * n as f64;
+        // The cap on the sum of the points' terms; `f64::INFINITY` when uncapped.
+        let cap_sum = (cap - prior) * n as f64;
+        if cap_sum < 0.0 {
+            return Capped::Above(prior);
+        }
         let mut acc = CostSum::new(self.truncation_sq);
         for start in (0..n).step_by(BLOCK) {
             let end = (start + BLOCK).min(n);
@@ -440,11 +542,14 @@ impl<'a> Correlator<'a> {
                 }
             }
             if acc.partial() > cap_sum {
-                return Capped::Above(acc.partial() / n as f64);
+                return Capped::Above(acc.partial() / n as f64 + prior);
             }
         }
         match acc.finish(self.min_overlap) {
-            Some(c) => Capped::Scored(c),
+            Some(c) => Capped::Scored(Correlation {
+                cost: c.cost + prior,
+                ..c
+            }),
             None => Capped::NoOverlap,
         }
     }
@@ -482,6 +587,10 @@ impl<'a> Correlator<'a> {
                 acc.add(v, local_ranges[cell as usize]);
             }
         }
-        acc.finish(self.min_overlap)
+        let prior = self.prior_cost(offset);
+        acc.finish(self.min_overlap).map(|c| Correlation {
+            cost: c.cost + prior,
+            ..c
+        })
     }
 }

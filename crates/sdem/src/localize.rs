@@ -21,7 +21,7 @@ use crate::search::{matched_heading_step, CandidateGrid, Evaluator, Index, Score
 use nalgebra::{Isometry3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-pub use crate::cost::{correlate, Correlation, CostConfig};
+pub use crate::cost::{correlate, Correlation, CostConfig, OffsetPrior};
 pub use crate::search::{HeadingWindow, SearchWindow};
 
 /// Which search runs over the window.
@@ -307,7 +307,14 @@ pub fn localize(
     } else {
         let normals = SurfaceNormals::new(reference, config.refinement.normal_radius_cells);
         let initial = Isometry3::from_parts(Translation3::from(grid_offset), grid_rotation);
-        match refine(reference, &normals, query, &initial, &config.refinement) {
+        match refine(
+            reference,
+            &normals,
+            query,
+            &initial,
+            config.cost.prior.as_ref(),
+            &config.refinement,
+        ) {
             Ok(r) => {
                 rotation = r.transform.rotation;
                 let t = r.transform.translation.vector;
@@ -1016,7 +1023,8 @@ mod tests {
         #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
 
         /// The exact search lands on the exhaustive oracle's minimum, heading included, wherever
-        /// the truth lies relative to the window (inside, near an edge, or outside it).
+        /// the truth lies relative to the window (inside, near an edge, or outside it), with or
+        /// without a prediction (weak or strong enough to decide, inside the window or out).
         #[test]
         fn branch_and_bound_finds_the_exhaustive_minimum(
             seed in 0u64..1_000_000,
@@ -1024,6 +1032,7 @@ mod tests {
             yaw in -30.0f64..30.0,
             compass_error in -3.0f64..3.0,
             window_shift in -0.1f64..0.1,
+            prior in proptest::option::of((-0.15f64..0.15, -0.15f64..0.15, -7.0f64..-1.6)),
         ) {
             let (reference, ra, query, mut qa) = small_problem(seed, x, y, z, yaw);
             qa.yaw += compass_error.to_radians();
@@ -1033,6 +1042,14 @@ mod tests {
                 step_m: 0.02,
                 heading: HeadingWindow { half_range_deg: 3.0, step_deg: Some(1.0) },
                 refine: false,
+                cost: CostConfig {
+                    // σ from 1 mm (the prediction decides) to 20 cm (the scans do).
+                    prior: prior.map(|(dx, dy, log_sigma)| OffsetPrior {
+                        offset: [centre.x + dx, centre.y + dy, centre.z],
+                        sigma_m: log_sigma.exp(),
+                    }),
+                    ..Default::default()
+                },
                 ..Default::default()
             };
             let oracle = localize(&reference, &ra, &query, &qa,

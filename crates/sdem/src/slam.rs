@@ -22,7 +22,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::{attitude_of, pose_from_parts, Attitude, Pose, Vec3};
-use crate::localize::{localize, LocalizeConfig, SearchWindow};
+use crate::localize::{localize, CostConfig, LocalizeConfig, OffsetPrior, SearchWindow};
 use crate::map::{
     verify_loop_closure, world_from_query, Descriptor, LoopClosure, LoopClosureConfig, Map, Node,
 };
@@ -47,6 +47,12 @@ pub struct SlamConfig {
     /// Half-size of the window when there is no odometry (the robot may have moved anywhere
     /// nearby), metres.
     pub window_half_no_odometry_m: [f64; 3],
+    /// Standard deviation of an odometry prediction, metres, weighed into the match as
+    /// [`crate::cost::OffsetPrior`] (it decides only what the scans leave open, such as the
+    /// position along a featureless ditch).
+    pub prior_sigma_m: f64,
+    /// Standard deviation of the prediction without odometry (the last motion repeated), metres.
+    pub prior_sigma_no_odometry_m: f64,
     /// Heading searched around an odometry prediction, ± degrees.
     pub heading_half_deg: f64,
     /// Heading searched around a compass reading when there is no odometry, ± degrees.
@@ -85,6 +91,8 @@ impl Default for SlamConfig {
             },
             window_half_m: [0.15, 0.15, 0.08],
             window_half_no_odometry_m: [0.5, 0.5, 0.15],
+            prior_sigma_m: 0.05,
+            prior_sigma_no_odometry_m: 0.2,
             heading_half_deg: 3.0,
             heading_half_compass_deg: 8.0,
             heading_half_no_prior_deg: 15.0,
@@ -115,6 +123,16 @@ impl SlamConfig {
             if !(h.is_finite() && h >= 0.0) {
                 return Err(Error::Invalid(format!(
                     "window half-size {h} m must be a finite number >= 0"
+                )));
+            }
+        }
+        for (name, v) in [
+            ("prior_sigma_m", self.prior_sigma_m),
+            ("prior_sigma_no_odometry_m", self.prior_sigma_no_odometry_m),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "{name} = {v} m must be a positive number"
                 )));
             }
         }
@@ -417,10 +435,13 @@ impl Slam {
         };
         let attitude = Attitude::new(roll, pitch, yaw);
         let predicted = pose_from_parts(position, attitude);
-        let window_half = if scan.odometry.is_some() {
-            self.config.window_half_m
+        let (window_half, prior_sigma_m) = if scan.odometry.is_some() {
+            (self.config.window_half_m, self.config.prior_sigma_m)
         } else {
-            self.config.window_half_no_odometry_m
+            (
+                self.config.window_half_no_odometry_m,
+                self.config.prior_sigma_no_odometry_m,
+            )
         };
 
         // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
@@ -465,6 +486,13 @@ impl Slam {
             heading: HeadingWindow {
                 half_range_deg: heading_half,
                 step_deg: None,
+            },
+            cost: CostConfig {
+                prior: Some(OffsetPrior {
+                    offset: (position - origin).into(),
+                    sigma_m: prior_sigma_m,
+                }),
+                ..self.config.localize.cost.clone()
             },
             ..self.config.localize.clone()
         };
