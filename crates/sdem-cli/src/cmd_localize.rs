@@ -6,7 +6,8 @@ use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, PoseRecord};
 use sdem::io::Dataset;
 use sdem::localize::{
-    localize, Diagnostics, HeadingWindow, LocalizeConfig, RefineOutcome, SearchMode, SearchWindow,
+    localize, Diagnostics, HeadingWindow, LocalizeConfig, OffsetPrior, RefineOutcome, SearchMode,
+    SearchWindow,
 };
 use sdem::sdem::{Sdem, SdemConfig};
 use serde::Serialize;
@@ -46,6 +47,11 @@ pub struct Args {
     /// x0:x1,y0:y1,z0:z1 [default: the paper's -0.5:0.5,-0.3:0.6,-0.1:0.1].
     #[arg(long, allow_hyphen_values = true, value_parser = parse_window)]
     window: Option<SearchWindow>,
+    /// A prediction of the offset (odometry), x,y,z,sigma in metres: weighed into the cost as one
+    /// more point off by the truncation at one sigma, so it decides only what the scans leave
+    /// open (the position along a featureless corridor) [default: none].
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "map")]
+    prior: Option<String>,
     /// Grid step of the search, metres.
     #[arg(long, default_value_t = 0.01, allow_hyphen_values = true)]
     step: f64,
@@ -169,6 +175,31 @@ fn parse_triple(flag: &str, text: &str) -> Result<[f64; 3]> {
     }
 }
 
+/// Parses `--prior x,y,z,sigma` (metres).
+fn parse_prior(text: &str) -> Result<OffsetPrior> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
+        .collect::<Option<Vec<f64>>>()
+        .with_context(|| {
+            format!("--prior '{text}': expected four finite numbers x,y,z,sigma in metres")
+        })?;
+    let [x, y, z, sigma_m] = values[..] else {
+        bail!(
+            "--prior '{text}': expected four numbers x,y,z,sigma in metres, got {}",
+            values.len()
+        );
+    };
+    let prior = OffsetPrior {
+        offset: [x, y, z],
+        sigma_m,
+    };
+    prior
+        .validate()
+        .with_context(|| format!("--prior '{text}'"))?;
+    Ok(prior)
+}
+
 /// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.
 fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
     let folder = if map.join(sdem::io::MAP_MANIFEST).exists() {
@@ -270,6 +301,10 @@ pub fn run(args: Args) -> Result<()> {
              branch-and-bound search bounds the projective cost only"
         );
     }
+    let prior = match &args.prior {
+        Some(text) => Some(parse_prior(text)?),
+        None => None,
+    };
     let config = LocalizeConfig {
         window: args.window.unwrap_or_else(SearchWindow::paper),
         step_m: args.step,
@@ -280,6 +315,7 @@ pub fn run(args: Args) -> Result<()> {
         mode,
         cost: CostConfig {
             model,
+            prior,
             ..Default::default()
         },
         runner_up: !args.no_runner_up,

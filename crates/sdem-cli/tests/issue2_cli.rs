@@ -521,13 +521,13 @@ fn localize_with_an_explicit_window() {
             c[2] - 0.1,
             c[2] + 0.1
         );
-        let report = localize(
-            dir.path(),
-            &ds,
-            i,
-            j,
-            &["--window", &window, "--heading-window", "2"],
-        );
+        // The second pair also gets a prediction 3 cm off the truth (σ 5 cm): the scans decide.
+        let prior = format!("{:.6},{:.6},{:.6},0.05", c[0] + 0.03, c[1], c[2]);
+        let mut extra = vec!["--window", window.as_str(), "--heading-window", "2"];
+        if i == 2 {
+            extra.extend(["--prior", prior.as_str()]);
+        }
+        let report = localize(dir.path(), &ds, i, j, &extra);
         let reference_from_query = compose(&inverse(&truth[i]), &truth[j]);
         let error = check_localize_report(&report, i, j, &reference_from_query);
         println!("{i}->{j} in {window}: error {:.3} mm", error * 1e3);
@@ -652,6 +652,10 @@ fn localize_bad_input_gives_one_line_errors() {
     }
     let m = base(&["--heading-window", "200"]);
     assert!(m.contains("--heading-window"), "{m}");
+    for prior in ["0.1,0.2,0", "a,b,c,d", "0.1,0.2,0,0", "0.1,0.2,0,-1"] {
+        let m = base(&["--prior", prior]);
+        assert!(m.contains("--prior") && m.contains(prior), "{m}");
+    }
     let m = base(&["--cost", "virtual"]);
     assert!(m.contains("--cost virtual"), "{m}");
     let m = run_err(
