@@ -175,7 +175,7 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
         branch_and_bound_cost: fast.cost,
         candidates_scored: fast.candidates_evaluated,
         boxes_bounded: fast.nodes_bounded,
-        search_points: sdem::cost::search_points(&q, base.cost.search_voxel_m).len(),
+        search_points: sdem::cost::search_points_of(&q, &base.cost).len(),
     })
 }
 

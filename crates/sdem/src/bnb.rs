@@ -27,7 +27,7 @@
 //! Query points are grouped (by cubes of 2, 4, 8 … cm) at coarser levels, so large boxes are
 //! bounded from a few hundred groups instead of every point: a group's reach covers its members'.
 
-use crate::cost::{scrambled_order, search_points, Capped, Correlator, CostConfig};
+use crate::cost::{scrambled_order, search_points_of, Capped, Correlator, CostConfig};
 use crate::geometry::fast_atan2;
 use crate::geometry::FAST_ATAN2_MAX_ERROR;
 use crate::sdem::floor_i32;
@@ -1045,7 +1045,7 @@ impl Prepared {
     pub fn new(reference: &Sdem, query: &Sdem, cost: &CostConfig) -> Self {
         Self {
             tables: RangeTables::new(reference),
-            groups: QueryGroups::new(&search_points(query, cost.search_voxel_m), 6),
+            groups: QueryGroups::new(&search_points_of(query, cost), 6),
         }
     }
 }
