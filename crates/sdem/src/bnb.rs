@@ -27,7 +27,7 @@
 //! Query points are grouped (by cubes of 2, 4, 8 … cm) at coarser levels, so large boxes are
 //! bounded from a few hundred groups instead of every point: a group's reach covers its members'.
 
-use crate::cost::{scrambled_order, search_points_of, Capped, Correlator, CostConfig};
+use crate::cost::{scrambled_order, Capped, Correlator};
 use crate::geometry::fast_atan2;
 use crate::geometry::FAST_ATAN2_MAX_ERROR;
 use crate::sdem::floor_i32;
@@ -441,30 +441,24 @@ pub(crate) struct BranchAndBound<'a> {
     /// Set aside for a second search, when asked.
     reserve: Option<Reserve>,
     /// Cloned for each worker that scores candidates.
-    prototype: Correlator<'a>,
+    prototype: &'a Correlator<'a>,
 }
 
 impl<'a> BranchAndBound<'a> {
-    pub fn new(
-        reference: &'a Sdem,
-        query: &'a Sdem,
-        cost: &'a CostConfig,
-        grid: &'a CandidateGrid,
-        tables: &'a RangeTables,
-        groups: &'a QueryGroups,
-    ) -> crate::Result<Self> {
-        Ok(Self {
-            prototype: Correlator::new(reference, query, cost)?,
-            reference,
+    /// A search of `grid` for candidates costing at most `cap`.
+    fn new(prepared: &'a Prepared<'a>, grid: &'a CandidateGrid, cap: f64) -> Self {
+        Self {
+            reference: prepared.correlator.reference(),
             grid,
-            tables,
-            groups,
-            truncation_sq: cost.truncation_sq(),
-            cap: f64::INFINITY,
+            tables: &prepared.tables,
+            groups: &prepared.groups,
+            truncation_sq: prepared.correlator.truncation_sq(),
+            cap,
             best: None,
             stats: BranchAndBoundStats::default(),
             reserve: None,
-        })
+            prototype: &prepared.correlator,
+        }
     }
 
     /// Runs the search over the whole grid; returns the exhaustive search's minimum.
@@ -632,7 +626,7 @@ impl<'a> BranchAndBound<'a> {
     }
 
     fn correlator(&self) -> Correlator<'a> {
-        self.prototype.clone()
+        (*self.prototype).clone()
     }
 
     fn score_leaf(&self, correlator: &mut Correlator, node: &Node, limit: f64) -> Option<Scored> {
@@ -1033,19 +1027,23 @@ fn reach_bound(
     (best, estimate)
 }
 
-/// What the search precomputes for one reference/query pair: the reference's range tables and
-/// the query's groups. Built once per localization and shared by its searches (the best and the
-/// runner-up).
-pub(crate) struct Prepared {
+/// What the search precomputes for one reference/query pair: the reference's range tables, the
+/// query's groups, and the correlator that scores candidates. Built once per localization and
+/// shared by its searches (the best and the runner-up).
+pub(crate) struct Prepared<'a> {
     tables: RangeTables,
     groups: QueryGroups,
+    correlator: Correlator<'a>,
 }
 
-impl Prepared {
-    pub fn new(reference: &Sdem, query: &Sdem, cost: &CostConfig) -> Self {
+impl<'a> Prepared<'a> {
+    /// Prepares the search of `correlator`'s pair (projective cost): groups of the points it
+    /// compares.
+    pub fn new(correlator: &Correlator<'a>) -> Self {
         Self {
-            tables: RangeTables::new(reference),
-            groups: QueryGroups::new(&search_points_of(query, cost), 6),
+            tables: RangeTables::new(correlator.reference()),
+            groups: QueryGroups::new(&correlator.search_points(), 6),
+            correlator: correlator.clone(),
         }
     }
 }
@@ -1058,22 +1056,17 @@ impl Prepared {
 /// and candidates that may cost up to that multiple of the best.
 pub(crate) fn search(
     prepared: &Prepared,
-    reference: &Sdem,
-    query: &Sdem,
-    cost: &CostConfig,
     grid: &CandidateGrid,
     cap: f64,
     reserve_ratio: Option<f64>,
-) -> crate::Result<(Option<Scored>, BranchAndBoundStats, Option<Reserve>)> {
-    let (tables, groups) = (&prepared.tables, &prepared.groups);
-    let mut bnb = BranchAndBound::new(reference, query, cost, grid, tables, groups)?;
-    bnb.cap = cap;
+) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
+    let mut bnb = BranchAndBound::new(prepared, grid, cap);
     bnb.reserve = reserve_ratio.map(|ratio| Reserve {
         ratio,
         boxes: Vec::new(),
         leaves: Vec::new(),
     });
-    Ok(bnb.run())
+    bnb.run()
 }
 
 /// The best candidate of `grid` (which leaves out the first search's peak) costing at most
@@ -1082,22 +1075,17 @@ pub(crate) fn search(
 /// cap is in the reserve (`cap` must be at most the reserve's ratio × the first search's best).
 pub(crate) fn runner_up(
     prepared: &Prepared,
-    reference: &Sdem,
-    query: &Sdem,
-    cost: &CostConfig,
     grid: &CandidateGrid,
     cap: f64,
     reserve: Reserve,
-) -> crate::Result<(Option<Scored>, BranchAndBoundStats)> {
-    let (tables, groups) = (&prepared.tables, &prepared.groups);
-    let mut bnb = BranchAndBound::new(reference, query, cost, grid, tables, groups)?;
-    bnb.cap = cap;
-    Ok(bnb.run_from(reserve))
+) -> (Option<Scored>, BranchAndBoundStats) {
+    BranchAndBound::new(prepared, grid, cap).run_from(reserve)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cost::CostConfig;
     use crate::geometry::{pose_from_parts, Attitude, Pose, Vec3};
     use crate::localize::SearchWindow;
     use crate::sdem::SdemConfig;
@@ -1143,10 +1131,9 @@ mod tests {
         let window = SearchWindow::around(&truth, [0.08, 0.08, 0.04]);
         let yaws: Vec<f64> = (-2..=2).map(|k| (k as f64).to_radians()).collect();
         let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-        let prepared = Prepared::new(&r, &q, &cost);
-        let (tables, groups) = (&prepared.tables, &prepared.groups);
-        let bnb = BranchAndBound::new(&r, &q, &cost, &grid, tables, groups).unwrap();
         let mut c = Correlator::new(&r, &q, &cost).unwrap();
+        let prepared = Prepared::new(&c);
+        let bnb = BranchAndBound::new(&prepared, &grid, f64::INFINITY);
         let n = grid.counts;
         let costs: Vec<f64> = (0..grid.len())
             .map(|f| {
@@ -1222,8 +1209,8 @@ mod tests {
         let window = SearchWindow::around(&truth, [0.12, 0.12, 0.04]);
         let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
         let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-        let prepared = Prepared::new(&r, &q, &cost);
         let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
+        let prepared = Prepared::new(&correlator);
         let costs: Vec<Option<f64>> = (0..grid.len())
             .map(|f| {
                 let i = grid.index(f);
@@ -1234,14 +1221,12 @@ mod tests {
             .collect();
         let mut found = 0;
         for ratio in [1.05, 1.3, 2.0, 5.0, 20.0] {
-            let (best, _, reserve) =
-                search(&prepared, &r, &q, &cost, &grid, f64::INFINITY, Some(ratio)).unwrap();
+            let (best, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(ratio));
             let (best_cost, best_flat) = best.unwrap();
             let mut outside = grid.clone();
             outside.exclude = Some((grid.offset(grid.index(best_flat)), 0.03));
             let cap = ratio * best_cost;
-            let (second, _) =
-                runner_up(&prepared, &r, &q, &cost, &outside, cap, reserve.unwrap()).unwrap();
+            let (second, _) = runner_up(&prepared, &outside, cap, reserve.unwrap());
             let oracle = (0..grid.len())
                 .filter(|&f| !outside.excluded(grid.index(f)))
                 .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))

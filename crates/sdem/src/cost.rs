@@ -382,8 +382,8 @@ pub(crate) fn yaw_matrix(yaw: f64) -> Matrix3<f32> {
 /// Scores candidates of one reference/query pair without allocating. For the virtual-S-DEM model
 /// `evaluate(t, 0)` equals `correlate(&reference.virtual_at(t), query)`.
 ///
-/// Parallel searches give each worker a clone of one correlator: cloning copies the chosen query
-/// points, where [`Correlator::new`] chooses them again.
+/// Every search of a localization and each of its workers clone one correlator: cloning copies
+/// the chosen query points, where [`Correlator::new`] chooses them again.
 #[derive(Clone)]
 pub struct Correlator<'a> {
     reference: &'a Sdem,
@@ -451,6 +451,27 @@ impl<'a> Correlator<'a> {
             zbuffer,
             prior,
         })
+    }
+
+    /// The reference S-DEM.
+    pub(crate) fn reference(&self) -> &'a Sdem {
+        self.reference
+    }
+
+    /// `τ²` in single precision.
+    pub(crate) fn truncation_sq(&self) -> f32 {
+        self.truncation_sq
+    }
+
+    /// The query points it compares (projective model), in the order [`search_points_of`]
+    /// chose them (the correlator keeps them scrambled).
+    pub(crate) fn search_points(&self) -> Vec<[f32; 3]> {
+        let [x, y, z] = &self.query_xyz;
+        let mut points = vec![[0.0; 3]; x.len()];
+        for (k, i) in scrambled_order(x.len()).into_iter().enumerate() {
+            points[i] = [x[k], y[k], z[k]];
+        }
+        points
     }
 
     /// The prediction's term at `offset` (0 without one), m².

@@ -256,10 +256,12 @@ pub fn localize(
         .samples(matched_heading_step(query, config.step_m));
     let full_turn = (config.heading.half_range_deg - 180.0).abs() < 1e-9;
     let grid = CandidateGrid::new(&config.window, config.step_m, yaws)?;
-    let mut evaluator = Evaluator::new(reference, query, &config.cost, &grid)?;
+    // Chooses the compared points once; every search and worker below clones it.
+    let mut correlator = Correlator::new(reference, query, &config.cost)?;
+    let mut evaluator = Evaluator::new(correlator.clone(), &grid);
     // Shared by the search for the best candidate and the one for the runner-up.
-    let prepared = (config.mode == SearchMode::BranchAndBound)
-        .then(|| bnb::Prepared::new(reference, query, &config.cost));
+    let prepared =
+        (config.mode == SearchMode::BranchAndBound).then(|| bnb::Prepared::new(&correlator));
     // The exact search sets aside what may cost up to the ambiguity ratio × the best, so the
     // runner-up search continues from there instead of bounding the window again.
     let reserve_ratio = config.runner_up.then_some(config.ambiguous_cost_ratio);
@@ -270,8 +272,7 @@ pub fn localize(
         full_turn,
         f64::INFINITY,
         reserve_ratio,
-    )?;
-    let mut correlator = Correlator::new(reference, query, &config.cost)?;
+    );
     let Some((cost, flat)) = best else {
         return Err(Error::Localize(format!(
             "no candidate in the window shares {} cells with the query S-DEM ({} compared); \
@@ -348,21 +349,10 @@ pub fn localize(
         // the exact search cheap.
         let cap = config.ambiguous_cost_ratio * cost;
         let second = match (reserve, prepared.as_ref()) {
-            (Some(reserve), Some(prepared)) => {
-                bnb::runner_up(
-                    prepared,
-                    reference,
-                    query,
-                    &config.cost,
-                    &outside,
-                    cap,
-                    reserve,
-                )?
-                .0
-            }
+            (Some(reserve), Some(prepared)) => bnb::runner_up(prepared, &outside, cap, reserve).0,
             _ => {
-                let mut e = Evaluator::new(reference, query, &config.cost, &outside)?;
-                run_search(&mut e, prepared.as_ref(), config, full_turn, cap, None)?.0
+                let mut e = Evaluator::new(correlator.clone(), &outside);
+                run_search(&mut e, prepared.as_ref(), config, full_turn, cap, None).0
             }
         };
         second.map(|(c, flat)| {
@@ -552,9 +542,9 @@ fn run_search(
     full_turn: bool,
     cap: f64,
     reserve_ratio: Option<f64>,
-) -> Result<(Option<Scored>, BranchAndBoundStats, Option<bnb::Reserve>)> {
+) -> (Option<Scored>, BranchAndBoundStats, Option<bnb::Reserve>) {
     let capped = |best: Option<Scored>| best.filter(|s| s.0 <= cap);
-    Ok(match config.mode {
+    match config.mode {
         SearchMode::Exhaustive => (
             capped(evaluator.exhaustive()),
             BranchAndBoundStats::default(),
@@ -568,17 +558,14 @@ fn run_search(
         SearchMode::BranchAndBound => {
             let (best, stats, reserve) = bnb::search(
                 prepared.expect("localize prepares the tables for branch-and-bound"),
-                evaluator.reference,
-                evaluator.query,
-                evaluator.cost,
                 evaluator.grid,
                 cap,
                 reserve_ratio,
-            )?;
+            );
             evaluator.evaluated += stats.leaves_evaluated;
             (best, stats, reserve)
         }
-    })
+    }
 }
 
 fn rotation_only(attitude: &Attitude) -> Pose {
@@ -594,8 +581,7 @@ fn rotation_only(attitude: &Attitude) -> Pose {
 /// there.
 fn refine_quadratic(evaluator: &mut Evaluator, idx: Index) -> Option<Vec3> {
     let grid = evaluator.grid;
-    let mut correlator =
-        Correlator::new(evaluator.reference, evaluator.query, evaluator.cost).ok()?;
+    let mut correlator = evaluator.correlator();
     let yaw = grid.yaw(idx);
     let mut ata = SMatrix::<f64, 10, 10>::zeros();
     let mut atb = SVector::<f64, 10>::zeros();

@@ -2,7 +2,7 @@
 //! exhaustive search (the oracle) and a coarse-to-fine heuristic. The exact fast search is in
 //! [`crate::bnb`].
 
-use crate::cost::{Correlation, Correlator, CostConfig};
+use crate::cost::{Correlation, Correlator};
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
 use crate::sdem::Sdem;
@@ -286,9 +286,6 @@ pub(crate) fn better(a: &Scored, b: &Scored) -> bool {
 
 /// Scores candidates in parallel and memoizes them, so each is evaluated once.
 pub(crate) struct Evaluator<'a> {
-    pub reference: &'a Sdem,
-    pub query: &'a Sdem,
-    pub cost: &'a CostConfig,
     pub grid: &'a CandidateGrid,
     pub memo: HashMap<usize, Option<Correlation>>,
     /// Candidates scored so far.
@@ -298,24 +295,18 @@ pub(crate) struct Evaluator<'a> {
 }
 
 impl<'a> Evaluator<'a> {
-    pub fn new(
-        reference: &'a Sdem,
-        query: &'a Sdem,
-        cost: &'a CostConfig,
-        grid: &'a CandidateGrid,
-    ) -> Result<Self> {
-        Ok(Self {
-            prototype: Correlator::new(reference, query, cost)?,
-            reference,
-            query,
-            cost,
+    /// Scores the candidates of `grid` with clones of `prototype`.
+    pub fn new(prototype: Correlator<'a>, grid: &'a CandidateGrid) -> Self {
+        Self {
+            prototype,
             grid,
             memo: HashMap::new(),
             evaluated: 0,
-        })
+        }
     }
 
-    fn correlator(&self) -> Correlator<'a> {
+    /// A correlator of its own for a worker.
+    pub fn correlator(&self) -> Correlator<'a> {
         self.prototype.clone()
     }
 
