@@ -159,37 +159,27 @@ struct Report {
     error_deg: Option<f64>,
 }
 
-/// Parses three comma-separated finite numbers.
-fn parse_triple(flag: &str, text: &str) -> Result<[f64; 3]> {
+/// Parses `N` comma-separated finite numbers given to `flag`; `form` names them in messages.
+fn parse_numbers<const N: usize>(flag: &str, text: &str, form: &str) -> Result<[f64; N]> {
     let values: Vec<f64> = text
         .split(',')
         .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
         .collect::<Option<Vec<f64>>>()
-        .with_context(|| format!("{flag} '{text}': expected three finite numbers a,b,c"))?;
-    match values[..] {
-        [a, b, c] => Ok([a, b, c]),
-        _ => bail!(
-            "{flag} '{text}': expected three numbers a,b,c, got {}",
-            values.len()
-        ),
-    }
+        .with_context(|| format!("{flag} '{text}': expected {N} finite numbers {form}"))?;
+    let count = values.len();
+    values
+        .try_into()
+        .map_err(|_| anyhow::anyhow!("{flag} '{text}': expected {N} numbers {form}, got {count}"))
+}
+
+/// Parses three comma-separated finite numbers.
+fn parse_triple(flag: &str, text: &str) -> Result<[f64; 3]> {
+    parse_numbers(flag, text, "a,b,c")
 }
 
 /// Parses `--prior x,y,z,sigma` (metres).
 fn parse_prior(text: &str) -> Result<OffsetPrior> {
-    let values: Vec<f64> = text
-        .split(',')
-        .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
-        .collect::<Option<Vec<f64>>>()
-        .with_context(|| {
-            format!("--prior '{text}': expected four finite numbers x,y,z,sigma in metres")
-        })?;
-    let [x, y, z, sigma_m] = values[..] else {
-        bail!(
-            "--prior '{text}': expected four numbers x,y,z,sigma in metres, got {}",
-            values.len()
-        );
-    };
+    let [x, y, z, sigma_m] = parse_numbers("--prior", text, "x,y,z,sigma in metres")?;
     let prior = OffsetPrior {
         offset: [x, y, z],
         sigma_m,
