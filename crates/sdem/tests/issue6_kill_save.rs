@@ -15,7 +15,7 @@ use sdem::posegraph::{diagonal_information, Edge, EdgeKind};
 use sdem::slam::SlamConfig;
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 const CHILD_ENV: &str = "SDEM_KILL_SAVE_CHILD";
@@ -120,63 +120,92 @@ fn check_intact(folder: &Path) -> usize {
     n
 }
 
+/// Spawns the child saving into `dir`.
+fn spawn(dir: &Path) -> Child {
+    Command::new(std::env::current_exe().unwrap())
+        .args([
+            "--ignored",
+            "--exact",
+            "child_saves_a_growing_map",
+            "--nocapture",
+            "--test-threads=1",
+        ])
+        .env(CHILD_ENV, dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap()
+}
+
+/// The count of a child's "saved N" line (the test harness may have printed the test's name in
+/// front of the first one).
+fn saved_count(line: &str) -> Option<usize> {
+    let at = line.rfind("saved ")?;
+    line[at + "saved ".len()..].trim().parse().ok()
+}
+
+/// Waits (up to a minute) for the child to create its node folder, i.e. to start saving.
+fn wait_for_first_save(dir: &Path) {
+    let start = Instant::now();
+    while !dir.join("nodes").exists() && start.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_micros(200));
+    }
+}
+
 #[test]
 fn a_save_killed_at_any_moment_leaves_the_previous_map_intact() {
-    let exe = std::env::current_exe().unwrap();
-    let spawn = |dir: &Path| {
-        Command::new(&exe)
-            .args([
-                "--ignored",
-                "--exact",
-                "child_saves_a_growing_map",
-                "--nocapture",
-                "--test-threads=1",
-            ])
-            .env(CHILD_ENV, dir)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap()
-    };
-    // How long the saves take on this machine, uninterrupted (from the first node file on).
-    let run_ms = {
+    // How long one save takes on this machine, uninterrupted: the median time between the
+    // child's reports.
+    let save_time = {
         let dir = tempfile::tempdir().unwrap();
         let mut child = spawn(dir.path());
-        let start = Instant::now();
-        while !dir.path().join("nodes").exists() && start.elapsed() < Duration::from_secs(60) {
-            std::thread::sleep(Duration::from_millis(1));
+        let mut stamps = Vec::new();
+        for line in BufReader::new(child.stdout.take().unwrap()).lines() {
+            if saved_count(&line.unwrap()).is_some() {
+                stamps.push(Instant::now());
+            }
         }
-        let from = Instant::now();
         child.wait().unwrap();
+        assert_eq!(stamps.len(), NODES);
         assert_eq!(check_intact(dir.path()), NODES);
-        from.elapsed().as_millis().max(20) as u64
+        let mut gaps: Vec<Duration> = stamps.windows(2).map(|w| w[1] - w[0]).collect();
+        gaps.sort();
+        gaps[gaps.len() / 2]
     };
+    // Each kill waits for the child to report a given save finished (none: for its first node
+    // file to appear) and then for a fraction of a save's time, so the kills land in every part
+    // of a save — writing a node file, syncing it, renaming it, writing the manifest — whatever
+    // the machine's speed, and always while the map is still growing.
+    let kills: Vec<(usize, Duration)> = (0..16)
+        .map(|j| (2 * j, save_time.mul_f64((j % 8) as f64 / 8.0)))
+        .collect();
     let mut outcomes = Vec::new();
-    // Kill times from early (during the first node files) to late, spread over the run, so the
-    // kills land in every part of a save whatever the machine's speed.
-    let delays_ms: Vec<u64> = (0..16).map(|k| run_ms * (2 + 6 * k) / 100).collect();
-    for &delay in &delays_ms {
+    for &(after_save, delay) in &kills {
         let dir = tempfile::tempdir().unwrap();
         let mut child = spawn(dir.path());
-        let stdout = child.stdout.take().unwrap();
-        let reader = std::thread::spawn(move || {
-            BufReader::new(stdout)
-                .lines()
-                .map_while(|l| l.ok())
-                .filter_map(|l| l.strip_prefix("saved ").and_then(|n| n.parse().ok()))
-                .last()
-                .unwrap_or(0usize)
-        });
-        // Count from the first node file's appearance, not from the spawn: the child has to
-        // build its nodes first.
-        let start = Instant::now();
-        while !dir.path().join("nodes").exists() && start.elapsed() < Duration::from_secs(60) {
-            std::thread::sleep(Duration::from_millis(1));
+        let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+        let mut finished = 0;
+        if after_save == 0 {
+            wait_for_first_save(dir.path());
+        } else {
+            for line in lines.by_ref() {
+                if let Some(n) = saved_count(&line.unwrap()) {
+                    finished = n;
+                    if n >= after_save {
+                        break;
+                    }
+                }
+            }
         }
-        std::thread::sleep(Duration::from_millis(delay));
+        std::thread::sleep(delay);
         child.kill().unwrap();
         child.wait().unwrap();
-        let finished = reader.join().unwrap();
+        // Saves the child finished while the parent slept.
+        for line in lines {
+            if let Some(n) = line.ok().as_deref().and_then(saved_count) {
+                finished = n;
+            }
+        }
 
         let loaded = if dir.path().join("map.json").exists() {
             check_intact(dir.path())
@@ -189,9 +218,16 @@ fn a_save_killed_at_any_moment_leaves_the_previous_map_intact() {
         };
         assert!(
             loaded >= finished && loaded <= finished + 1,
-            "killed after {delay} ms: the child had finished {finished} saves, the folder holds \
-             {loaded} nodes"
+            "killed {delay:?} after save {after_save}: the child had finished {finished} saves, \
+             the folder holds {loaded} nodes"
         );
+        // What the kill left beyond the loaded map: temporary files, node files the manifest
+        // does not name yet — the kill caught the child inside a save.
+        let files_in = |folder: &Path| std::fs::read_dir(folder).map_or(0, |d| d.count());
+        let leftovers = files_in(dir.path()) + files_in(&dir.path().join("nodes"))
+            - usize::from(dir.path().join("map.json").exists()) // the manifest
+            - usize::from(dir.path().join("nodes").exists()) // the node folder
+            - loaded;
         // Going on from the leftovers (stray temporary files, a node file the manifest does not
         // name yet) completes the map.
         let mut files = if loaded > 0 {
@@ -210,15 +246,23 @@ fn a_save_killed_at_any_moment_leaves_the_previous_map_intact() {
                 .collect();
             assert!(stray.is_empty(), "left in {}: {stray:?}", folder.display());
         }
-        outcomes.push((delay, finished, loaded));
+        outcomes.push((after_save, delay, finished, loaded, leftovers));
     }
-    // The kills landed during the run, not all before or after it.
+    // The kills landed while the map grew (not after the child was done), and some of them
+    // during a save (the folder holding one node more than the last finished save).
     let mid_run = outcomes
         .iter()
-        .filter(|&&(_, _, loaded)| loaded > 0 && loaded < NODES)
+        .filter(|&&(_, _, _, loaded, _)| loaded < NODES)
         .count();
+    let mid_save = outcomes
+        .iter()
+        .filter(|&&(_, _, _, _, leftovers)| leftovers > 0)
+        .count();
+    eprintln!(
+        "save time {save_time:?}; (after save, delay, finished, loaded, leftovers): {outcomes:?}"
+    );
     assert!(
-        mid_run >= delays_ms.len() / 2,
-        "too few kills landed mid-run: {outcomes:?}"
+        mid_run == kills.len() && mid_save >= kills.len() / 4,
+        "kills did not land during the saves: {outcomes:?}"
     );
 }
