@@ -237,6 +237,7 @@ pub fn localize(
     config: &LocalizeConfig,
 ) -> Result<Localization> {
     config.cost.validate()?;
+    config.refinement.validate()?;
     config.heading.validate()?;
     if config.mode == SearchMode::BranchAndBound && config.cost.model != CostModel::Projective {
         return Err(Error::Invalid(

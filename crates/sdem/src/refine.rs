@@ -76,6 +76,29 @@ impl Default for RefineConfig {
     }
 }
 
+impl RefineConfig {
+    /// Checks the settings.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming the field that is not a positive number.
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("kernel_scale_m", self.kernel_scale_m),
+            ("max_correspondence_m", self.max_correspondence_m),
+            ("max_rotation_deg", self.max_rotation_deg),
+            ("max_translation_m", self.max_translation_m),
+        ];
+        for (name, value) in positive {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "refinement.{name} = {value} must be a positive number"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The result of a refinement.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Refinement {
@@ -412,4 +435,32 @@ pub fn refine(
         rms_m: sigma_sq.sqrt(),
         information: h / sigma_sq,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bad_settings_are_refused_by_name() {
+        for name in [
+            "kernel_scale_m",
+            "max_correspondence_m",
+            "max_rotation_deg",
+            "max_translation_m",
+        ] {
+            for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+                let mut config = RefineConfig::default();
+                match name {
+                    "kernel_scale_m" => config.kernel_scale_m = bad,
+                    "max_correspondence_m" => config.max_correspondence_m = bad,
+                    "max_rotation_deg" => config.max_rotation_deg = bad,
+                    _ => config.max_translation_m = bad,
+                }
+                let e = config.validate().unwrap_err().to_string();
+                assert!(e.contains(name), "{e}");
+            }
+        }
+        RefineConfig::default().validate().unwrap();
+    }
 }
