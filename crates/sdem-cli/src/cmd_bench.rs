@@ -12,8 +12,8 @@
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
 use sdem::benchmark::{
-    bench_pairs, localize_pair, paper_pair, success_rate, summarize, PairConfig, PairResult, Stats,
-    PAPER_MOVE_M,
+    bench_pairs, localize_config, localize_pair, paper_pair, success_rate, summarize, PairConfig,
+    PairResult, Stats, PAPER_MOVE_M,
 };
 use sdem::geometry::Vec3;
 use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow};
@@ -34,7 +34,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Grid step of the pairs' search, metres (the refinement goes below it).
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = sdem::benchmark::PAIRS_STEP_M)]
     step: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -241,9 +241,8 @@ fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
     say(&format!("pairs: simulating {count} seeded pairs ..."));
     let pairs = bench_pairs(args.seed, count, &pair_config)?;
     let config = LocalizeConfig {
-        window: pair_config.search_window(),
         step_m: args.step,
-        ..Default::default()
+        ..localize_config(&pair_config)
     };
     let sdem_config = SdemConfig::default();
     let (mut tally, mut failures) = (Tally::default(), Vec::new());

@@ -431,11 +431,17 @@ pub fn success_rate(errors: &[f64], threshold: f64) -> f64 {
     errors.iter().filter(|&&e| e < threshold).count() as f64 / errors.len() as f64
 }
 
+/// The grid step the pairs are searched with, metres: a 2 cm grid finds the basin and the
+/// refinement the bottom (`sdem bench --step`'s default).
+pub const PAIRS_STEP_M: f64 = 0.02;
+
 /// The localization settings the benchmark runs sdem with: the default search over the pairs'
-/// displacement window. The one place this module builds a [`LocalizeConfig`].
+/// displacement window on a [`PAIRS_STEP_M`] grid. The one place this module builds a
+/// [`LocalizeConfig`]; `sdem bench` and the pairs exported for the peers both use it.
 pub fn localize_config(pairs: &PairConfig) -> LocalizeConfig {
     LocalizeConfig {
         window: pairs.search_window(),
+        step_m: PAIRS_STEP_M,
         ..Default::default()
     }
 }
