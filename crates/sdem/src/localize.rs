@@ -167,6 +167,14 @@ pub struct Diagnostics {
     pub weakest_sigma_m: Option<f64>,
     /// Standard deviation along the best-constrained direction, metres.
     pub strongest_sigma_m: Option<f64>,
+    /// The translational direction along which the pose is free (a corridor's axis; unit
+    /// vector, levelled reference axes), when it is: the refinement's weakest direction when its
+    /// σ exceeds [`LocalizeConfig::ambiguous_sigma_ratio`] × the strongest; without a
+    /// refinement, the direction along which the grid's cost rises less than
+    /// [`LocalizeConfig::ambiguous_rise_ratio`] × the steepest. Along it the scans do not fix the
+    /// pose (what curvature there is comes from the sampling, not the scene): `sdem slam` takes
+    /// the prediction's position along it.
+    pub flat_direction: Option<[f64; 3]>,
     /// True when another, distant candidate scores almost as well or the cost is flat along
     /// some direction (the pose along [`Self::weakest_direction`] should not be trusted), when
     /// the 6-DoF refinement failed (the pose is the grid's, unconfirmed), or when too few of the
@@ -431,6 +439,7 @@ fn diagnose(
         translation.symmetric_eigen()
     });
     let mut weakest = None;
+    let mut flat = None;
     if let Some(eigen) = &eigen {
         let (mut i_max, mut i_min) = (0, 0);
         for i in 0..3 {
@@ -445,6 +454,7 @@ fn diagnose(
         let sigma_max = eigen.eigenvalues[i_max].max(0.0).sqrt();
         let sigma_min = eigen.eigenvalues[i_min].max(0.0).sqrt();
         if sigma_max > config.ambiguous_sigma_ratio * sigma_min {
+            flat = Some([v.x, v.y, v.z]);
             ambiguity.push(format!(
                 "the cost is flat along ({:.2}, {:.2}, {:.2}): σ {:.2} mm there against {:.2} mm \
                  across",
@@ -499,6 +509,12 @@ fn diagnose(
         if weakest.is_none() {
             weakest = Some(([v.x, v.y, v.z], f64::NAN, f64::NAN));
         }
+        // The refinement's curvature, where there is one, says whether the pose is free along
+        // a direction; the grid's cost alone can be flat where the refinement is not (on 3DTK's
+        // scan 2 the grid's pitch was 2° off, so no floor point fell within τ at any height).
+        if covariance.is_none() {
+            flat = Some([v.x, v.y, v.z]);
+        }
     }
     // Too little in common, or the points did not confirm the grid's answer: on the fault
     // bench's failures (a query 0.45 m away seeing little of what the reference saw) 14–21 % of
@@ -530,6 +546,7 @@ fn diagnose(
         weakest_direction: weakest.map(|w| w.0),
         weakest_sigma_m: weakest.map(|w| w.1),
         strongest_sigma_m: weakest.map(|w| w.2),
+        flat_direction: flat,
         ambiguous: !ambiguity.is_empty(),
         ambiguity,
     }

@@ -512,7 +512,37 @@ impl Slam {
             other => other,
         })?;
         let localize_ms = ms(localize_start);
-        let world_from_sensor = world_from_query(&origin, &found);
+        let mut world_from_sensor = world_from_query(&origin, &found);
+        let mut covariance = found
+            .diagnostics
+            .covariance
+            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+        let mut ambiguity = found.diagnostics.ambiguity.clone();
+        // Along a direction the scans leave free (a ditch's or a corridor's axis), the match's
+        // position is the scans' sampling pattern, not the scene: it pulls towards the
+        // reference's own origin (a forward-looking scan in a straight corridor came out 20 %
+        // short at every step). There the prediction decides, and the edge carries the
+        // prediction's uncertainty (degeneracy-aware fusion, after Zhang, Kaess and Singh,
+        // ICRA 2016).
+        if let (Some(v), Some(_)) = (found.diagnostics.flat_direction, motion) {
+            let v = Vec3::from(v);
+            let t = world_from_sensor.translation.vector;
+            let along = v.dot(&(position - t));
+            world_from_sensor.translation.vector = t + v * along;
+            if let Some(c) = covariance.as_mut() {
+                let inflate = v * v.transpose() * prior_sigma_m.powi(2);
+                let mut block = c.fixed_view_mut::<3, 3>(0, 0);
+                block += inflate;
+            }
+            ambiguity.push(format!(
+                "along ({:.2}, {:.2}, {:.2}) the position is the prediction's ({:+.1} cm from \
+                 the match's)",
+                v.x,
+                v.y,
+                v.z,
+                along * 100.0
+            ));
+        }
         let node = Node::from_scan(
             node_id,
             scan.scan_index,
@@ -521,10 +551,6 @@ impl Slam {
             scan.points_in_sensor,
             &self.config.sdem,
         )?;
-        let covariance = found
-            .diagnostics
-            .covariance
-            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
         // One edge per reference node; together they carry the match's information once.
         let share = 1.0 / reference_ids.len() as f64;
         for &r in &reference_ids {
@@ -563,8 +589,9 @@ impl Slam {
             cost: Some(found.cost),
             overlap_fraction: Some(found.diagnostics.overlap_fraction),
             inlier_fraction: Some(found.diagnostics.inlier_fraction),
-            covariance: found.diagnostics.covariance,
-            ambiguity: found.diagnostics.ambiguity.clone(),
+            covariance: covariance
+                .map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)]))),
+            ambiguity,
             loop_closures: closures,
             optimization,
         })
@@ -1134,6 +1161,67 @@ mod tests {
             slam.map.nodes.len(),
             1,
             "a failed step leaves the map as it was"
+        );
+    }
+
+    /// A forward-looking scan in a straight corridor says nothing of the motion along it: the
+    /// match's position there is the sampling's (it came out 20 % short at every step, 1.0 m
+    /// short after 5.5 m). The loop takes the odometry's position along the flat direction and
+    /// the scans' across it.
+    #[test]
+    fn along_a_featureless_corridor_the_odometry_decides() {
+        use rand::SeedableRng;
+        let scene = sim::corridor(40.0).unwrap();
+        let sensor = SensorConfig::default();
+        let truth: Vec<Pose> = (0..6)
+            .map(|i| {
+                pose_from_parts(
+                    Vec3::new(-5.0 + 0.5 * i as f64, 0.02 * (i % 3) as f64, 0.0),
+                    Attitude::default(),
+                )
+            })
+            .collect();
+        let odometry = simulate_odometry(&truth, &OdometryNoise::default(), 7).unwrap();
+        let mut slam = Slam::new(SlamConfig::default()).unwrap();
+        let mut fused = 0;
+        for (i, pose) in truth.iter().enumerate() {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100 + i as u64);
+            let sweep = sim::scan(&scene, &sensor, pose, 0.0, &mut rng);
+            let report = slam
+                .add_scan(&ScanInput {
+                    scan_index: i,
+                    points_in_sensor: &sweep.points_in_sensor(),
+                    attitude: Some(sweep.mean_attitude()),
+                    odometry: (i > 0).then(|| (odometry[i], odometry[i - 1])),
+                })
+                .unwrap();
+            fused += usize::from(
+                report
+                    .ambiguity
+                    .iter()
+                    .any(|a| a.contains("the position is the prediction's")),
+            );
+        }
+        assert_eq!(fused, 5, "every step after the first is along the corridor");
+        let estimate = slam.poses();
+        let travelled = |poses: &[Pose]| poses[5].translation.vector - poses[0].translation.vector;
+        let (e, t, o) = (
+            travelled(&estimate),
+            travelled(&truth),
+            travelled(&odometry),
+        );
+        // Along: the odometry's travel (5 % noise); across: the scans' (5 mm over the 5 steps
+        // when written; the flat direction leans up to 1 % out of the corridor's axis).
+        assert!(
+            (e.x - o.x).abs() < 0.01,
+            "along: {} m, odometry {} m",
+            e.x,
+            o.x
+        );
+        assert!((e.x - t.x).abs() < 0.1, "along: {} m, truth {} m", e.x, t.x);
+        assert!(
+            (e.y - t.y).abs() < 0.01 && (e.z - t.z).abs() < 0.01,
+            "across: {e:?} against {t:?}"
         );
     }
 }
