@@ -922,6 +922,9 @@ struct Reach {
 /// 7,928, 256 → 7,796 / 5,744, 1,024 → 8,052 / 5,424 (no faster).
 const MAX_CONE_CELLS: i32 = 256;
 
+/// Cones of more cells than this ask the range tables first whether any gate can be reached.
+const SMALL_CONE_CELLS: i32 = 4;
+
 /// A lower bound on the term of every member of a ball over the box (see
 /// [`BranchAndBound::bound_below`]); `half` is the box's translation half-extent per axis.
 #[inline]
@@ -976,11 +979,11 @@ fn reach_bound(
         return (lb, estimate);
     }
     let (one_minus_cos, sin) = turn;
+    // Written without branches (the gate selects), so that the loop over a cone's cells is
+    // cheap: it is most of the search's time.
     let term = |c: &crate::sdem::CellPlane| -> f32 {
         // Unknown cells (NaN) and gates the members cannot reach cost τ².
-        if !(c.lo <= r_hi && c.hi >= r_lo) {
-            return truncation_sq;
-        }
+        let reachable = c.lo <= r_hi && c.hi >= r_lo;
         let [nx, ny, nz] = c.n;
         // Turning by θ (|θ| ≤ δ) from the middle heading moves the centre by
         // (cos θ − 1) arm + sin θ (ẑ × arm): along the normal, at most this.
@@ -994,7 +997,12 @@ fn reach_bound(
             + g.spread;
         let distance = (nx * g.x[0] + ny * g.x[1] + nz * g.x[2] - c.d).abs();
         let v = (distance - along_normal).max(0.0);
-        (v * v).min(truncation_sq)
+        let squared = (v * v).min(truncation_sq);
+        if reachable {
+            squared
+        } else {
+            truncation_sq
+        }
     };
     let mut best = truncation_sq;
     if let Some(c) = centre {
@@ -1007,6 +1015,14 @@ fn reach_bound(
         // A single cell: the centre's (or one outside the grid).
         return (best, estimate);
     }
+    if (e1 - e0 + 1) * (a1 - a0 + 1) > SMALL_CONE_CELLS {
+        // No gate of the cone reaches the members' ranges: every cell costs τ², and the
+        // range tables say so without visiting them.
+        let (min, max) = tables.window(e0 as usize, e1 as usize, a0 as usize, a1 as usize);
+        if min > r_hi || max < r_lo {
+            return (truncation_sq, estimate);
+        }
+    }
     // Columns a0..=a1 of a row, as at most two runs of the stored row (wrapping once).
     let runs = if a1 < n_az {
         [(a0, a1 + 1), (0, 0)]
@@ -1017,7 +1033,8 @@ fn reach_bound(
         let row = (e * n_az) as usize;
         for &(from, to) in &runs {
             for c in &planes.cells[row + from as usize..row + to as usize] {
-                best = best.min(term(c));
+                let t = term(c);
+                best = if t < best { t } else { best };
             }
         }
         if best == 0.0 {
