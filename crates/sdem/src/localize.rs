@@ -169,11 +169,11 @@ pub struct Diagnostics {
     pub strongest_sigma_m: Option<f64>,
     /// The translational direction along which the pose is free (a corridor's axis; unit
     /// vector, levelled reference axes), when it is: the refinement's weakest direction when its
-    /// σ exceeds [`LocalizeConfig::ambiguous_sigma_ratio`] × the strongest; without a
-    /// refinement, the direction along which the grid's cost rises less than
-    /// [`LocalizeConfig::ambiguous_rise_ratio`] × the steepest. Along it the scans do not fix the
-    /// pose (what curvature there is comes from the sampling, not the scene): `sdem slam` takes
-    /// the prediction's position along it.
+    /// σ exceeds [`LocalizeConfig::ambiguous_sigma_ratio`] × the strongest; else the direction
+    /// along which the grid's cost rises less than [`LocalizeConfig::ambiguous_rise_ratio`] ×
+    /// the steepest, when the refinement's weakest direction lies within about 25° of it (or there is
+    /// no refinement). Along it the scans do not fix the pose (what curvature there is comes
+    /// from the sampling, not the scene): `sdem slam` takes the prediction's position along it.
     pub flat_direction: Option<[f64; 3]>,
     /// True when another, distant candidate scores almost as well or the cost is flat along
     /// some direction (the pose along [`Self::weakest_direction`] should not be trusted), when
@@ -509,10 +509,13 @@ fn diagnose(
         if weakest.is_none() {
             weakest = Some(([v.x, v.y, v.z], f64::NAN, f64::NAN));
         }
-        // The refinement's curvature, where there is one, says whether the pose is free along
-        // a direction; the grid's cost alone can be flat where the refinement is not (on 3DTK's
-        // scan 2 the grid's pitch was 2° off, so no floor point fell within τ at any height).
-        if covariance.is_none() {
+        // The grid's cost alone can be flat where the refined pose is not: on 3DTK's scan 2 the
+        // grid's pitch was 2° off, so no floor point fell within τ at any height, while the
+        // refinement was weakest along the corridor (σ 0.29 mm against 0.10 mm). It names the
+        // free direction only when the refinement's weakest direction agrees with it (or there
+        // is no refinement).
+        let agrees = weakest.is_none_or(|(w, _, _)| Vec3::from(w).dot(&v).abs() > 0.9);
+        if flat.is_none() && agrees {
             flat = Some([v.x, v.y, v.z]);
         }
     }
@@ -866,11 +869,17 @@ mod tests {
         );
         // Across the corridor the pose is still well fixed.
         assert!(d.strongest_sigma_m.unwrap() < 0.001, "{d:?}");
+        // The refinement's curvature names the axis as the direction the pose is free along.
+        let flat = d
+            .flat_direction
+            .expect("a corridor's pose is free along its axis");
+        assert!(flat[0].abs() > 0.95, "flat direction {flat:?}");
 
         let found = localize_in(&sim::paper_room(), 23);
         let d = &found.diagnostics;
         println!("room: cost {:.3e}, {d:?}", found.cost);
         assert!(!d.ambiguous, "{d:?}");
+        assert_eq!(d.flat_direction, None);
         assert!(d.runner_up_cost_at_least.unwrap() > found.cost, "{d:?}");
         assert!(d.overlap_fraction > 0.5 && d.inlier_fraction > 0.5, "{d:?}");
         let cov = d.covariance.unwrap();
