@@ -83,23 +83,31 @@ impl RangeTables {
         let mut squares = vec![base];
         while (1usize << squares.len()) <= n_el.min(width) && squares.len() < 8 {
             let half = 1usize << (squares.len() - 1);
-            let prev = squares.last().expect("level 0 exists");
+            let prev: &[(f32, f32)] = squares.last().expect("level 0 exists");
             let mut next = vec![EMPTY; n_el * width];
-            for e in 0..n_el {
-                for a in 0..width {
-                    let mut v = prev[e * width + a];
-                    if e + half < n_el {
-                        v = merge(v, prev[(e + half) * width + a]);
+            // Row by row in parallel, each row's columns in two branch-free runs (with and
+            // without the square's right half inside the table): 7–9 ms a localization before.
+            let inside = width - half;
+            next.par_chunks_mut(width).enumerate().for_each(|(e, out)| {
+                let this = &prev[e * width..(e + 1) * width];
+                if e + half < n_el {
+                    let below = &prev[(e + half) * width..(e + half + 1) * width];
+                    for a in 0..inside {
+                        out[a] = merge(
+                            merge(this[a], below[a]),
+                            merge(this[a + half], below[a + half]),
+                        );
                     }
-                    if a + half < width {
-                        v = merge(v, prev[e * width + a + half]);
-                        if e + half < n_el {
-                            v = merge(v, prev[(e + half) * width + a + half]);
-                        }
+                    for a in inside..width {
+                        out[a] = merge(this[a], below[a]);
                     }
-                    next[e * width + a] = v;
+                } else {
+                    for a in 0..inside {
+                        out[a] = merge(this[a], this[a + half]);
+                    }
+                    out[inside..].copy_from_slice(&this[inside..]);
                 }
-            }
+            });
             squares.push(next);
         }
         let row: Vec<(f32, f32)> = (0..n_el)
