@@ -226,7 +226,8 @@ pub struct StepReport {
     pub overlap_fraction: Option<f64>,
     /// Inlier fraction of the match.
     pub inlier_fraction: Option<f64>,
-    /// Covariance of `[x, y, z, roll, pitch, yaw]` from the match (world axes).
+    /// Covariance of `[x, y, z, roll, pitch, yaw]` from the match (world axes), as its edges
+    /// carry it: along a direction the scans leave free, widened by the prediction's variance.
     pub covariance: Option<[[f64; 6]; 6]>,
     /// The match's ambiguity warnings, if any.
     pub ambiguity: Vec<String>,
