@@ -171,9 +171,10 @@ pub struct Diagnostics {
     /// vector, levelled reference axes), when it is: the refinement's weakest direction when its
     /// σ exceeds [`LocalizeConfig::ambiguous_sigma_ratio`] × the strongest; else the direction
     /// along which the grid's cost rises less than [`LocalizeConfig::ambiguous_rise_ratio`] ×
-    /// the steepest, when the refinement's weakest direction lies within about 25° of it (or there is
-    /// no refinement). Along it the scans do not fix the pose (what curvature there is comes
-    /// from the sampling, not the scene): `sdem slam` takes the prediction's position along it.
+    /// the steepest, when the refinement's weakest direction lies within about 25° of it (or
+    /// there is no refinement). Along it the scans do not fix the pose (what curvature there is
+    /// comes from the sampling, not the scene): `sdem slam` takes the prediction's position
+    /// along it.
     pub flat_direction: Option<[f64; 3]>,
     /// True when another, distant candidate scores almost as well or the cost is flat along
     /// some direction (the pose along [`Self::weakest_direction`] should not be trusted), when
@@ -869,7 +870,8 @@ mod tests {
         );
         // Across the corridor the pose is still well fixed.
         assert!(d.strongest_sigma_m.unwrap() < 0.001, "{d:?}");
-        // The refinement's curvature names the axis as the direction the pose is free along.
+        // The grid's flat cost and the refinement's weakest direction agree: the pose is free
+        // along the axis.
         let flat = d
             .flat_direction
             .expect("a corridor's pose is free along its axis");
