@@ -10,6 +10,7 @@ use sdem::localize::{
     SearchWindow,
 };
 use sdem::sdem::{Sdem, SdemConfig};
+use sdem::slam::Near;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -49,8 +50,10 @@ pub struct Args {
     window: Option<SearchWindow>,
     /// A prediction of the offset (odometry), x,y,z,sigma in metres: weighed into the cost as one
     /// more point off by the truncation at one sigma, so it decides only what the scans leave
-    /// open (the position along a featureless corridor) [default: none].
-    #[arg(long, allow_hyphen_values = true, conflicts_with = "map")]
+    /// open (the position along a featureless corridor). With --map: the predicted position in
+    /// the map's frame; it centres the search as --near does, and along a direction the scan
+    /// leaves free the position is the prediction's, as in `sdem slam` [default: none].
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "near")]
     prior: Option<String>,
     /// Grid step of the search, metres.
     #[arg(long, default_value_t = 0.01, allow_hyphen_values = true)]
@@ -207,9 +210,19 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
         }
         None => None,
     };
-    let near = match &args.near {
-        Some(text) => Some(sdem::geometry::Vec3::from(parse_triple("--near", text)?)),
-        None => None,
+    let near = match (&args.near, &args.prior) {
+        (Some(text), _) => Some(Near {
+            position: sdem::geometry::Vec3::from(parse_triple("--near", text)?),
+            sigma_m: None,
+        }),
+        (None, Some(text)) => {
+            let prior = parse_prior(text)?;
+            Some(Near {
+                position: sdem::geometry::Vec3::from(prior.offset),
+                sigma_m: Some(prior.sigma_m),
+            })
+        }
+        (None, None) => None,
     };
     // The map's own search settings (its config.toml), not this command's --step.
     let found = sdem::slam::relocalize(&saved.map, &saved.config, &points, attitude, near, 3)

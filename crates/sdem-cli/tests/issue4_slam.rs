@@ -103,6 +103,52 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         moved < 0.01,
         "relocalized {moved} m from the mapped pose: {found}"
     );
+    // With a prediction (x,y,z,σ) instead: the same place, where the scan fixes every direction.
+    let prior = format!("{near},0.05");
+    let found: Value = serde_json::from_str(&run_ok(
+        dir.path(),
+        &[
+            "localize",
+            "--map",
+            "out",
+            "--scan",
+            "data/scans/000002.ply",
+            "--attitude",
+            &row[1..].join(","),
+            "--prior",
+            &prior,
+            "--json",
+        ],
+    ))
+    .unwrap();
+    let pose = &found["world_from_sensor"];
+    let moved = ["x", "y", "z"]
+        .iter()
+        .map(|k| (pose[k].as_f64().unwrap() - mapped[k].as_f64().unwrap()).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    assert!(moved < 0.01, "relocalized {moved} m with --prior: {found}");
+    // Both is a usage error (clap's exit code 2), naming the two.
+    let both = common::run(
+        dir.path(),
+        &[
+            "localize",
+            "--map",
+            "out",
+            "--scan",
+            "data/scans/000002.ply",
+            "--near",
+            &near,
+            "--prior",
+            &prior,
+        ],
+    );
+    assert_eq!(both.code, Some(2), "{}", both.stderr);
+    assert!(
+        both.stderr.contains("--prior") && both.stderr.contains("--near"),
+        "{}",
+        both.stderr
+    );
     let err = fails(
         dir.path(),
         &[

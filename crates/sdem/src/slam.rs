@@ -526,22 +526,12 @@ impl Slam {
         // prediction's uncertainty (degeneracy-aware fusion, after Zhang, Kaess and Singh,
         // ICRA 2016).
         if let (Some(v), Some(_)) = (found.diagnostics.flat_direction, motion) {
-            let v = Vec3::from(v);
-            let t = world_from_sensor.translation.vector;
-            let along = v.dot(&(position - t));
-            world_from_sensor.translation.vector = t + v * along;
-            if let Some(c) = covariance.as_mut() {
-                let inflate = v * v.transpose() * prior_sigma_m.powi(2);
-                let mut block = c.fixed_view_mut::<3, 3>(0, 0);
-                block += inflate;
-            }
-            ambiguity.push(format!(
-                "along ({:.2}, {:.2}, {:.2}) the position is the prediction's ({:+.1} cm from \
-                 the match's)",
-                v.x,
-                v.y,
-                v.z,
-                along * 100.0
+            ambiguity.push(take_prediction_along(
+                &mut world_from_sensor,
+                covariance.as_mut(),
+                v,
+                &position,
+                prior_sigma_m,
             ));
         }
         let node = Node::from_scan(
@@ -744,20 +734,32 @@ pub struct Relocalization {
     pub time_ms: f64,
 }
 
-/// Finds where a scan was taken in a saved map: near `near` (world frame) when given, else at
-/// the nodes whose place descriptors look most like the scan's, trying up to `max_nodes` nodes
-/// with the exact search (a window of [`SlamConfig::window_half_no_odometry_m`] around the node,
-/// or around `near`), nearest or most alike first, until one clears the inlier threshold of loop
-/// closure.
+/// Where a scan to relocalize was taken, roughly (see [`relocalize`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Near {
+    /// The sensor's position in the map's world frame, metres.
+    pub position: Vec3,
+    /// How well it is known, metres (one σ), when it is a prediction (odometry since the last
+    /// known pose): then it also weighs in the cost ([`OffsetPrior`]), and along a direction the
+    /// scan leaves free (a corridor's axis) the position is the prediction's, as in
+    /// [`Slam::add_scan`]. Without it only the window is centred there.
+    pub sigma_m: Option<f64>,
+}
+
+/// Finds where a scan was taken in a saved map: near `near` when given, else at the nodes whose
+/// place descriptors look most like the scan's, trying up to `max_nodes` nodes with the exact
+/// search (a window of [`SlamConfig::window_half_no_odometry_m`] around the node, or around
+/// `near`), nearest or most alike first, until one clears the inlier threshold of loop closure.
 ///
 /// # Errors
-/// An empty map or scan, or no node that matches.
+/// An empty map or scan, a `near` that is not finite or whose σ is not a positive length, or no
+/// node that matches.
 pub fn relocalize(
     map: &Map,
     config: &SlamConfig,
     points_in_sensor: &[Vec3],
     attitude: Option<Attitude>,
-    near: Option<Vec3>,
+    near: Option<Near>,
     max_nodes: usize,
 ) -> Result<Relocalization> {
     let start = Instant::now();
@@ -766,12 +768,28 @@ pub fn relocalize(
             "the map has no node to relocalize in".into(),
         ));
     }
+    if let Some(n) = &near {
+        if !n.position.iter().all(|v| v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the position to relocalize near, {:?}, must be finite metres",
+                n.position.as_slice()
+            )));
+        }
+        if let Some(sigma_m) = n.sigma_m {
+            OffsetPrior {
+                offset: n.position.into(),
+                sigma_m,
+            }
+            .validate()?;
+        }
+    }
+    let near_position = near.map(|n| n.position);
     let level = attitude.unwrap_or_default();
     let query = Sdem::from_points(points_in_sensor, &level.rotation(), &config.sdem)?;
     if query.known_cells() == 0 {
         return Err(Error::Invalid("the scan has no usable point".into()));
     }
-    let mut candidates: Vec<(usize, f64)> = match near {
+    let mut candidates: Vec<(usize, f64)> = match near_position {
         Some(p) => map
             .nodes
             .iter()
@@ -801,12 +819,20 @@ pub fn relocalize(
     for &(node_id, _) in &candidates {
         let origin = map.nodes[node_id].position();
         let reference = map.merged_reference(&[node_id], &origin, &config.sdem)?;
-        let centre = near.map_or(Vec3::zeros(), |p| p - origin);
+        let centre = near_position.map_or(Vec3::zeros(), |p| p - origin);
+        let prior = near.and_then(|n| n.sigma_m).map(|sigma_m| OffsetPrior {
+            offset: centre.into(),
+            sigma_m,
+        });
         let localize_config = LocalizeConfig {
             window: SearchWindow::around(&centre, config.window_half_no_odometry_m),
             heading: HeadingWindow {
                 half_range_deg: heading,
                 step_deg: None,
+            },
+            cost: CostConfig {
+                prior,
+                ..config.localize.cost.clone()
             },
             ..config.localize.clone()
         };
@@ -846,15 +872,61 @@ pub fn relocalize(
                 .join("; ")
         )));
     };
-    let pose = world_from_query(&origin, &found);
+    let mut pose = world_from_query(&origin, &found);
+    let mut diagnostics = found.diagnostics;
+    if let (
+        Some(v),
+        Some(Near {
+            position,
+            sigma_m: Some(sigma_m),
+        }),
+    ) = (diagnostics.flat_direction, near)
+    {
+        let mut covariance = diagnostics
+            .covariance
+            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+        let note = take_prediction_along(&mut pose, covariance.as_mut(), v, &position, sigma_m);
+        diagnostics.ambiguity.push(note);
+        diagnostics.covariance =
+            covariance.map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)])));
+    }
     Ok(Relocalization {
         world_from_sensor: (&pose).into(),
         node_id,
         tried,
         cost: found.cost,
-        diagnostics: found.diagnostics,
+        diagnostics,
         time_ms: ms(start),
     })
+}
+
+/// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): moves `pose` along the
+/// free direction `flat` (unit, world axes) to the `predicted` position's place along it, and
+/// widens `covariance` (world axes) there by the prediction's variance; returns the note that
+/// says so.
+fn take_prediction_along(
+    pose: &mut Pose,
+    covariance: Option<&mut Matrix6<f64>>,
+    flat: [f64; 3],
+    predicted: &Vec3,
+    sigma_m: f64,
+) -> String {
+    let v = Vec3::from(flat);
+    let t = pose.translation.vector;
+    let along = v.dot(&(predicted - t));
+    pose.translation.vector = t + v * along;
+    if let Some(c) = covariance {
+        let mut block = c.fixed_view_mut::<3, 3>(0, 0);
+        block += v * v.transpose() * sigma_m.powi(2);
+    }
+    format!(
+        "along ({:.2}, {:.2}, {:.2}) the position is the prediction's ({:+.1} cm from the \
+         match's)",
+        v.x,
+        v.y,
+        v.z,
+        along * 100.0
+    )
 }
 
 fn ms(start: Instant) -> f64 {
@@ -1224,5 +1296,72 @@ mod tests {
             (e.y - t.y).abs() < 0.01 && (e.z - t.z).abs() < 0.01,
             "across: {e:?} against {t:?}"
         );
+    }
+
+    /// Relocalized in a corridor with a prediction, the position along the corridor is the
+    /// prediction's and across it the scan's; with a rough position only, the match is flagged;
+    /// a σ that is no length is refused.
+    #[test]
+    fn a_relocalization_with_a_prediction_takes_it_along_a_corridor() {
+        use rand::SeedableRng;
+        let scene = sim::corridor(40.0).unwrap();
+        let sensor = SensorConfig::default();
+        let config = SlamConfig::default();
+        let scan = |pose: &Pose, seed| {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            sim::scan(&scene, &sensor, pose, 0.0, &mut rng).points_in_sensor()
+        };
+        let origin = Pose::identity();
+        let node = Node::from_scan(0, 0, origin, None, &scan(&origin, 1), &config.sdem).unwrap();
+        let map = Map { nodes: vec![node] };
+        let truth = pose_from_parts(Vec3::new(0.3, 0.05, 0.0), Attitude::default());
+        let points = scan(&truth, 2);
+        let level = Some(Attitude::default());
+        let relocalized = |near: Near| {
+            let found = relocalize(&map, &config, &points, level, Some(near), 1).unwrap();
+            let pose = Pose::from(&found.world_from_sensor);
+            (pose.translation.vector, found.diagnostics)
+        };
+        // A prediction 4 cm ahead of the truth along the corridor.
+        let predicted = truth.translation.vector + Vec3::new(0.04, 0.0, 0.0);
+        let (at, diagnostics) = relocalized(Near {
+            position: predicted,
+            sigma_m: Some(0.05),
+        });
+        assert!((at.x - predicted.x).abs() < 0.002, "along: {at:?}");
+        let across = (at - truth.translation.vector).yz();
+        assert!(across.norm() < 0.01, "across: {at:?}");
+        assert!(
+            diagnostics
+                .ambiguity
+                .iter()
+                .any(|a| a.contains("the position is the prediction's")),
+            "{diagnostics:?}"
+        );
+        // Only a rough position: the match's own (14 cm short when written, the grid's, the
+        // refinement refusing to follow it), flagged; nothing taken from the rough position.
+        let (at, diagnostics) = relocalized(Near {
+            position: predicted,
+            sigma_m: None,
+        });
+        assert!(diagnostics.ambiguous, "{at:?} {diagnostics:?}");
+        assert!(!diagnostics
+            .ambiguity
+            .iter()
+            .any(|a| a.contains("the position is the prediction's")));
+        for sigma_m in [0.0, -1.0, f64::NAN] {
+            let bad = relocalize(
+                &map,
+                &config,
+                &points,
+                level,
+                Some(Near {
+                    position: predicted,
+                    sigma_m: Some(sigma_m),
+                }),
+                1,
+            );
+            assert!(bad.is_err(), "σ {sigma_m} accepted");
+        }
     }
 }
