@@ -976,16 +976,6 @@ fn reach_bound(
         }
         (a0, a1) = (a0.max(0), a1.min(n_az - 1));
     }
-    if (e1 - e0 + 1) * (a1 - a0 + 1) > MAX_CONE_CELLS {
-        // Whether any cell of the cone could compare the members within its gate.
-        let (min, max) = tables.window(e0 as usize, e1 as usize, a0 as usize, a1 as usize);
-        let lb = if min > r_hi || max < r_lo {
-            truncation_sq
-        } else {
-            0.0
-        };
-        return (lb, estimate);
-    }
     let (one_minus_cos, sin) = turn;
     // Written without branches (the gate selects), so that the loop over a cone's cells is
     // cheap: it is most of the search's time.
@@ -1023,12 +1013,17 @@ fn reach_bound(
         // A single cell: the centre's (or one outside the grid).
         return (best, estimate);
     }
-    if (e1 - e0 + 1) * (a1 - a0 + 1) > SMALL_CONE_CELLS {
-        // No gate of the cone reaches the members' ranges: every cell costs τ², and the
-        // range tables say so without visiting them.
+    let cone_cells = (e1 - e0 + 1) * (a1 - a0 + 1);
+    if cone_cells > SMALL_CONE_CELLS {
+        // Whether any gate of the cone reaches the members' ranges, from the range tables
+        // without visiting the cells: if none does, every cell costs τ²; if one does and the
+        // cone is too large to visit, 0.
         let (min, max) = tables.window(e0 as usize, e1 as usize, a0 as usize, a1 as usize);
         if min > r_hi || max < r_lo {
             return (truncation_sq, estimate);
+        }
+        if cone_cells > MAX_CONE_CELLS {
+            return (0.0, estimate);
         }
     }
     // Columns a0..=a1 of a row, as at most two runs of the stored row (wrapping once).
