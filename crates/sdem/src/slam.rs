@@ -22,7 +22,9 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::{attitude_of, pose_from_parts, Attitude, Pose, Vec3};
-use crate::localize::{localize, CostConfig, LocalizeConfig, OffsetPrior, SearchWindow};
+use crate::localize::{
+    localize, CostConfig, Diagnostics, LocalizeConfig, OffsetPrior, SearchWindow,
+};
 use crate::map::{
     verify_loop_closure, world_from_query, Descriptor, LoopClosure, LoopClosureConfig, Map, Node,
 };
@@ -514,26 +516,23 @@ impl Slam {
         })?;
         let localize_ms = ms(localize_start);
         let mut world_from_sensor = world_from_query(&origin, &found);
-        let mut covariance = found
-            .diagnostics
-            .covariance
-            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
-        let mut ambiguity = found.diagnostics.ambiguity.clone();
+        let mut diagnostics = found.diagnostics;
         // Along a direction the scans leave free (a ditch's or a corridor's axis), the match's
         // position is the scans' sampling pattern, not the scene: it pulls towards the
         // reference's own origin (a forward-looking scan in a straight corridor came out 20 %
         // short at every step). There the prediction decides, and the edge carries the
-        // prediction's uncertainty (degeneracy-aware fusion, after Zhang, Kaess and Singh,
-        // ICRA 2016).
-        if let (Some(v), Some(_)) = (found.diagnostics.flat_direction, motion) {
-            ambiguity.push(take_prediction_along(
+        // prediction's uncertainty.
+        if motion.is_some() {
+            take_prediction_along(
                 &mut world_from_sensor,
-                covariance.as_mut(),
-                v,
+                &mut diagnostics,
                 &position,
                 prior_sigma_m,
-            ));
+            );
         }
+        let covariance = diagnostics
+            .covariance
+            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
         let node = Node::from_scan(
             node_id,
             scan.scan_index,
@@ -578,11 +577,10 @@ impl Slam {
             heading_prior,
             reference_nodes: references,
             cost: Some(found.cost),
-            overlap_fraction: Some(found.diagnostics.overlap_fraction),
-            inlier_fraction: Some(found.diagnostics.inlier_fraction),
-            covariance: covariance
-                .map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)]))),
-            ambiguity,
+            overlap_fraction: Some(diagnostics.overlap_fraction),
+            inlier_fraction: Some(diagnostics.inlier_fraction),
+            covariance: diagnostics.covariance,
+            ambiguity: diagnostics.ambiguity,
             loop_closures: closures,
             optimization,
         })
@@ -874,21 +872,12 @@ pub fn relocalize(
     };
     let mut pose = world_from_query(&origin, &found);
     let mut diagnostics = found.diagnostics;
-    if let (
-        Some(v),
-        Some(Near {
-            position,
-            sigma_m: Some(sigma_m),
-        }),
-    ) = (diagnostics.flat_direction, near)
+    if let Some(Near {
+        position,
+        sigma_m: Some(sigma_m),
+    }) = near
     {
-        let mut covariance = diagnostics
-            .covariance
-            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
-        let note = take_prediction_along(&mut pose, covariance.as_mut(), v, &position, sigma_m);
-        diagnostics.ambiguity.push(note);
-        diagnostics.covariance =
-            covariance.map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)])));
+        take_prediction_along(&mut pose, &mut diagnostics, &position, sigma_m);
     }
     Ok(Relocalization {
         world_from_sensor: (&pose).into(),
@@ -900,33 +889,38 @@ pub fn relocalize(
     })
 }
 
-/// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): moves `pose` along the
-/// free direction `flat` (unit, world axes) to the `predicted` position's place along it, and
-/// widens `covariance` (world axes) there by the prediction's variance; returns the note that
-/// says so.
+/// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): where `diagnostics` name
+/// a free direction (unit, world axes), moves `pose` along it to the `predicted` position's
+/// place, widens the covariance (world axes) there by the prediction's variance `sigma_m²`, and
+/// adds a note saying so to the ambiguity.
 fn take_prediction_along(
     pose: &mut Pose,
-    covariance: Option<&mut Matrix6<f64>>,
-    flat: [f64; 3],
+    diagnostics: &mut Diagnostics,
     predicted: &Vec3,
     sigma_m: f64,
-) -> String {
+) {
+    let Some(flat) = diagnostics.flat_direction else {
+        return;
+    };
     let v = Vec3::from(flat);
     let t = pose.translation.vector;
     let along = v.dot(&(predicted - t));
     pose.translation.vector = t + v * along;
-    if let Some(c) = covariance {
-        let mut block = c.fixed_view_mut::<3, 3>(0, 0);
-        block += v * v.transpose() * sigma_m.powi(2);
+    if let Some(c) = diagnostics.covariance.as_mut() {
+        for i in 0..3 {
+            for j in 0..3 {
+                c[i][j] += v[i] * v[j] * sigma_m.powi(2);
+            }
+        }
     }
-    format!(
+    diagnostics.ambiguity.push(format!(
         "along ({:.2}, {:.2}, {:.2}) the position is the prediction's ({:+.1} cm from the \
          match's)",
         v.x,
         v.y,
         v.z,
         along * 100.0
-    )
+    ));
 }
 
 fn ms(start: Instant) -> f64 {
