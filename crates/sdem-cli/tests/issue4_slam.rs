@@ -77,56 +77,42 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         mapped["y"].as_f64().unwrap() - 0.1,
         mapped["z"].as_f64().unwrap()
     );
-    let found: Value = serde_json::from_str(&run_ok(
-        dir.path(),
-        &[
-            "localize",
-            "--map",
-            "out",
-            "--scan",
-            "data/scans/000002.ply",
-            "--attitude",
-            &row[1..].join(","),
-            "--near",
-            &near,
-            "--json",
-        ],
-    ))
-    .unwrap();
-    let pose = &found["world_from_sensor"];
-    let moved = ["x", "y", "z"]
-        .iter()
-        .map(|k| (pose[k].as_f64().unwrap() - mapped[k].as_f64().unwrap()).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let attitude_row = row[1..].join(",");
+    // Relocalizes scan 2 with `place` (--near or --prior and its value); returns how far it
+    // landed from where the map put it.
+    let relocalized = |place: [&str; 2]| -> (f64, Value) {
+        let found: Value = serde_json::from_str(&run_ok(
+            dir.path(),
+            &[
+                "localize",
+                "--map",
+                "out",
+                "--scan",
+                "data/scans/000002.ply",
+                "--attitude",
+                &attitude_row,
+                place[0],
+                place[1],
+                "--json",
+            ],
+        ))
+        .unwrap();
+        let pose = &found["world_from_sensor"];
+        let moved = ["x", "y", "z"]
+            .iter()
+            .map(|k| (pose[k].as_f64().unwrap() - mapped[k].as_f64().unwrap()).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        (moved, found)
+    };
+    let (moved, found) = relocalized(["--near", &near]);
     assert!(
         moved < 0.01,
         "relocalized {moved} m from the mapped pose: {found}"
     );
     // With a prediction (x,y,z,σ) instead: the same place, where the scan fixes every direction.
     let prior = format!("{near},0.05");
-    let found: Value = serde_json::from_str(&run_ok(
-        dir.path(),
-        &[
-            "localize",
-            "--map",
-            "out",
-            "--scan",
-            "data/scans/000002.ply",
-            "--attitude",
-            &row[1..].join(","),
-            "--prior",
-            &prior,
-            "--json",
-        ],
-    ))
-    .unwrap();
-    let pose = &found["world_from_sensor"];
-    let moved = ["x", "y", "z"]
-        .iter()
-        .map(|k| (pose[k].as_f64().unwrap() - mapped[k].as_f64().unwrap()).powi(2))
-        .sum::<f64>()
-        .sqrt();
+    let (moved, found) = relocalized(["--prior", &prior]);
     assert!(moved < 0.01, "relocalized {moved} m with --prior: {found}");
     // Both is a usage error (clap's exit code 2), naming the two.
     let both = common::run(
