@@ -2,8 +2,9 @@
 //! ([`crate::cost::CostModel::Projective`]), after correlative scan matching with precomputed
 //! multi-resolution tables (Olson 2009; Hess et al. 2016, Cartographer).
 //!
-//! A node is a box of grid candidates (index intervals in x, y, z and heading), split on a
-//! power-of-two lattice into up to 16 children. Each query point's term depends on its own moved
+//! A node is a box of grid candidates (index intervals in x, y, z and heading), halved at a power
+//! of two along the axis it reaches farthest in (a heading step counts as far as it moves a
+//! typical query point), as a k-d tree splits space. Each query point's term depends on its own moved
 //! position only (the cost is a plain sum: a cell the reference does not see costs `τ²`), so a
 //! lower bound on every point's term over a box bounds the box:
 //!
@@ -315,8 +316,8 @@ struct Balls {
     count: Vec<u32>,
 }
 
-/// A box of candidates: inclusive index intervals per axis (x, y, z, heading). Boxes are split
-/// on a power-of-two lattice, so every box of one size starts at a multiple of it.
+/// A box of candidates: inclusive index intervals per axis (x, y, z, heading), halved at powers
+/// of two (see [`Node::children`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Node {
     lo: Index,
@@ -328,13 +329,23 @@ impl Node {
         self.lo == self.hi
     }
 
-    /// The boxes this one splits into: every axis longer than one candidate is halved at the
-    /// power of two below its length (up to 16 children).
-    fn children(&self) -> Vec<Node> {
+    /// The boxes this one splits into: the axes along which the box reaches farthest (`step`:
+    /// metres per index along each axis; within [`SPLIT_TIE`] of the farthest) are halved at the
+    /// power of two below their length. Splitting every axis at once (up to 16 children) bounded
+    /// 532 boxes in 42–51 ms on the paper's pair, 6,040 in 421–439 ms with ±10° of heading; the
+    /// widest axis alone 228 in 23–25 ms and 1,762 in 134–154 ms, the same minima: a thin axis
+    /// (the window's ±10 cm of height) is no longer halved with the wide ones, and a box's
+    /// children are no more than it takes to tell where the minimum is not.
+    fn children(&self, step: &[f64; 4]) -> Vec<Node> {
+        let reach = |a: usize| (self.hi[a] - self.lo[a] + 1) as f64 * step[a];
+        let widest = (0..4)
+            .filter(|&a| self.hi[a] > self.lo[a])
+            .map(reach)
+            .fold(0.0, f64::max);
         let mut out = vec![*self];
         for a in 0..4 {
             let extent = self.hi[a] - self.lo[a] + 1;
-            if extent > 1 {
+            if extent > 1 && reach(a) >= SPLIT_TIE * widest {
                 let half = extent.next_power_of_two() / 2;
                 let mid = self.lo[a] + half - 1;
                 out = out
@@ -373,6 +384,11 @@ fn with_margin(limit: f64) -> f64 {
 /// bench pair 3 / the paper's pair with ±10° of heading): 0.1 → 7,796 / 5,744, 0.3 → 7,796 /
 /// 6,136, 0.6 → 12,228 / 9,512, and no faster at 0.2–0.3 (larger groups widen every reach).
 const GROUP_REACH_FRACTION: f64 = 0.1;
+
+/// An axis is split with the farthest-reaching one when it reaches at least this fraction as far
+/// (see [`Node::children`]): 0.7, 0.85 and 0.99 bounded 234, 220 and 228 boxes on the paper's
+/// pair, 2,000, 1,820 and 1,762 with ±10° of heading, in times within the runs' spread.
+const SPLIT_TIE: f64 = 0.99;
 
 /// Boxes expanded together, their children bounded in parallel.
 const BATCH: usize = 4;
@@ -450,6 +466,9 @@ pub(crate) struct BranchAndBound<'a> {
     reserve: Option<Reserve>,
     /// Cloned for each worker that scores candidates.
     prototype: &'a Correlator<'a>,
+    /// Metres per index along x, y, z and heading (a heading step times the query's median
+    /// horizontal range: how far it moves a typical point), for choosing which axes to split.
+    axis_step: [f64; 4],
 }
 
 impl<'a> BranchAndBound<'a> {
@@ -466,6 +485,14 @@ impl<'a> BranchAndBound<'a> {
             stats: BranchAndBoundStats::default(),
             reserve: None,
             prototype: &prepared.correlator,
+            axis_step: {
+                let yaw_step = match grid.yaws.as_slice() {
+                    [a, b, ..] => (b - a).abs(),
+                    _ => 0.0,
+                };
+                let s = grid.step;
+                [s, s, s, yaw_step * prepared.median_horizontal_m]
+            },
         }
     }
 
@@ -666,7 +693,10 @@ impl<'a> BranchAndBound<'a> {
             .iter()
             .flat_map(|p| {
                 let mask = p.saturated.as_deref().map(Vec::as_slice);
-                p.node.children().into_iter().map(move |c| (c, mask))
+                p.node
+                    .children(&self.axis_step)
+                    .into_iter()
+                    .map(move |c| (c, mask))
             })
             .filter(|(c, _)| !self.grid.box_excluded(c.lo, c.hi))
             .collect();
@@ -1053,6 +1083,8 @@ fn reach_bound(
 pub(crate) struct Prepared<'a> {
     tables: RangeTables,
     groups: QueryGroups,
+    /// The compared points' median horizontal distance from the query's origin, metres.
+    median_horizontal_m: f64,
     correlator: Correlator<'a>,
 }
 
@@ -1060,9 +1092,21 @@ impl<'a> Prepared<'a> {
     /// Prepares the search of `correlator`'s pair (projective cost): groups of the points it
     /// compares.
     pub fn new(correlator: &Correlator<'a>) -> Self {
+        let points = correlator.search_points();
+        let mut horizontal: Vec<f64> = points
+            .iter()
+            .map(|p| (p[0] as f64).hypot(p[1] as f64))
+            .collect();
+        let median_horizontal_m = if horizontal.is_empty() {
+            1.0
+        } else {
+            let k = horizontal.len() / 2;
+            *horizontal.select_nth_unstable_by(k, f64::total_cmp).1
+        };
         Self {
             tables: RangeTables::new(correlator.reference()),
-            groups: QueryGroups::new(&correlator.search_points(), 6),
+            groups: QueryGroups::new(&points, 6),
+            median_horizontal_m,
             correlator: correlator.clone(),
         }
     }
