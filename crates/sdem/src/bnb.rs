@@ -393,15 +393,25 @@ const SPLIT_TIE: f64 = 0.99;
 /// Boxes expanded together, their children bounded in parallel.
 const BATCH: usize = 4;
 
+/// What a box's bound, taken point by point (grouping level 0), learned for the boxes inside it.
+pub(crate) struct PointHint {
+    /// The points whose term is `τ²` at every candidate of the box: they are `τ²` in every box
+    /// inside it too, and are counted without being bounded again.
+    saturated: u32,
+    /// The other points (indices at level 0), those whose term was largest here first: a box
+    /// inside whose bound passes the best cost so far is then cut short after fewer points.
+    /// On the bench pairs the boxes cut short had summed 80 % of their points in the
+    /// scrambled order.
+    order: Vec<u32>,
+}
+
 /// A box waiting in the queue, ordered by bound, then by the estimated cost at its centre.
 struct Pending {
     bound: f64,
     estimate: f64,
     node: Node,
-    /// The query points whose term is `τ²` at every candidate of the box (bit per point, in
-    /// the order of grouping level 0), when the box was bounded point by point: they are
-    /// `τ²` in every box inside it too, and are not bounded again.
-    saturated: Option<std::sync::Arc<Vec<u64>>>,
+    /// What bounding the box point by point learned, for the boxes inside it.
+    hint: Option<std::sync::Arc<PointHint>>,
 }
 
 impl PartialEq for Pending {
@@ -519,7 +529,7 @@ impl<'a> BranchAndBound<'a> {
             bound: 0.0,
             estimate: 0.0,
             node: root,
-            saturated: None,
+            hint: None,
         });
         while let Some(node) = current.take() {
             let mut open = self.expand(std::slice::from_ref(&node));
@@ -570,13 +580,12 @@ impl<'a> BranchAndBound<'a> {
                 if p.estimate.is_finite() {
                     return p;
                 }
-                let mask = p.saturated.as_deref().map(Vec::as_slice);
-                let (bound, estimate, saturated) = this.bound_below(&p.node, limit, mask);
+                let (bound, estimate, hint) = this.bound_below(&p.node, limit, p.hint.as_deref());
                 Pending {
                     bound,
                     estimate,
                     node: p.node,
-                    saturated: saturated.map(std::sync::Arc::new).or(p.saturated),
+                    hint: hint.map(std::sync::Arc::new).or(p.hint),
                 }
             })
             .collect();
@@ -689,10 +698,10 @@ impl<'a> BranchAndBound<'a> {
     /// Bounds or scores the children of `nodes` in parallel against the current limit; updates
     /// the best candidate and returns the boxes still open.
     fn expand(&mut self, parents: &[Pending]) -> Vec<Pending> {
-        let children: Vec<(Node, Option<&[u64]>)> = parents
+        let children: Vec<(Node, Option<&PointHint>)> = parents
             .iter()
             .flat_map(|p| {
-                let mask = p.saturated.as_deref().map(Vec::as_slice);
+                let mask = p.hint.as_deref();
                 p.node
                     .children(&self.axis_step)
                     .into_iter()
@@ -711,12 +720,12 @@ impl<'a> BranchAndBound<'a> {
                         let correlator = correlator.get_or_insert_with(|| this.correlator());
                         this.try_leaf(correlator, child, limit)
                     } else {
-                        let (bound, estimate, saturated) = this.bound_below(child, limit, *mask);
+                        let (bound, estimate, hint) = this.bound_below(child, limit, *mask);
                         let pending = Pending {
                             bound,
                             estimate,
                             node: *child,
-                            saturated: saturated.map(std::sync::Arc::new),
+                            hint: hint.map(std::sync::Arc::new),
                         };
                         if bound > with_margin(limit) {
                             Outcome::Pruned(pending)
@@ -776,8 +785,8 @@ impl<'a> BranchAndBound<'a> {
         &self,
         node: &Node,
         limit: f64,
-        parent_saturated: Option<&[u64]>,
-    ) -> (f64, f64, Option<Vec<u64>>) {
+        parent: Option<&PointHint>,
+    ) -> (f64, f64, Option<PointHint>) {
         let grid = self.grid;
         let lo = grid.offset(node.lo);
         let hi = grid.offset(node.hi);
@@ -802,9 +811,9 @@ impl<'a> BranchAndBound<'a> {
             .unwrap_or(0);
         let balls = &self.groups.balls[level];
         let total = self.groups.points as f64;
-        // Point by point (level 0), the points saturated in the parent box are skipped.
-        let parent_saturated = parent_saturated.filter(|_| level == 0);
-        let mut saturated = (level == 0).then(|| vec![0u64; balls.cx.len().div_ceil(64)]);
+        // Point by point (level 0), what the parent box learned: its saturated points are
+        // counted, not bounded, and the others come largest term first.
+        let hint = parent.filter(|_| level == 0);
         // The prediction's term is smallest where the box comes nearest the prediction.
         let prior = self.prototype.prior_bound(&lo, &hi);
         let prior_at_centre = self.prototype.prior_cost(&centre);
@@ -820,10 +829,22 @@ impl<'a> BranchAndBound<'a> {
         let planes = self.reference.surfaces();
         let truncation_sq = self.truncation_sq;
         let margin = 2.0 * FAST_ATAN2_MAX_ERROR;
-        let mut bound_sum = 0f64;
-        let mut estimate_sum = 0f64;
+        let saturated_before = hint.map_or(0, |h| h.saturated);
+        let mut saturated = saturated_before;
+        let mut bound_sum = truncation_sq as f64 * saturated as f64;
+        let mut estimate_sum = bound_sum;
+        if bound_sum > limit_sum {
+            return (bound_sum / total + prior, f64::INFINITY, None);
+        }
+        // The child boxes' order: the terms found here, in four classes, largest first.
+        let mut classes: Option<[Vec<u32>; 4]> = (level == 0).then(Default::default);
         const CHUNK: usize = 64;
         // One array per quantity, so the compiler vectorizes the geometry.
+        let mut bx = [0f32; CHUNK];
+        let mut by = [0f32; CHUNK];
+        let mut bz = [0f32; CHUNK];
+        let mut br = [0f32; CHUNK];
+        let mut bh = [0f32; CHUNK];
         let mut ux = [0f32; CHUNK];
         let mut uy = [0f32; CHUNK];
         let mut uz = [0f32; CHUNK];
@@ -832,18 +853,16 @@ impl<'a> BranchAndBound<'a> {
         let mut radii = [0f32; CHUNK];
         let mut spreads = [0f32; CHUNK];
         let mut cells = [[0i32; 6]; CHUNK];
-        let n = balls.cx.len();
+        let order = hint.map(|h| h.order.as_slice());
+        let n = order.map_or(balls.cx.len(), <[u32]>::len);
+        let ball = |j: usize| order.map_or(j, |o| o[j] as usize);
         for start in (0..n).step_by(CHUNK) {
             let len = CHUNK.min(n - start);
-            let (bx, by, bz) = (
-                &balls.cx[start..start + len],
-                &balls.cy[start..start + len],
-                &balls.cz[start..start + len],
-            );
-            let (br, bh) = (
-                &balls.radius[start..start + len],
-                &balls.horizontal[start..start + len],
-            );
+            for i in 0..len {
+                let k = ball(start + i);
+                (bx[i], by[i], bz[i]) = (balls.cx[k], balls.cy[k], balls.cz[k]);
+                (br[i], bh[i]) = (balls.radius[k], balls.horizontal[k]);
+            }
             for i in 0..len {
                 let (x, y, z) = (bx[i], by[i], bz[i]);
                 let u0 = cos * x - sin * y + t.x;
@@ -880,18 +899,8 @@ impl<'a> BranchAndBound<'a> {
                 ];
             }
             for i in 0..len {
-                let k = start + i;
+                let k = ball(start + i);
                 let count = balls.count[k] as f64;
-                let word = k / 64;
-                let bit = 1u64 << (k % 64);
-                if parent_saturated.is_some_and(|m| m[word] & bit != 0) {
-                    bound_sum += truncation_sq as f64 * count;
-                    estimate_sum += truncation_sq as f64 * count;
-                    if let Some(m) = saturated.as_mut() {
-                        m[word] |= bit;
-                    }
-                    continue;
-                }
                 let [e0, e1, a0, a1, ec, ac] = cells[i];
                 let g = Reach {
                     x: [ux[i], uy[i], uz[i]],
@@ -911,9 +920,20 @@ impl<'a> BranchAndBound<'a> {
                 let (lb, at_centre) = reach_bound(tables, planes, &g, half, turn, truncation_sq);
                 estimate_sum += at_centre as f64 * count;
                 bound_sum += lb as f64 * count;
-                if lb >= truncation_sq {
-                    if let Some(m) = saturated.as_mut() {
-                        m[word] |= bit;
+                if let Some(classes) = classes.as_mut() {
+                    if lb >= truncation_sq {
+                        saturated += 1;
+                    } else {
+                        let class = if lb >= 0.25 * truncation_sq {
+                            0
+                        } else if lb >= 0.0625 * truncation_sq {
+                            1
+                        } else if lb > 0.0 {
+                            2
+                        } else {
+                            3
+                        };
+                        classes[class].push(k as u32);
                     }
                 }
             }
@@ -921,10 +941,14 @@ impl<'a> BranchAndBound<'a> {
                 return (bound_sum / total + prior, f64::INFINITY, None);
             }
         }
+        let hint = classes.map(|classes| PointHint {
+            saturated,
+            order: classes.concat(),
+        });
         (
             bound_sum / total + prior,
             estimate_sum / total + prior_at_centre,
-            saturated,
+            hint,
         )
     }
 }
