@@ -225,7 +225,7 @@ impl SurfaceNormals {
     /// The boundary point with a normal nearest to `x` within `max_distance`, by index into
     /// `Sdem::points()`. A k-d tree (kiddo): the spatial hash of 10 cm cells it replaces scanned
     /// the 27 cells around `x`, a few hundred points near the sensor, and took 50–74 ms of a
-    /// bench pair's refinement (18 iterations over 10,000 points); the tree 14–20 ms.
+    /// bench pair's refinement (18 iterations over 10,000 points); the tree 25–33 ms.
     fn nearest(&self, x: [f32; 3], max_distance: f32) -> Option<u32> {
         let (tree, index) = self.neighbours.as_ref()?;
         let found = tree.nearest_one::<SquaredEuclidean>(&x);
