@@ -710,6 +710,12 @@ impl<'a> BranchAndBound<'a> {
             .filter(|(c, _)| !self.grid.box_excluded(c.lo, c.hi))
             .collect();
         let limit = self.limit();
+        // With a reserve, a box's bound is summed on up to the reserve's ratio × the best, not
+        // cut short at the best: one that ends below is set aside with its whole bound, one cut
+        // short above can hold no runner-up at all. Re-bounding the boxes cut short at the best
+        // cost the runner-up search 10–270 ms a bench pair; this way the first search's bounds
+        // take a few more points, and 50 bench pairs went from 149–157 to 127–129 ms.
+        let cut = self.reserve.as_ref().map_or(limit, |r| r.ratio * limit);
         let this = &*self;
         let outcomes: Vec<Outcome> = children
             .par_iter()
@@ -720,7 +726,7 @@ impl<'a> BranchAndBound<'a> {
                         let correlator = correlator.get_or_insert_with(|| this.correlator());
                         this.try_leaf(correlator, child, limit)
                     } else {
-                        let (bound, estimate, hint) = this.bound_below(child, limit, *mask);
+                        let (bound, estimate, hint) = this.bound_below(child, cut, *mask);
                         let pending = Pending {
                             bound,
                             estimate,
