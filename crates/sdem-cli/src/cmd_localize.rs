@@ -6,8 +6,8 @@ use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, PoseRecord};
 use sdem::io::Dataset;
 use sdem::localize::{
-    localize, Diagnostics, HeadingWindow, LocalizeConfig, OffsetPrior, RefineOutcome, SearchMode,
-    SearchWindow,
+    localize, Diagnostics, HeadingWindow, LocalizeConfig, OffsetPrior, RefineOutcome,
+    RefinementSummary, SearchMode, SearchWindow,
 };
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::slam::Near;
@@ -152,6 +152,7 @@ struct Report {
     cost_model: CostModel,
     on_window_edge: bool,
     refined: RefineOutcome,
+    refinement: RefinementSummary,
     diagnostics: Diagnostics,
     time_ms: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -367,6 +368,7 @@ pub fn run(args: Args) -> Result<()> {
         cost_model: model,
         on_window_edge: found.on_window_edge,
         refined: found.refined,
+        refinement: RefinementSummary::new(found.refined, found.refinement.as_ref()),
         diagnostics: found.diagnostics.clone(),
         time_ms,
         truth: truth.as_ref().map(PoseRecord::from),
@@ -385,9 +387,17 @@ pub fn run(args: Args) -> Result<()> {
         println!("  error     {:.2} cm, {:.3}°", e_m * 100.0, e_deg);
     }
     let d = &found.diagnostics;
+    let refined = match (report.refinement.iterations, report.refinement.converged) {
+        (Some(n), Some(true)) => format!("{:?}, {n} iterations", found.refined),
+        (Some(n), _) => format!(
+            "{:?}, stopped at its limit of {n} iterations still moving",
+            found.refined
+        ),
+        _ => format!("{:?}", found.refined),
+    };
     println!(
-        "  heading correction {:+.2}° to the compass; refined: {:?}",
-        report.heading_correction_deg, found.refined
+        "  heading correction {:+.2}° to the compass; refined: {refined}",
+        report.heading_correction_deg
     );
     println!(
         "  cost {:.3e} m² (rms {:.2} cm) over {} cells ({:.0} % of the query, {:.0} % within \

@@ -542,6 +542,10 @@ fn localize_with_an_explicit_window() {
         assert!(num(d, "inlier_fraction") > 0.5, "{d}");
         assert_eq!(d["ambiguous"], false, "{d}");
         assert_eq!(d["covariance"].as_array().map(Vec::len), Some(6), "{d}");
+        let r = &report["refinement"];
+        assert_eq!(r["outcome"], "six_dof", "{r}");
+        assert_eq!(r["converged"], true, "{r}");
+        assert!(num(r, "rms_m") < 0.02, "{r}");
     }
 }
 

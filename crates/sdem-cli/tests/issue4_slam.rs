@@ -66,7 +66,13 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         assert!(step["overlap_fraction"].as_f64().unwrap() > 0.3);
         assert!(step["covariance"].as_array().is_some());
         assert!(!step["reference_nodes"].as_array().unwrap().is_empty());
+        // How the refinement went: the 6-DoF one, converged within its iterations.
+        let refinement = &step["refinement"];
+        assert_eq!(refinement["outcome"], "six_dof", "{refinement}");
+        assert_eq!(refinement["converged"], true, "{refinement}");
+        assert!(refinement["iterations"].as_u64().unwrap() >= 1, "{refinement}");
     }
+    assert!(steps[0]["refinement"].is_null());
     // A scan relocalized in the saved map lands where the map put it.
     let attitude = std::fs::read_to_string(dir.path().join("data/attitude.csv")).unwrap();
     let row: Vec<&str> = attitude.lines().nth(3).unwrap().split(',').collect();

@@ -199,6 +199,33 @@ pub enum RefineOutcome {
     Failed,
 }
 
+/// How the refinement of a match went, for reports: a refinement that stopped at its iteration
+/// limit (`converged: false`) was still moving, as on ill-conditioned matches (a street seen by
+/// a moving car) where each update is small but they add up.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RefinementSummary {
+    /// Which refinement produced the estimate.
+    pub outcome: RefineOutcome,
+    /// Gauss-Newton iterations run (6-DoF refinement only).
+    pub iterations: Option<usize>,
+    /// Whether the last update was below `RefineConfig::converged_step`.
+    pub converged: Option<bool>,
+    /// Robust RMS point-to-plane residual, metres.
+    pub rms_m: Option<f64>,
+}
+
+impl RefinementSummary {
+    /// The summary of a localization's `refined` and `refinement`.
+    pub fn new(outcome: RefineOutcome, refinement: Option<&Refinement>) -> Self {
+        Self {
+            outcome,
+            iterations: refinement.map(|r| r.iterations),
+            converged: refinement.map(|r| r.converged),
+            rms_m: refinement.map(|r| r.rms_m),
+        }
+    }
+}
+
 /// Localizes `query` against `reference`.
 ///
 /// # Arguments

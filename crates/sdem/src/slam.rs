@@ -233,6 +233,8 @@ pub struct StepReport {
     pub covariance: Option<[[f64; 6]; 6]>,
     /// The match's ambiguity warnings, if any.
     pub ambiguity: Vec<String>,
+    /// How the match's refinement went (`None` for the first scan).
+    pub refinement: Option<crate::localize::RefinementSummary>,
     /// Loop closures checked at this scan, accepted or not.
     pub loop_closures: Vec<LoopClosure>,
     /// Pose-graph optimization run at this scan: iterations and time, ms.
@@ -383,6 +385,7 @@ impl Slam {
                 inlier_fraction: None,
                 covariance: None,
                 ambiguity: Vec::new(),
+                refinement: None,
                 loop_closures: Vec::new(),
                 optimization: None,
             });
@@ -516,6 +519,8 @@ impl Slam {
         })?;
         let localize_ms = ms(localize_start);
         let mut world_from_sensor = world_from_query(&origin, &found);
+        let refinement =
+            crate::localize::RefinementSummary::new(found.refined, found.refinement.as_ref());
         let mut diagnostics = found.diagnostics;
         // Along a direction the scans leave free (a ditch's or a corridor's axis), the match's
         // position is the scans' sampling pattern, not the scene: it pulls towards the
@@ -581,6 +586,7 @@ impl Slam {
             inlier_fraction: Some(diagnostics.inlier_fraction),
             covariance: diagnostics.covariance,
             ambiguity: diagnostics.ambiguity,
+            refinement: Some(refinement),
             loop_closures: closures,
             optimization,
         })
