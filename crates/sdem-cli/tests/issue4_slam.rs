@@ -70,7 +70,10 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         let refinement = &step["refinement"];
         assert_eq!(refinement["outcome"], "six_dof", "{refinement}");
         assert_eq!(refinement["converged"], true, "{refinement}");
-        assert!(refinement["iterations"].as_u64().unwrap() >= 1, "{refinement}");
+        assert!(
+            refinement["iterations"].as_u64().unwrap() >= 1,
+            "{refinement}"
+        );
     }
     assert!(steps[0]["refinement"].is_null());
     // A scan relocalized in the saved map lands where the map put it.

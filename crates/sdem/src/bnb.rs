@@ -571,7 +571,8 @@ impl<'a> BranchAndBound<'a> {
             .filter(|p| !self.prunable(p.bound) && !self.grid.box_excluded(p.node.lo, p.node.hi))
             .collect();
         // A box whose bound the first search cut short (its estimate is then ∞) holds only a
-        // partial sum: bounded again against this search's limit, most drop out.
+        // partial sum: bounded again against this search's limit, most drop out. (Rare: with a
+        // reserve the first search sums bounds up to the reserve's ratio, see `expand`.)
         let limit = self.limit();
         let this = &self;
         let boxes: Vec<Pending> = boxes
@@ -835,8 +836,7 @@ impl<'a> BranchAndBound<'a> {
         let planes = self.reference.surfaces();
         let truncation_sq = self.truncation_sq;
         let margin = 2.0 * FAST_ATAN2_MAX_ERROR;
-        let saturated_before = hint.map_or(0, |h| h.saturated);
-        let mut saturated = saturated_before;
+        let mut saturated = hint.map_or(0, |h| h.saturated);
         let mut bound_sum = truncation_sq as f64 * saturated as f64;
         let mut estimate_sum = bound_sum;
         if bound_sum > limit_sum {
