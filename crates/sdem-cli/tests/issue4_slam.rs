@@ -87,25 +87,26 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         mapped["z"].as_f64().unwrap()
     );
     let attitude_row = row[1..].join(",");
+    // `sdem localize --map out --scan <scan 2>` followed by `more`.
+    let localize_scan_2 = |more: &[&str]| -> Vec<String> {
+        [
+            "localize",
+            "--map",
+            "out",
+            "--scan",
+            "data/scans/000002.ply",
+        ]
+        .iter()
+        .chain(more)
+        .map(|a| a.to_string())
+        .collect()
+    };
     // Relocalizes scan 2 with `place` (--near or --prior and its value); returns how far it
     // landed from where the map put it.
     let relocalized = |place: [&str; 2]| -> (f64, Value) {
-        let found: Value = serde_json::from_str(&run_ok(
-            dir.path(),
-            &[
-                "localize",
-                "--map",
-                "out",
-                "--scan",
-                "data/scans/000002.ply",
-                "--attitude",
-                &attitude_row,
-                place[0],
-                place[1],
-                "--json",
-            ],
-        ))
-        .unwrap();
+        let args = localize_scan_2(&["--attitude", &attitude_row, place[0], place[1], "--json"]);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let found: Value = serde_json::from_str(&run_ok(dir.path(), &args)).unwrap();
         let pose = &found["world_from_sensor"];
         let moved = ["x", "y", "z"]
             .iter()
@@ -124,19 +125,10 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
     let (moved, found) = relocalized(["--prior", &prior]);
     assert!(moved < 0.01, "relocalized {moved} m with --prior: {found}");
     // Both is a usage error (clap's exit code 2), naming the two.
+    let args = localize_scan_2(&["--near", &near, "--prior", &prior]);
     let both = common::run(
         dir.path(),
-        &[
-            "localize",
-            "--map",
-            "out",
-            "--scan",
-            "data/scans/000002.ply",
-            "--near",
-            &near,
-            "--prior",
-            &prior,
-        ],
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
     );
     assert_eq!(both.code, Some(2), "{}", both.stderr);
     assert!(
