@@ -49,6 +49,8 @@ pub(crate) struct RangeTables {
     /// 1-D sparse table over whole rows: level `k` holds `(min, max)` over rows `e..e + 2^k`.
     rows: Vec<Vec<(f32, f32)>>,
     global: (f32, f32),
+    /// The cells' planes, laid out for the cone loop of [`reach_bound`].
+    planes: PlaneRows,
     elevation_min: f32,
     azimuth_min: f32,
     inv_resolution: f32,
@@ -130,6 +132,7 @@ impl RangeTables {
             rows.push(next);
         }
         let global_range = rows[0].iter().fold(EMPTY, |acc, &r| merge(acc, r));
+        let planes = PlaneRows::new(planes, n_az, n_el, width);
         Self {
             n_az,
             n_el,
@@ -138,6 +141,7 @@ impl RangeTables {
             squares,
             rows,
             global: global_range,
+            planes,
             elevation_min: config.elevation_min_deg.to_radians() as f32,
             azimuth_min: config.azimuth_min_deg.to_radians() as f32,
             inv_resolution: (1.0 / config.resolution_deg.to_radians()) as f32,
@@ -190,6 +194,52 @@ impl RangeTables {
             }
         }
         acc
+    }
+}
+
+/// Cells a cone's row is read at a time in [`reach_bound`].
+const LANES: usize = 8;
+
+/// The reference's cell planes (see [`crate::sdem::CellPlane`]), one array per quantity, so that
+/// the cells of a cone's row are bounded [`LANES`] at a time (the compiler vectorizes it). Rows are
+/// stored `stride` apart: the table's columns (twice the azimuth cells on a full circle, so a
+/// window that wraps is one run), then [`LANES`] unknown cells, so a row can be read past its end.
+/// An unknown cell has a zero normal and an empty gate (`lo` = ∞, `hi` = −∞): it costs `τ²`.
+struct PlaneRows {
+    stride: usize,
+    nx: Vec<f32>,
+    ny: Vec<f32>,
+    nz: Vec<f32>,
+    d: Vec<f32>,
+    lo: Vec<f32>,
+    hi: Vec<f32>,
+}
+
+impl PlaneRows {
+    fn new(cells: &[crate::sdem::CellPlane], n_az: usize, n_el: usize, width: usize) -> Self {
+        let stride = width + LANES;
+        let len = n_el * stride;
+        let mut out = Self {
+            stride,
+            nx: vec![0.0; len],
+            ny: vec![0.0; len],
+            nz: vec![0.0; len],
+            d: vec![0.0; len],
+            lo: vec![f32::INFINITY; len],
+            hi: vec![f32::NEG_INFINITY; len],
+        };
+        for e in 0..n_el {
+            for a in 0..width {
+                let c = &cells[e * n_az + a % n_az];
+                if c.n[0].is_nan() {
+                    continue;
+                }
+                let i = e * stride + a;
+                (out.nx[i], out.ny[i], out.nz[i]) = (c.n[0], c.n[1], c.n[2]);
+                (out.d[i], out.lo[i], out.hi[i]) = (c.d, c.lo, c.hi);
+            }
+        }
+        out
     }
 }
 
@@ -800,6 +850,7 @@ impl<'a> BranchAndBound<'a> {
         let centre = (lo + hi) * 0.5;
         let half = ((hi - lo) * 0.5).map(|v| v as f32 + 1e-5);
         let translation_radius = half.norm();
+        let half_horizontal = half.x.hypot(half.y);
         let (yaw_lo, yaw_hi) = (grid.yaws[node.lo[3]], grid.yaws[node.hi[3]]);
         let yaw_centre = 0.5 * (yaw_lo + yaw_hi);
         // A point at horizontal distance h turns through at most `chord · h` from its position
@@ -856,6 +907,7 @@ impl<'a> BranchAndBound<'a> {
         let mut uz = [0f32; CHUNK];
         let mut ranges = [0f32; CHUNK];
         let mut horizontals = [0f32; CHUNK];
+        let mut laterals = [0f32; CHUNK];
         let mut radii = [0f32; CHUNK];
         let mut spreads = [0f32; CHUNK];
         let mut cells = [[0i32; 6]; CHUNK];
@@ -877,27 +929,30 @@ impl<'a> BranchAndBound<'a> {
                 // A group member turns about the query origin with its centre, so its offset
                 // from the centre keeps its length.
                 let spread = br[i] + 1e-4;
-                let radius = translation_radius + chord * bh[i] + spread;
+                let turned = chord * bh[i] + spread;
+                let radius = translation_radius + turned;
                 let horizontal = (u0 * u0 + u1 * u1).sqrt();
                 let range = (horizontal * horizontal + u2 * u2).sqrt();
-                // Angular radius: tan(asin(ρ/|u|)) ≥ asin(ρ/|u|), plus the arctangent's error.
-                let alpha = radius / (range * range - radius * radius).sqrt() + margin;
-                let beta = radius / (horizontal * horizontal - radius * radius).sqrt() + margin;
+                let (lowest, highest, beta) =
+                    footprint([u0, u1, u2], horizontal, [half.x, half.y, half.z], turned);
+                // Beyond this from the z axis the members stand off it.
+                let lateral = half_horizontal + turned;
                 let elevation = fast_atan2(u2, horizontal);
                 let azimuth = fast_atan2(u1, u0);
                 let el = (elevation - tables.elevation_min) * tables.inv_resolution;
                 let az = (azimuth - tables.azimuth_min) * tables.inv_resolution;
-                let (da, db) = (alpha * tables.inv_resolution, beta * tables.inv_resolution);
+                let db = (beta + margin) * tables.inv_resolution;
                 ux[i] = u0;
                 uy[i] = u1;
                 uz[i] = u2;
                 ranges[i] = range;
                 horizontals[i] = horizontal;
+                laterals[i] = lateral;
                 radii[i] = radius;
                 spreads[i] = spread;
                 cells[i] = [
-                    floor_i32(el - da),
-                    floor_i32(el + da),
+                    floor_i32((lowest - margin - tables.elevation_min) * tables.inv_resolution),
+                    floor_i32((highest + margin - tables.elevation_min) * tables.inv_resolution),
                     floor_i32(az - db),
                     floor_i32(az + db),
                     floor_i32(el),
@@ -915,7 +970,7 @@ impl<'a> BranchAndBound<'a> {
                     radius: radii[i],
                     spread: spreads[i],
                     holds_origin: ranges[i] <= radii[i] * 1.0001,
-                    holds_axis: horizontals[i] <= radii[i] * 1.0001,
+                    holds_axis: horizontals[i] <= laterals[i] * 1.0001,
                     e0,
                     e1,
                     a0,
@@ -959,6 +1014,38 @@ impl<'a> BranchAndBound<'a> {
     }
 }
 
+/// The directions in which a ball's members may lie over a box, seen from the reference's origin:
+/// `(lowest elevation, highest elevation, azimuth half-width about the centre's azimuth)`, in
+/// radians, before the arctangent's error. The members lie within `half` (the box's translation)
+/// plus `turned` (the heading's arc and the group's spread, any direction) of the centre `u`, at
+/// `horizontal` from the z axis.
+///
+/// A horizontal offset w (w_t across the ray, w_r along it) turns the direction by
+/// atan(w_t / (h + w_r)): the box's support across and along the ray plus `turned` bound both
+/// parts. Height and distance from the z axis vary by at most `half.z` + `turned` and
+/// |half_xy| + `turned`, so the elevations lie between the corners' of that rectangle. Tighter
+/// than the ball around all of it: on the bench pairs 25 % less time, with the same minima.
+#[inline(always)]
+fn footprint(u: [f32; 3], horizontal: f32, half: [f32; 3], turned: f32) -> (f32, f32, f32) {
+    let (across_ray, along_ray) = if horizontal > 0.0 {
+        let (s, c) = ((u[1] / horizontal).abs(), (u[0] / horizontal).abs());
+        (half[0] * s + half[1] * c, half[0] * c + half[1] * s)
+    } else {
+        let h = (half[0] * half[0] + half[1] * half[1]).sqrt();
+        (h, h)
+    };
+    // tan ψ ≤ w_t / (h − w_r) ≥ ψ; where the members may stand on the z axis it is not
+    // positive, and every azimuth is seen (`Reach::holds_axis`).
+    let beta = (across_ray + turned) / (horizontal - along_ray - turned);
+    let vertical = half[2] + turned;
+    let lateral = (half[0] * half[0] + half[1] * half[1]).sqrt() + turned;
+    let (z_lo, z_hi) = (u[2] - vertical, u[2] + vertical);
+    let (h_lo, h_hi) = ((horizontal - lateral).max(0.0), horizontal + lateral);
+    let lowest = fast_atan2(z_lo, if z_lo >= 0.0 { h_hi } else { h_lo });
+    let highest = fast_atan2(z_hi, if z_hi >= 0.0 { h_lo } else { h_hi });
+    (lowest, highest, beta)
+}
+
 /// Where a ball's members may be over a box of candidates (see [`BranchAndBound::bound_below`]).
 #[derive(Clone, Copy, Default)]
 struct Reach {
@@ -982,6 +1069,77 @@ struct Reach {
     a1: i32,
     ec: i32,
     ac: i32,
+}
+
+/// What the term of a cell's plane depends on, for one ball over one box (see [`reach_bound`]).
+struct ConeTerm {
+    x: [f32; 3],
+    arm: [f32; 2],
+    half: [f32; 3],
+    turn: (f32, f32),
+    spread: f32,
+    gate: (f32, f32),
+    truncation_sq: f32,
+}
+
+impl ConeTerm {
+    /// The smallest lower bound over the [`LANES`] cells from `start` on (those from `valid` on
+    /// count `τ²`): in each, the members' distance to the cell's plane can shrink by at most the
+    /// region's extent along its normal. Written without branches (the gate selects), one array
+    /// per quantity, so that it is vectorized: this is most of the search's time.
+    #[inline(always)]
+    fn lanes_min(&self, rows: &PlaneRows, start: usize, valid: usize) -> f32 {
+        let lane = |v: &[f32]| -> [f32; LANES] {
+            v[start..start + LANES].try_into().expect("LANES cells")
+        };
+        let (nx, ny, nz) = (lane(&rows.nx), lane(&rows.ny), lane(&rows.nz));
+        let (d, lo, hi) = (lane(&rows.d), lane(&rows.lo), lane(&rows.hi));
+        let (one_minus_cos, sin) = self.turn;
+        let (r_lo, r_hi) = self.gate;
+        let mut out = [0f32; LANES];
+        for j in 0..LANES {
+            // Unknown cells and gates the members cannot reach cost τ².
+            let reachable = lo[j] <= r_hi && hi[j] >= r_lo && j < valid;
+            // Turning by θ (|θ| ≤ δ) from the middle heading moves the centre by
+            // (cos θ − 1) arm + sin θ (ẑ × arm): along the normal, at most this.
+            let radial = (nx[j] * self.arm[0] + ny[j] * self.arm[1]).abs();
+            let tangential = (ny[j] * self.arm[0] - nx[j] * self.arm[1]).abs();
+            let along_normal = self.half[0] * nx[j].abs()
+                + self.half[1] * ny[j].abs()
+                + self.half[2] * nz[j].abs()
+                + one_minus_cos * radial
+                + sin * tangential
+                + self.spread;
+            let distance = (nx[j] * self.x[0] + ny[j] * self.x[1] + nz[j] * self.x[2] - d[j]).abs();
+            // Plain comparisons, not `f32::max`/`min` (no NaN can arise here: unknown cells
+            // are finite), so that they map to packed minimum and maximum instructions.
+            let gap = distance - along_normal;
+            let v = if gap > 0.0 { gap } else { 0.0 };
+            let squared = v * v;
+            let squared = if squared < self.truncation_sq {
+                squared
+            } else {
+                self.truncation_sq
+            };
+            out[j] = if reachable {
+                squared
+            } else {
+                self.truncation_sq
+            };
+        }
+        let mut width = LANES;
+        while width > 1 {
+            width /= 2;
+            for j in 0..width {
+                out[j] = if out[j + width] < out[j] {
+                    out[j + width]
+                } else {
+                    out[j]
+                };
+            }
+        }
+        out[0]
+    }
 }
 
 /// Cones of up to this many cells are bounded cell by cell, from each cell's plane; larger ones
@@ -1008,7 +1166,6 @@ fn reach_bound(
     // The centre's own cell: the estimate (the squared distance there), and for a point on a
     // surface often a bound of 0 at once.
     let centre_cell = tables.cell(g.ec, g.ac);
-    let centre = centre_cell.map(|c| &planes.cells[c]);
     let estimate = centre_cell
         .and_then(|c| planes.squared_distance(c, g.x, g.range))
         .map_or(truncation_sq, |e2| e2.min(truncation_sq));
@@ -1036,35 +1193,20 @@ fn reach_bound(
         }
         (a0, a1) = (a0.max(0), a1.min(n_az - 1));
     }
-    let (one_minus_cos, sin) = turn;
-    // Written without branches (the gate selects), so that the loop over a cone's cells is
-    // cheap: it is most of the search's time.
-    let term = |c: &crate::sdem::CellPlane| -> f32 {
-        // Unknown cells (NaN) and gates the members cannot reach cost τ².
-        let reachable = c.lo <= r_hi && c.hi >= r_lo;
-        let [nx, ny, nz] = c.n;
-        // Turning by θ (|θ| ≤ δ) from the middle heading moves the centre by
-        // (cos θ − 1) arm + sin θ (ẑ × arm): along the normal, at most this.
-        let radial = (nx * g.arm[0] + ny * g.arm[1]).abs();
-        let tangential = (ny * g.arm[0] - nx * g.arm[1]).abs();
-        let along_normal = half.x * nx.abs()
-            + half.y * ny.abs()
-            + half.z * nz.abs()
-            + one_minus_cos * radial
-            + sin * tangential
-            + g.spread;
-        let distance = (nx * g.x[0] + ny * g.x[1] + nz * g.x[2] - c.d).abs();
-        let v = (distance - along_normal).max(0.0);
-        let squared = (v * v).min(truncation_sq);
-        if reachable {
-            squared
-        } else {
-            truncation_sq
-        }
+    let rows = &tables.planes;
+    let p = ConeTerm {
+        x: g.x,
+        arm: g.arm,
+        half: [half.x, half.y, half.z],
+        turn,
+        spread: g.spread,
+        gate: (r_lo, r_hi),
+        truncation_sq,
     };
     let mut best = truncation_sq;
-    if let Some(c) = centre {
-        best = term(c);
+    if let Some(c) = centre_cell {
+        let (e, a) = (c / tables.n_az, c % tables.n_az);
+        best = p.lanes_min(rows, e * rows.stride + a, 1);
         if best == 0.0 {
             return (0.0, estimate);
         }
@@ -1086,19 +1228,13 @@ fn reach_bound(
             return (0.0, estimate);
         }
     }
-    // Columns a0..=a1 of a row, as at most two runs of the stored row (wrapping once).
-    let runs = if a1 < n_az {
-        [(a0, a1 + 1), (0, 0)]
-    } else {
-        [(a0, n_az), (0, a1 + 1 - n_az)]
-    };
+    // Columns a0..=a1 of a row are one run of the stored row (see `PlaneRows`).
+    let len = (a1 - a0 + 1) as usize;
     for e in e0..=e1 {
-        let row = (e * n_az) as usize;
-        for &(from, to) in &runs {
-            for c in &planes.cells[row + from as usize..row + to as usize] {
-                let t = term(c);
-                best = if t < best { t } else { best };
-            }
+        let row = e as usize * rows.stride + a0 as usize;
+        for k in (0..len).step_by(LANES) {
+            let t = p.lanes_min(rows, row + k, len - k);
+            best = if t < best { t } else { best };
         }
         if best == 0.0 {
             return (0.0, estimate);
@@ -1290,6 +1426,77 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// Every position a member can take over a box (the translation box's corners and inside,
+    /// plus an offset of up to `turned` in any direction) lies in the directions [`footprint`]
+    /// gives, near and far, level and steep, wide boxes and thin ones.
+    #[test]
+    fn footprint_holds_every_position_of_the_members() {
+        use rand::Rng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let margin = 2.0 * FAST_ATAN2_MAX_ERROR as f64 + 1e-5;
+        let mut azimuth_checked = 0;
+        for _ in 0..2000 {
+            let range = rng.random_range(0.3..6.0f64);
+            let elevation = rng.random_range(-1.5..1.5f64);
+            let azimuth = rng.random_range(-3.1..3.1f64);
+            let u = [
+                range * elevation.cos() * azimuth.cos(),
+                range * elevation.cos() * azimuth.sin(),
+                range * elevation.sin(),
+            ];
+            let half = [0, 1, 2].map(|_| rng.random_range(0.0..0.3f64));
+            let turned = rng.random_range(0.0..0.2f64);
+            let horizontal = u[0].hypot(u[1]);
+            let (lowest, highest, beta) = footprint(
+                u.map(|v| v as f32),
+                horizontal as f32,
+                half.map(|v| v as f32),
+                turned as f32,
+            );
+            let (lowest, highest, beta) = (lowest as f64, highest as f64, beta as f64);
+            let stands_off_axis = horizontal > (half[0].hypot(half[1]) + turned) * 1.0001;
+            azimuth_checked += stands_off_axis as usize;
+            for k in 0..64 {
+                // Corners of the box first, then anywhere in it; the offset on its sphere.
+                let a: [f64; 3] = std::array::from_fn(|i| {
+                    let side = if k < 8 {
+                        if (k >> i) & 1 == 1 {
+                            1.0
+                        } else {
+                            -1.0
+                        }
+                    } else {
+                        rng.random_range(-1.0..1.0)
+                    };
+                    side * half[i]
+                });
+                let w: [f64; 3] = std::array::from_fn(|_| rng.random_range(-1.0..1.0f64));
+                let norm = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt().max(1e-12);
+                let x: [f64; 3] = std::array::from_fn(|i| u[i] + a[i] + w[i] / norm * turned);
+                let h = x[0].hypot(x[1]);
+                let e = x[2].atan2(h);
+                assert!(
+                    e >= lowest - margin && e <= highest + margin,
+                    "elevation {e} outside [{lowest}, {highest}] (u {u:?}, half {half:?}, \
+                     turned {turned})"
+                );
+                if stands_off_axis {
+                    let turn = (x[1].atan2(x[0]) - u[1].atan2(u[0]) + 3.0 * std::f64::consts::PI)
+                        .rem_euclid(2.0 * std::f64::consts::PI)
+                        - std::f64::consts::PI;
+                    assert!(
+                        turn.abs() <= beta + margin,
+                        "azimuth {turn} beyond ±{beta} (u {u:?}, half {half:?}, turned {turned})"
+                    );
+                }
+            }
+        }
+        assert!(
+            azimuth_checked > 1000,
+            "{azimuth_checked} of 2000 off the axis"
+        );
     }
 
     /// The runner-up search, continued from what the first search set aside, finds the same
