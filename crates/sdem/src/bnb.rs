@@ -36,18 +36,16 @@ use crate::sdem::Sdem;
 use crate::search::{better, CandidateGrid, Index, Scored};
 use rayon::prelude::*;
 
-/// Range minimum, maximum and known-cell count of the reference S-DEM over rectangles of cells.
+/// The reference S-DEM's cells as the search reads them: each cell's plane (for the cone loop),
+/// and the range gates' extent over coarse blocks of cells (for cones too large to visit).
 pub(crate) struct RangeTables {
     n_az: usize,
     n_el: usize,
-    /// Columns stored: twice the azimuth cells on a full circle, so windows can wrap.
-    width: usize,
     full_circle: bool,
-    /// Square sparse tables: level `k` holds `(min, max)` over the `2^k × 2^k` square starting at
-    /// each cell, `n_el × width` entries (squares running off the grid are clipped).
-    squares: Vec<Vec<(f32, f32)>>,
-    /// 1-D sparse table over whole rows: level `k` holds `(min, max)` over rows `e..e + 2^k`.
-    rows: Vec<Vec<(f32, f32)>>,
+    /// `(min lo, max hi)` of the gates over each block of [`BLOCK`] × [`BLOCK`] cells (of the
+    /// stored columns), `block_columns` blocks a row; `(∞, −∞)` where every cell is unknown.
+    blocks: Vec<(f32, f32)>,
+    block_columns: usize,
     global: (f32, f32),
     /// The cells' planes, laid out for the cone loop of [`reach_bound`].
     planes: PlaneRows,
@@ -56,6 +54,10 @@ pub(crate) struct RangeTables {
     inv_resolution: f32,
 }
 
+/// Side of the blocks of [`RangeTables::blocks`], cells: the cones they answer for (more than
+/// [`MAX_CONE_CELLS`]) span a few blocks each way.
+const BLOCK: usize = 8;
+
 const EMPTY: (f32, f32) = (f32::INFINITY, f32::NEG_INFINITY);
 
 fn merge(a: (f32, f32), b: (f32, f32)) -> (f32, f32) {
@@ -63,85 +65,39 @@ fn merge(a: (f32, f32), b: (f32, f32)) -> (f32, f32) {
 }
 
 impl RangeTables {
+    /// A sparse table (square windows of every power of two at every cell) took 7–8 ms a
+    /// localization to build on the full sphere at 1° (eight levels of 130,000 entries), a
+    /// tenth of a bench pair; the cone loop, once vectorized, no longer gained from asking it
+    /// before visiting cones of 5–256 cells. Blocks answer for the larger cones.
     pub fn new(reference: &Sdem) -> Self {
         let grid = reference.grid();
         let (n_az, n_el) = (grid.azimuth_cells(), grid.elevation_cells());
         let config = reference.config();
         let full_circle = (config.azimuth_max_deg - config.azimuth_min_deg - 360.0).abs() < 1e-9;
         let width = if full_circle { 2 * n_az } else { n_az };
-        let planes = &reference.surfaces().cells;
-        let cell = |e: usize, a: usize| {
-            let c = &planes[e * n_az + a % n_az];
-            [c.lo, c.hi]
-        };
-        let mut base = vec![EMPTY; n_el * width];
+        let cells = &reference.surfaces().cells;
+        let block_columns = width.div_ceil(BLOCK);
+        let mut blocks = vec![EMPTY; n_el.div_ceil(BLOCK) * block_columns];
+        let mut global = EMPTY;
         for e in 0..n_el {
+            let row = &mut blocks[(e / BLOCK) * block_columns..][..block_columns];
             for a in 0..width {
-                let [lo, hi] = cell(e, a);
-                if !lo.is_nan() {
-                    base[e * width + a] = (lo, hi);
+                let c = &cells[e * n_az + if a < n_az { a } else { a - n_az }];
+                // Unknown cells (NaN) leave the block as it is.
+                if c.lo <= c.hi {
+                    row[a / BLOCK] = merge(row[a / BLOCK], (c.lo, c.hi));
+                    global = merge(global, (c.lo, c.hi));
                 }
             }
         }
-        let mut squares = vec![base];
-        while (1usize << squares.len()) <= n_el.min(width) && squares.len() < 8 {
-            let half = 1usize << (squares.len() - 1);
-            let prev: &[(f32, f32)] = squares.last().expect("level 0 exists");
-            let mut next = vec![EMPTY; n_el * width];
-            // Row by row in parallel, each row's columns in two branch-free runs (with and
-            // without the square's right half inside the table): 7–9 ms a localization before.
-            let inside = width - half;
-            next.par_chunks_mut(width).enumerate().for_each(|(e, out)| {
-                let this = &prev[e * width..(e + 1) * width];
-                if e + half < n_el {
-                    let below = &prev[(e + half) * width..(e + half + 1) * width];
-                    for a in 0..inside {
-                        out[a] = merge(
-                            merge(this[a], below[a]),
-                            merge(this[a + half], below[a + half]),
-                        );
-                    }
-                    for a in inside..width {
-                        out[a] = merge(this[a], below[a]);
-                    }
-                } else {
-                    for a in 0..inside {
-                        out[a] = merge(this[a], this[a + half]);
-                    }
-                    out[inside..].copy_from_slice(&this[inside..]);
-                }
-            });
-            squares.push(next);
-        }
-        let row: Vec<(f32, f32)> = (0..n_el)
-            .map(|e| (0..n_az).fold(EMPTY, |acc, a| merge(acc, squares[0][e * width + a])))
-            .collect();
-        let mut rows = vec![row];
-        while (1usize << rows.len()) <= n_el {
-            let half = 1usize << (rows.len() - 1);
-            let prev = rows.last().expect("level 0 exists");
-            let next = (0..n_el)
-                .map(|e| {
-                    if e + half < n_el {
-                        merge(prev[e], prev[e + half])
-                    } else {
-                        prev[e]
-                    }
-                })
-                .collect();
-            rows.push(next);
-        }
-        let global_range = rows[0].iter().fold(EMPTY, |acc, &r| merge(acc, r));
-        let planes = PlaneRows::new(planes, n_az, n_el, width);
         Self {
             n_az,
             n_el,
-            width,
             full_circle,
-            squares,
-            rows,
-            global: global_range,
-            planes,
+            blocks,
+            block_columns,
+            global,
+            planes: PlaneRows::new(cells, n_az, n_el, width),
             elevation_min: config.elevation_min_deg.to_radians() as f32,
             azimuth_min: config.azimuth_min_deg.to_radians() as f32,
             inv_resolution: (1.0 / config.resolution_deg.to_radians()) as f32,
@@ -165,32 +121,15 @@ impl RangeTables {
         Some(e as usize * self.n_az + a as usize)
     }
 
-    fn rows_range(&self, e0: usize, e1: usize) -> (f32, f32) {
-        let h = e1 - e0 + 1;
-        let k = (usize::BITS - 1 - h.leading_zeros()) as usize;
-        let s = 1usize << k;
-        merge(self.rows[k][e0], self.rows[k][e1 + 1 - s])
-    }
-
-    /// `(min, max)` over rows `e0..=e1` and columns `a0..=a1` (columns may run past `n_az` on a
-    /// full circle; `a1 - a0 < n_az`); `(∞, −∞)` where every cell is unknown.
-    #[inline]
+    /// `(min, max)` of the gates over (at least) rows `e0..=e1` and columns `a0..=a1` (columns
+    /// may run past `n_az` on a full circle; `a1 < width`); `(∞, −∞)` where every cell is
+    /// unknown.
     fn window(&self, e0: usize, e1: usize, a0: usize, a1: usize) -> (f32, f32) {
-        let (h, w) = (e1 - e0 + 1, a1 - a0 + 1);
-        let k = ((usize::BITS - 1 - h.min(w).leading_zeros()) as usize).min(self.squares.len() - 1);
-        let s = 1usize << k;
-        let (ne, na) = (h.div_ceil(s), w.div_ceil(s));
-        if ne * na > 12 {
-            // A wide band near a pole: whole rows bound it (a superset, still valid).
-            return self.rows_range(e0, e1);
-        }
-        let table = &self.squares[k];
         let mut acc = EMPTY;
-        for i in 0..ne {
-            let e = (e0 + i * s).min(e1 + 1 - s);
-            for j in 0..na {
-                let a = (a0 + j * s).min(a1 + 1 - s);
-                acc = merge(acc, table[e * self.width + a]);
+        for be in e0 / BLOCK..=e1 / BLOCK {
+            let row = &self.blocks[be * self.block_columns..][..self.block_columns];
+            for &b in &row[a0 / BLOCK..=a1 / BLOCK] {
+                acc = merge(acc, b);
             }
         }
         acc
@@ -230,7 +169,7 @@ impl PlaneRows {
         };
         for e in 0..n_el {
             for a in 0..width {
-                let c = &cells[e * n_az + a % n_az];
+                let c = &cells[e * n_az + if a < n_az { a } else { a - n_az }];
                 if c.n[0].is_nan() {
                     continue;
                 }
@@ -1167,9 +1106,6 @@ impl ConeTerm {
 /// 7,928, 256 → 7,796 / 5,744, 1,024 → 8,052 / 5,424 (no faster).
 const MAX_CONE_CELLS: i32 = 256;
 
-/// Cones of more cells than this ask the range tables first whether any gate can be reached.
-const SMALL_CONE_CELLS: i32 = 4;
-
 /// A lower bound on the term of every member of a ball over the box (see
 /// [`BranchAndBound::bound_below`]); `half` is the box's translation half-extent per axis.
 #[inline]
@@ -1236,17 +1172,18 @@ fn reach_bound(
         return (best, estimate);
     }
     let cone_cells = (e1 - e0 + 1) * (a1 - a0 + 1);
-    if cone_cells > SMALL_CONE_CELLS {
-        // Whether any gate of the cone reaches the members' ranges, from the range tables
-        // without visiting the cells: if none does, every cell costs τ²; if one does and the
-        // cone is too large to visit, 0.
+    if cone_cells > MAX_CONE_CELLS {
+        // Too many cells to visit: whether any gate near the cone reaches the members' ranges
+        // (if none does, every cell costs τ²), else 0.
         let (min, max) = tables.window(e0 as usize, e1 as usize, a0 as usize, a1 as usize);
-        if min > r_hi || max < r_lo {
-            return (truncation_sq, estimate);
-        }
-        if cone_cells > MAX_CONE_CELLS {
-            return (0.0, estimate);
-        }
+        return (
+            if min > r_hi || max < r_lo {
+                truncation_sq
+            } else {
+                0.0
+            },
+            estimate,
+        );
     }
     // Columns a0..=a1 of a row are one run of the stored row (see `PlaneRows`).
     let len = (a1 - a0 + 1) as usize;
