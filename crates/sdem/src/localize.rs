@@ -302,13 +302,24 @@ pub fn localize(
     // The exact search sets aside what may cost up to the ambiguity ratio × the best, so the
     // runner-up search continues from there instead of bounding the window again.
     let reserve_ratio = config.runner_up.then_some(config.ambiguous_cost_ratio);
-    let (best, stats, reserve) = run_search(
-        &mut evaluator,
-        prepared.as_ref(),
-        config,
-        full_turn,
-        f64::INFINITY,
-        reserve_ratio,
+    // The refinement's surface normals depend on the reference alone: they are fitted while
+    // the search runs, on the cores its sequential steps leave idle.
+    let ((best, stats, reserve), normals) = rayon::join(
+        || {
+            run_search(
+                &mut evaluator,
+                prepared.as_ref(),
+                config,
+                full_turn,
+                f64::INFINITY,
+                reserve_ratio,
+            )
+        },
+        || {
+            config
+                .refine
+                .then(|| SurfaceNormals::new(reference, config.refinement.normal_radius_cells))
+        },
     );
     let Some((cost, flat)) = best else {
         return Err(Error::Localize(format!(
@@ -340,10 +351,7 @@ pub fn localize(
     let mut rotation = grid_rotation;
     let mut refinement = None;
     let mut refine_error = None;
-    let (offset, refined) = if !config.refine {
-        (grid_offset, RefineOutcome::None)
-    } else {
-        let normals = SurfaceNormals::new(reference, config.refinement.normal_radius_cells);
+    let (offset, refined) = if let Some(normals) = normals {
         let initial = Isometry3::from_parts(Translation3::from(grid_offset), grid_rotation);
         match refine(
             reference,
@@ -367,6 +375,8 @@ pub fn localize(
                 }
             }
         }
+    } else {
+        (grid_offset, RefineOutcome::None)
     };
     let heading_correction = {
         let (_, _, yaw) = rotation.euler_angles();
