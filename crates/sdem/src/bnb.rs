@@ -78,18 +78,30 @@ impl RangeTables {
         let cells = &reference.surfaces().cells;
         let block_columns = width.div_ceil(BLOCK);
         let mut blocks = vec![EMPTY; n_el.div_ceil(BLOCK) * block_columns];
-        let mut global = EMPTY;
-        for e in 0..n_el {
-            let row = &mut blocks[(e / BLOCK) * block_columns..][..block_columns];
-            for a in 0..width {
-                let c = &cells[e * n_az + if a < n_az { a } else { a - n_az }];
-                // Unknown cells (NaN) leave the block as it is.
-                if c.lo <= c.hi {
-                    row[a / BLOCK] = merge(row[a / BLOCK], (c.lo, c.hi));
-                    global = merge(global, (c.lo, c.hi));
-                }
-            }
-        }
+        // A row of blocks at a time, in parallel, beside the planes' rows.
+        let (global, planes) = rayon::join(
+            || {
+                blocks
+                    .par_chunks_mut(block_columns)
+                    .enumerate()
+                    .map(|(b, row)| {
+                        let mut global = EMPTY;
+                        for e in b * BLOCK..((b + 1) * BLOCK).min(n_el) {
+                            for a in 0..width {
+                                let c = &cells[e * n_az + if a < n_az { a } else { a - n_az }];
+                                // Unknown cells (NaN) leave the block as it is.
+                                if c.lo <= c.hi {
+                                    row[a / BLOCK] = merge(row[a / BLOCK], (c.lo, c.hi));
+                                    global = merge(global, (c.lo, c.hi));
+                                }
+                            }
+                        }
+                        global
+                    })
+                    .reduce(|| EMPTY, merge)
+            },
+            || PlaneRows::new(cells, n_az, n_el, width),
+        );
         Self {
             n_az,
             n_el,
@@ -97,7 +109,7 @@ impl RangeTables {
             blocks,
             block_columns,
             global,
-            planes: PlaneRows::new(cells, n_az, n_el, width),
+            planes,
             elevation_min: config.elevation_min_deg.to_radians() as f32,
             azimuth_min: config.azimuth_min_deg.to_radians() as f32,
             inv_resolution: (1.0 / config.resolution_deg.to_radians()) as f32,
@@ -167,17 +179,27 @@ impl PlaneRows {
             lo: vec![f32::INFINITY; len],
             hi: vec![f32::NEG_INFINITY; len],
         };
-        for e in 0..n_el {
-            for a in 0..width {
-                let c = &cells[e * n_az + if a < n_az { a } else { a - n_az }];
-                if c.n[0].is_nan() {
-                    continue;
+        // Row by row in parallel.
+        (
+            out.nx.par_chunks_mut(stride),
+            out.ny.par_chunks_mut(stride),
+            out.nz.par_chunks_mut(stride),
+            out.d.par_chunks_mut(stride),
+            out.lo.par_chunks_mut(stride),
+            out.hi.par_chunks_mut(stride),
+        )
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(e, (nx, ny, nz, d, lo, hi))| {
+                for a in 0..width {
+                    let c = &cells[e * n_az + if a < n_az { a } else { a - n_az }];
+                    if c.n[0].is_nan() {
+                        continue;
+                    }
+                    (nx[a], ny[a], nz[a]) = (c.n[0], c.n[1], c.n[2]);
+                    (d[a], lo[a], hi[a]) = (c.d, c.lo, c.hi);
                 }
-                let i = e * stride + a;
-                (out.nx[i], out.ny[i], out.nz[i]) = (c.n[0], c.n[1], c.n[2]);
-                (out.d[i], out.lo[i], out.hi[i]) = (c.d, c.lo, c.hi);
-            }
-        }
+            });
         out
     }
 }
@@ -1290,9 +1312,13 @@ impl<'a> Prepared<'a> {
             let k = horizontal.len() / 2;
             *horizontal.select_nth_unstable_by(k, f64::total_cmp).1
         };
+        let (tables, groups) = rayon::join(
+            || RangeTables::new(correlator.reference()),
+            || QueryGroups::new(&points, 6),
+        );
         Self {
-            tables: RangeTables::new(correlator.reference()),
-            groups: QueryGroups::new(&points, 6),
+            tables,
+            groups,
             median_horizontal_m,
             correlator: correlator.clone(),
         }

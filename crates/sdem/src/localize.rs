@@ -293,8 +293,13 @@ pub fn localize(
         .samples(matched_heading_step(query, config.step_m));
     let full_turn = (config.heading.half_range_deg - 180.0).abs() < 1e-9;
     let grid = CandidateGrid::new(&config.window, config.step_m, yaws)?;
-    // Chooses the compared points once; every search and worker below clones it.
-    let mut correlator = Correlator::new(reference, query, &config.cost)?;
+    // Chooses the compared points once; every search and worker below clones it. Meanwhile the
+    // reference's cell planes, which the search's tables and the cost read, are fitted.
+    let (correlator, _) = rayon::join(
+        || Correlator::new(reference, query, &config.cost),
+        || reference.surfaces(),
+    );
+    let mut correlator = correlator?;
     let mut evaluator = Evaluator::new(correlator.clone(), &grid);
     // Shared by the search for the best candidate and the one for the runner-up.
     let prepared =
