@@ -843,7 +843,6 @@ impl<'a> BranchAndBound<'a> {
         let centre = (lo + hi) * 0.5;
         let half = ((hi - lo) * 0.5).map(|v| v as f32 + 1e-5);
         let translation_radius = half.norm();
-        let half_horizontal = half.x.hypot(half.y);
         let (yaw_lo, yaw_hi) = (grid.yaws[node.lo[3]], grid.yaws[node.hi[3]]);
         let yaw_centre = 0.5 * (yaw_lo + yaw_hi);
         // A point at horizontal distance h turns through at most `chord · h` from its position
@@ -901,7 +900,7 @@ impl<'a> BranchAndBound<'a> {
         let mut ranges = [0f32; CHUNK];
         let mut horizontals = [0f32; CHUNK];
         let mut laterals = [0f32; CHUNK];
-        let mut radii = [0f32; CHUNK];
+        let mut reaches = [0f32; CHUNK];
         let mut nears = [0f32; CHUNK];
         let mut fars = [0f32; CHUNK];
         let mut spreads = [0f32; CHUNK];
@@ -925,8 +924,6 @@ impl<'a> BranchAndBound<'a> {
                 // from the centre keeps its length.
                 let spread = br[i] + 1e-4;
                 let arc = chord * bh[i];
-                let turned = arc + spread;
-                let radius = translation_radius + turned;
                 let horizontal = (u0 * u0 + u1 * u1).sqrt();
                 let range = (horizontal * horizontal + u2 * u2).sqrt();
                 let Footprint {
@@ -935,6 +932,8 @@ impl<'a> BranchAndBound<'a> {
                     beta,
                     near,
                     far,
+                    reach,
+                    lateral,
                 } = footprint(
                     [u0, u1, u2],
                     [horizontal, range],
@@ -942,8 +941,6 @@ impl<'a> BranchAndBound<'a> {
                     arc,
                     spread,
                 );
-                // Beyond this from the z axis the members stand off it.
-                let lateral = half_horizontal + turned;
                 let elevation = fast_atan2(u2, horizontal);
                 let azimuth = fast_atan2(u1, u0);
                 let el = (elevation - tables.elevation_min) * tables.inv_resolution;
@@ -955,7 +952,7 @@ impl<'a> BranchAndBound<'a> {
                 ranges[i] = range;
                 horizontals[i] = horizontal;
                 laterals[i] = lateral;
-                radii[i] = radius;
+                reaches[i] = reach;
                 nears[i] = near;
                 fars[i] = far;
                 spreads[i] = spread;
@@ -973,12 +970,17 @@ impl<'a> BranchAndBound<'a> {
                 let count = balls.count[k] as f64;
                 let [e0, e1, a0, a1, ec, ac] = cells[i];
                 let g = Reach {
-                    x: [ux[i], uy[i], uz[i]],
-                    arm: [ux[i] - t.x, uy[i] - t.y],
+                    term: ConeTerm {
+                        x: [ux[i], uy[i], uz[i]],
+                        arm: [ux[i] - t.x, uy[i] - t.y],
+                        half: [half.x, half.y, half.z],
+                        turn,
+                        spread: spreads[i],
+                        gate: (nears[i], fars[i]),
+                        truncation_sq,
+                    },
                     range: ranges[i],
-                    gate: (nears[i], fars[i]),
-                    spread: spreads[i],
-                    holds_origin: ranges[i] <= radii[i] * 1.0001,
+                    holds_origin: ranges[i] <= reaches[i] * 1.0001,
                     holds_axis: horizontals[i] <= laterals[i] * 1.0001,
                     e0,
                     e1,
@@ -987,7 +989,7 @@ impl<'a> BranchAndBound<'a> {
                     ec,
                     ac,
                 };
-                let (lb, at_centre) = reach_bound(tables, planes, &g, half, turn, truncation_sq);
+                let (lb, at_centre) = reach_bound(tables, planes, &g);
                 estimate_sum += at_centre as f64 * count;
                 bound_sum += lb as f64 * count;
                 if let Some(classes) = classes.as_mut() {
@@ -1033,6 +1035,9 @@ struct Footprint {
     /// The members' ranges lie in `[near, far]`.
     near: f32,
     far: f32,
+    /// Every member lies within this of the centre, and within `lateral` of it horizontally.
+    reach: f32,
+    lateral: f32,
 }
 
 /// The directions and ranges at which a ball's members may lie over a box. The members lie within
@@ -1081,22 +1086,17 @@ fn footprint(
         beta,
         near: range - along,
         far: ((range + along) * (range + along) + reach * reach).sqrt(),
+        reach,
+        lateral,
     }
 }
 
 /// Where a ball's members may be over a box of candidates (see [`BranchAndBound::bound_below`]).
-#[derive(Clone, Copy, Default)]
 struct Reach {
-    /// The ball centre's position at the box's middle candidate.
-    x: [f32; 3],
-    /// Its horizontal offset from the query's origin there (the arm the heading turns).
-    arm: [f32; 2],
-    /// Its range.
+    /// What a cell's term depends on.
+    term: ConeTerm,
+    /// The centre's range.
     range: f32,
-    /// The members' ranges lie within this interval.
-    gate: (f32, f32),
-    /// The group's own radius (and a rounding margin).
-    spread: f32,
     /// The ball holds the origin, or the z axis (then it sees every direction, or every azimuth).
     holds_origin: bool,
     holds_axis: bool,
@@ -1111,11 +1111,17 @@ struct Reach {
 
 /// What the term of a cell's plane depends on, for one ball over one box (see [`reach_bound`]).
 struct ConeTerm {
+    /// The ball centre's position at the box's middle candidate.
     x: [f32; 3],
+    /// Its horizontal offset from the query's origin there (the arm the heading turns).
     arm: [f32; 2],
+    /// The box's translation half-extent per axis.
     half: [f32; 3],
+    /// `(1 − cos δ, sin δ)` of the heading interval's half-width δ.
     turn: (f32, f32),
+    /// The group's own radius (and a rounding margin).
     spread: f32,
+    /// The members' ranges lie within this interval.
     gate: (f32, f32),
     truncation_sq: f32,
 }
@@ -1193,23 +1199,17 @@ impl ConeTerm {
 const MAX_CONE_CELLS: i32 = 256;
 
 /// A lower bound on the term of every member of a ball over the box (see
-/// [`BranchAndBound::bound_below`]); `half` is the box's translation half-extent per axis.
+/// [`BranchAndBound::bound_below`]).
 #[inline(always)]
-fn reach_bound(
-    tables: &RangeTables,
-    planes: &crate::sdem::CellSurfaces,
-    g: &Reach,
-    half: nalgebra::Vector3<f32>,
-    turn: (f32, f32),
-    truncation_sq: f32,
-) -> (f32, f32) {
-    let (r_lo, r_hi) = g.gate;
+fn reach_bound(tables: &RangeTables, planes: &crate::sdem::CellSurfaces, g: &Reach) -> (f32, f32) {
+    let p = &g.term;
+    let (truncation_sq, (r_lo, r_hi)) = (p.truncation_sq, p.gate);
     // The centre's own cell: the estimate (the squared distance there), and for a point on a
     // surface often a bound of 0 at once.
     let centre_cell = tables.cell(g.ec, g.ac);
     let centre = centre_cell.map(|c| &planes.cells[c]);
     let estimate = centre_cell
-        .and_then(|c| planes.squared_distance(c, g.x, g.range))
+        .and_then(|c| planes.squared_distance(c, p.x, g.range))
         .map_or(truncation_sq, |e2| e2.min(truncation_sq));
     if g.holds_origin {
         // Any direction, any range: the reference's whole extent.
@@ -1236,15 +1236,6 @@ fn reach_bound(
         (a0, a1) = (a0.max(0), a1.min(n_az - 1));
     }
     let rows = &tables.planes;
-    let p = ConeTerm {
-        x: g.x,
-        arm: g.arm,
-        half: [half.x, half.y, half.z],
-        turn,
-        spread: g.spread,
-        gate: (r_lo, r_hi),
-        truncation_sq,
-    };
     let mut best = truncation_sq;
     if let Some(c) = centre {
         // One cell: its 24 bytes, not a line of each of the rows' six arrays.
@@ -1497,7 +1488,6 @@ mod tests {
             let half = [0, 1, 2].map(|_| rng.random_range(0.0..0.3f64));
             let arc = rng.random_range(0.0..0.2f64);
             let spread = rng.random_range(0.0..0.05f64);
-            let turned = arc + spread;
             let horizontal = u[0].hypot(u[1]);
             let f = footprint(
                 u.map(|v| v as f32),
@@ -1508,7 +1498,9 @@ mod tests {
             );
             let (lowest, highest, beta) = (f.lowest as f64, f.highest as f64, f.beta as f64);
             let (near, far) = (f.near as f64, f.far as f64);
-            let stands_off_axis = horizontal > (half[0].hypot(half[1]) + turned) * 1.0001;
+            let (reach, lateral) = (f.reach as f64, f.lateral as f64);
+            // As `bound_below` decides whether every azimuth is seen.
+            let stands_off_axis = horizontal > lateral * 1.0001;
             azimuth_checked += stands_off_axis as usize;
             for k in 0..64 {
                 // Corners of the box first, then anywhere in it; the offset on its sphere.
@@ -1530,6 +1522,14 @@ mod tests {
                 let b = [arc * heading.cos(), arc * heading.sin(), 0.0];
                 let x: [f64; 3] =
                     std::array::from_fn(|i| u[i] + a[i] + b[i] + w[i] / norm * spread);
+                let offset: [f64; 3] = std::array::from_fn(|i| x[i] - u[i]);
+                let slack = 1e-5 * range;
+                assert!(
+                    offset[0].hypot(offset[1]).hypot(offset[2]) <= reach + slack
+                        && offset[0].hypot(offset[1]) <= lateral + slack,
+                    "offset {offset:?} beyond {reach} (horizontally {lateral}) (u {u:?}, \
+                     half {half:?}, arc {arc}, spread {spread})"
+                );
                 let h = x[0].hypot(x[1]);
                 let r = h.hypot(x[2]);
                 assert!(
