@@ -401,9 +401,6 @@ const GROUP_REACH_FRACTION: f64 = 0.1;
 /// pair, 2,000, 1,820 and 1,762 with ±10° of heading, in times within the runs' spread.
 const SPLIT_TIE: f64 = 0.99;
 
-/// Boxes expanded together, their children bounded in parallel.
-const BATCH: usize = 4;
-
 /// What a box's bound, taken point by point (grouping level 0), learned for the boxes inside it.
 pub(crate) struct PointHint {
     /// The points whose term is `τ²` at every candidate of the box: they are `τ²` in every box
@@ -472,183 +469,48 @@ pub(crate) struct Reserve {
     leaves: Vec<(Node, f64)>,
 }
 
-/// The search state.
-pub(crate) struct BranchAndBound<'a> {
-    reference: &'a Sdem,
-    grid: &'a CandidateGrid,
-    tables: &'a RangeTables,
-    groups: &'a QueryGroups,
-    truncation_sq: f32,
+/// What a search has found so far, and what it set aside: one per search, shared by its workers.
+struct Progress {
     /// Only candidates costing at most this are of interest (∞: all).
     cap: f64,
     best: Option<Scored>,
     stats: BranchAndBoundStats,
     /// Set aside for a second search, when asked.
     reserve: Option<Reserve>,
-    /// Cloned for each worker that scores candidates.
-    prototype: &'a Correlator<'a>,
-    /// Metres per index along x, y, z and heading (a heading step times the query's median
-    /// horizontal range: how far it moves a typical point), for choosing which axes to split.
-    axis_step: [f64; 4],
 }
 
-impl<'a> BranchAndBound<'a> {
-    /// A search of `grid` for candidates costing at most `cap`.
-    fn new(prepared: &'a Prepared<'a>, grid: &'a CandidateGrid, cap: f64) -> Self {
+impl Progress {
+    fn new(cap: f64, reserve_ratio: Option<f64>) -> Self {
         Self {
-            reference: prepared.correlator.reference(),
-            grid,
-            tables: &prepared.tables,
-            groups: &prepared.groups,
-            truncation_sq: prepared.correlator.truncation_sq(),
             cap,
             best: None,
             stats: BranchAndBoundStats::default(),
-            reserve: None,
-            prototype: &prepared.correlator,
-            axis_step: {
-                let yaw_step = match grid.yaws.as_slice() {
-                    [a, b, ..] => (b - a).abs(),
-                    _ => 0.0,
-                };
-                let s = grid.step;
-                [s, s, s, yaw_step * prepared.median_horizontal_m]
-            },
+            reserve: reserve_ratio.map(|ratio| Reserve {
+                ratio,
+                boxes: Vec::new(),
+                leaves: Vec::new(),
+            }),
         }
     }
 
-    /// Runs the search over the whole grid; returns the exhaustive search's minimum.
-    ///
-    /// Best first: the box with the lowest bound is expanded next, so no box whose bound lies
-    /// above the minimum is ever expanded. A first dive (always into the most promising child)
-    /// finds a good candidate early, against which every later box and candidate is cut short.
-    pub fn run(mut self) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
-        let c = self.grid.counts;
-        let root = Node {
-            lo: [0; 4],
-            hi: [c[0] - 1, c[1] - 1, c[2] - 1, c[3] - 1],
-        };
-        if root.is_leaf() {
-            let mut correlator = self.correlator();
-            let score = self.score_leaf(&mut correlator, &root, self.cap);
-            self.stats.leaves_evaluated += 1;
-            return (score, self.stats, None);
-        }
-        let mut queue = std::collections::BinaryHeap::new();
-        // The dive.
-        let mut current = Some(Pending {
-            bound: 0.0,
-            estimate: 0.0,
-            node: root,
-            hint: None,
-        });
-        while let Some(node) = current.take() {
-            let mut open = self.expand(std::slice::from_ref(&node));
-            open.sort_by(|a, b| b.cmp(a));
-            let mut open = open.into_iter();
-            current = open.next();
-            queue.extend(open);
-        }
-        self.best_first(queue)
+    /// The cost below which a candidate is of interest: the best so far, or the cap.
+    fn limit(&self) -> f64 {
+        self.best.map_or(self.cap, |(cost, _)| cost.min(self.cap))
     }
 
-    /// A search for the best candidate below the cap among what `reserve` holds (the grid may
-    /// now leave out candidates the first search had).
-    fn run_from(mut self, reserve: Reserve) -> (Option<Scored>, BranchAndBoundStats) {
-        let cap = self.cap;
-        let leaves: Vec<Node> = reserve
-            .leaves
-            .iter()
-            .filter(|(node, lb)| *lb <= with_margin(cap) && !self.grid.excluded(node.lo))
-            .map(|(node, _)| *node)
-            .collect();
-        let this = &self;
-        let scored: Vec<Option<Scored>> = leaves
-            .par_iter()
-            .map_init(
-                || this.correlator(),
-                |correlator, node| this.score_leaf(correlator, node, cap),
-            )
-            .collect();
-        self.stats.leaves_evaluated += leaves.len();
-        for s in scored.into_iter().flatten() {
-            if self.best.is_none_or(|b| better(&s, &b)) {
-                self.best = Some(s);
-            }
-        }
-        let boxes: Vec<Pending> = reserve
-            .boxes
-            .into_iter()
-            .filter(|p| !self.prunable(p.bound) && !self.grid.box_excluded(p.node.lo, p.node.hi))
-            .collect();
-        // A box whose bound the first search cut short (its estimate is then ∞) holds only a
-        // partial sum: bounded again against this search's limit, most drop out. (Rare: with a
-        // reserve the first search sums bounds up to the reserve's ratio, see `expand`.)
+    fn prunable(&self, bound: f64) -> bool {
+        bound > with_margin(self.limit())
+    }
+
+    /// Where a box's bound may stop summing: the limit, or with a reserve its ratio × the limit.
+    /// With a reserve, a box's bound is summed on up to the reserve's ratio × the best, not cut
+    /// short at the best: one that ends below is set aside with its whole bound, one cut short
+    /// above can hold no runner-up at all. Re-bounding the boxes cut short at the best cost the
+    /// runner-up search 10–270 ms a bench pair; this way the first search's bounds take a few
+    /// more points, and 50 bench pairs went from 149–157 to 127–129 ms.
+    fn cut(&self) -> f64 {
         let limit = self.limit();
-        let this = &self;
-        let boxes: Vec<Pending> = boxes
-            .into_par_iter()
-            .map(|p| {
-                if p.estimate.is_finite() {
-                    return p;
-                }
-                let (bound, estimate, hint) = this.bound_below(&p.node, limit, p.hint.as_deref());
-                Pending {
-                    bound,
-                    estimate,
-                    node: p.node,
-                    hint: hint.map(std::sync::Arc::new).or(p.hint),
-                }
-            })
-            .collect();
-        self.stats.nodes_bounded += boxes.iter().filter(|p| p.estimate.is_finite()).count();
-        let queue: std::collections::BinaryHeap<Pending> = boxes
-            .into_iter()
-            .filter(|p| !self.prunable(p.bound))
-            .collect();
-        let (best, stats, _) = self.best_first(queue);
-        (best, stats)
-    }
-
-    /// Expands the queue's boxes, lowest bound first, until every box left is above the best.
-    fn best_first(
-        mut self,
-        mut queue: std::collections::BinaryHeap<Pending>,
-    ) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
-        while let Some(top) = queue.pop() {
-            if self.prunable(top.bound) {
-                queue.push(top);
-                break;
-            }
-            let mut batch = vec![top];
-            while batch.len() < BATCH {
-                match queue.peek() {
-                    Some(next) if !self.prunable(next.bound) => {
-                        batch.push(queue.pop().expect("peeked"))
-                    }
-                    _ => break,
-                }
-            }
-            for p in self.expand(&batch) {
-                if self.prunable(p.bound) {
-                    self.set_aside_box(p);
-                } else {
-                    queue.push(p);
-                }
-            }
-        }
-        for p in queue {
-            self.set_aside_box(p);
-        }
-        // Only what lies within the ratio of the final best is kept.
-        let limit = self.limit();
-        let mut reserve = self.reserve.take();
-        if let Some(r) = reserve.as_mut() {
-            let keep = with_margin(r.ratio * limit);
-            r.boxes.retain(|p| p.bound <= keep);
-            r.leaves.retain(|l| l.1 <= keep);
-        }
-        (self.best, self.stats, reserve)
+        self.reserve.as_ref().map_or(limit, |r| r.ratio * limit)
     }
 
     /// Keeps a box dropped against the current best for a second search, when it may hold a
@@ -672,13 +534,278 @@ impl<'a> BranchAndBound<'a> {
         }
     }
 
-    /// The cost below which a candidate is of interest: the best so far, or the cap.
-    fn limit(&self) -> f64 {
-        self.best.map_or(self.cap, |(cost, _)| cost.min(self.cap))
+    /// Takes in what bounding or scoring `children` turned out: updates the best candidate and
+    /// the counts, sets aside what is dropped, and returns the boxes still open.
+    fn absorb(
+        &mut self,
+        grid: &CandidateGrid,
+        children: &[(Node, Option<&PointHint>)],
+        outcomes: Vec<Outcome>,
+    ) -> Vec<Pending> {
+        let mut open = Vec::new();
+        for ((child, _), outcome) in children.iter().zip(outcomes) {
+            if child.is_leaf() {
+                self.stats.leaves_evaluated += 1;
+            } else {
+                self.stats.nodes_bounded += 1;
+            }
+            match outcome {
+                Outcome::Leaf(s) => {
+                    if self.best.is_none_or(|b| better(&s, &b)) {
+                        if let Some(old) = self.best.replace(s) {
+                            let node = grid.index(old.1);
+                            self.set_aside_leaf(Node { lo: node, hi: node }, old.0);
+                        }
+                    } else {
+                        self.set_aside_leaf(*child, s.0);
+                    }
+                }
+                Outcome::LeafAbove(node, lower_bound) => self.set_aside_leaf(node, lower_bound),
+                Outcome::Open(p) if self.prunable(p.bound) => self.set_aside_box(p),
+                Outcome::Open(p) => open.push(p),
+                Outcome::Pruned(p) => self.set_aside_box(p),
+                Outcome::Closed => {}
+            }
+        }
+        open
     }
 
-    fn prunable(&self, bound: f64) -> bool {
-        bound > with_margin(self.limit())
+    /// The best candidate, the counts, and what was set aside within the reserve's ratio of the
+    /// final best.
+    fn finish(mut self) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
+        let limit = self.limit();
+        if let Some(r) = self.reserve.as_mut() {
+            let keep = with_margin(r.ratio * limit);
+            r.boxes.retain(|p| p.bound <= keep);
+            r.leaves.retain(|l| l.1 <= keep);
+        }
+        (self.best, self.stats, self.reserve)
+    }
+}
+
+/// What the workers of [`BranchAndBound::best_first`] share.
+struct Shared {
+    queue: std::collections::BinaryHeap<Pending>,
+    progress: Progress,
+    /// Workers bounding a box's children at the moment (their children may still open boxes).
+    busy: usize,
+}
+
+/// The search: what it reads, the same for every worker.
+pub(crate) struct BranchAndBound<'a> {
+    reference: &'a Sdem,
+    grid: &'a CandidateGrid,
+    tables: &'a RangeTables,
+    groups: &'a QueryGroups,
+    truncation_sq: f32,
+    /// Only candidates costing at most this are of interest (∞: all).
+    cap: f64,
+    /// Cloned for each worker that scores candidates.
+    prototype: &'a Correlator<'a>,
+    /// Metres per index along x, y, z and heading (a heading step times the query's median
+    /// horizontal range: how far it moves a typical point), for choosing which axes to split.
+    axis_step: [f64; 4],
+}
+
+impl<'a> BranchAndBound<'a> {
+    /// A search of `grid` for candidates costing at most `cap`.
+    fn new(prepared: &'a Prepared<'a>, grid: &'a CandidateGrid, cap: f64) -> Self {
+        Self {
+            reference: prepared.correlator.reference(),
+            grid,
+            tables: &prepared.tables,
+            groups: &prepared.groups,
+            truncation_sq: prepared.correlator.truncation_sq(),
+            cap,
+            prototype: &prepared.correlator,
+            axis_step: {
+                let yaw_step = match grid.yaws.as_slice() {
+                    [a, b, ..] => (b - a).abs(),
+                    _ => 0.0,
+                };
+                let s = grid.step;
+                [s, s, s, yaw_step * prepared.median_horizontal_m]
+            },
+        }
+    }
+
+    /// Runs the search over the whole grid; returns the exhaustive search's minimum.
+    ///
+    /// Best first: the box with the lowest bound is expanded next, so no box whose bound lies
+    /// above the minimum is ever expanded. A first dive (always into the most promising child)
+    /// finds a good candidate early, against which every later box and candidate is cut short.
+    fn run(
+        &self,
+        mut progress: Progress,
+    ) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
+        let c = self.grid.counts;
+        let root = Node {
+            lo: [0; 4],
+            hi: [c[0] - 1, c[1] - 1, c[2] - 1, c[3] - 1],
+        };
+        if root.is_leaf() {
+            let mut correlator = self.correlator();
+            progress.best = self.score_leaf(&mut correlator, &root, progress.cap);
+            progress.stats.leaves_evaluated += 1;
+            return (progress.best, progress.stats, None);
+        }
+        let mut queue = std::collections::BinaryHeap::new();
+        // The dive.
+        let mut current = Some(Pending {
+            bound: 0.0,
+            estimate: 0.0,
+            node: root,
+            hint: None,
+        });
+        while let Some(node) = current.take() {
+            let mut open = self.expand(&mut progress, &node);
+            open.sort_by(|a, b| b.cmp(a));
+            let mut open = open.into_iter();
+            current = open.next();
+            queue.extend(open);
+        }
+        self.best_first(progress, queue)
+    }
+
+    /// A search for the best candidate below the cap among what `reserve` holds (the grid may
+    /// now leave out candidates the first search had).
+    fn run_from(
+        &self,
+        mut progress: Progress,
+        reserve: Reserve,
+    ) -> (Option<Scored>, BranchAndBoundStats) {
+        let cap = progress.cap;
+        let leaves: Vec<Node> = reserve
+            .leaves
+            .iter()
+            .filter(|(node, lb)| *lb <= with_margin(cap) && !self.grid.excluded(node.lo))
+            .map(|(node, _)| *node)
+            .collect();
+        let scored: Vec<Option<Scored>> = leaves
+            .par_iter()
+            .map_init(
+                || self.correlator(),
+                |correlator, node| self.score_leaf(correlator, node, cap),
+            )
+            .collect();
+        progress.stats.leaves_evaluated += leaves.len();
+        for s in scored.into_iter().flatten() {
+            if progress.best.is_none_or(|b| better(&s, &b)) {
+                progress.best = Some(s);
+            }
+        }
+        let boxes: Vec<Pending> = reserve
+            .boxes
+            .into_iter()
+            .filter(|p| {
+                !progress.prunable(p.bound) && !self.grid.box_excluded(p.node.lo, p.node.hi)
+            })
+            .collect();
+        // A box whose bound the first search cut short (its estimate is then ∞) holds only a
+        // partial sum: bounded again against this search's limit, most drop out. (Rare: with a
+        // reserve the first search sums bounds up to the reserve's ratio, see `Progress::cut`.)
+        let limit = progress.limit();
+        let boxes: Vec<Pending> = boxes
+            .into_par_iter()
+            .map(|p| {
+                if p.estimate.is_finite() {
+                    return p;
+                }
+                let (bound, estimate, hint) = self.bound_below(&p.node, limit, p.hint.as_deref());
+                Pending {
+                    bound,
+                    estimate,
+                    node: p.node,
+                    hint: hint.map(std::sync::Arc::new).or(p.hint),
+                }
+            })
+            .collect();
+        progress.stats.nodes_bounded += boxes.iter().filter(|p| p.estimate.is_finite()).count();
+        let queue: std::collections::BinaryHeap<Pending> = boxes
+            .into_iter()
+            .filter(|p| !progress.prunable(p.bound))
+            .collect();
+        let (best, stats, _) = self.best_first(progress, queue);
+        (best, stats)
+    }
+
+    /// Expands the queue's boxes, lowest bound first, until every box left is above the best.
+    ///
+    /// One worker per thread, each taking the lowest box of a shared queue, bounding its
+    /// children alone and putting the open ones back: no worker waits for another's boxes, as
+    /// a batch bounded in parallel must for its slowest child (the boxes' bounds take 5–140 µs).
+    /// A worker that finds the queue empty, or its lowest box above the best, waits while
+    /// another is still bounding (whose children may open boxes); the search ends when none is.
+    /// The minimum is the same whatever order the workers finish in; the boxes bounded, a few
+    /// more or fewer from run to run.
+    fn best_first(
+        &self,
+        progress: Progress,
+        queue: std::collections::BinaryHeap<Pending>,
+    ) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
+        let shared = std::sync::Mutex::new(Shared {
+            queue,
+            progress,
+            busy: 0,
+        });
+        let wake = std::sync::Condvar::new();
+        rayon::scope(|scope| {
+            for _ in 0..rayon::current_num_threads().max(1) {
+                scope.spawn(|_| self.work(&shared, &wake));
+            }
+        });
+        let Shared {
+            queue,
+            mut progress,
+            ..
+        } = shared
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        for p in queue {
+            progress.set_aside_box(p);
+        }
+        progress.finish()
+    }
+
+    /// One worker of [`Self::best_first`].
+    fn work(&self, shared: &std::sync::Mutex<Shared>, wake: &std::sync::Condvar) {
+        let lock = || {
+            shared
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+        };
+        let mut correlator = None;
+        let mut state = lock();
+        loop {
+            let open = state
+                .queue
+                .peek()
+                .is_some_and(|top| !state.progress.prunable(top.bound));
+            if !open {
+                if state.busy == 0 {
+                    wake.notify_all();
+                    return;
+                }
+                state = wake
+                    .wait(state)
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                continue;
+            }
+            let parent = state.queue.pop().expect("peeked");
+            state.busy += 1;
+            let (limit, cut) = (state.progress.limit(), state.progress.cut());
+            drop(state);
+            let children = self.children_of(&parent);
+            let outcomes: Vec<Outcome> = children
+                .iter()
+                .map(|(child, hint)| self.outcome(child, *hint, limit, cut, &mut correlator))
+                .collect();
+            state = lock();
+            let open = state.progress.absorb(self.grid, &children, outcomes);
+            state.queue.extend(open);
+            state.busy -= 1;
+            wake.notify_all();
+        }
     }
 
     fn correlator(&self) -> Correlator<'a> {
@@ -707,78 +834,59 @@ impl<'a> BranchAndBound<'a> {
         }
     }
 
-    /// Bounds or scores the children of `nodes` in parallel against the current limit; updates
-    /// the best candidate and returns the boxes still open.
-    fn expand(&mut self, parents: &[Pending]) -> Vec<Pending> {
-        let children: Vec<(Node, Option<&PointHint>)> = parents
-            .iter()
-            .flat_map(|p| {
-                let mask = p.hint.as_deref();
-                p.node
-                    .children(&self.axis_step)
-                    .into_iter()
-                    .map(move |c| (c, mask))
-            })
-            .filter(|(c, _)| !self.grid.box_excluded(c.lo, c.hi))
-            .collect();
-        let limit = self.limit();
-        // With a reserve, a box's bound is summed on up to the reserve's ratio × the best, not
-        // cut short at the best: one that ends below is set aside with its whole bound, one cut
-        // short above can hold no runner-up at all. Re-bounding the boxes cut short at the best
-        // cost the runner-up search 10–270 ms a bench pair; this way the first search's bounds
-        // take a few more points, and 50 bench pairs went from 149–157 to 127–129 ms.
-        let cut = self.reserve.as_ref().map_or(limit, |r| r.ratio * limit);
-        let this = &*self;
+    /// The children of `parent` the grid does not leave out, each with what the parent's bound
+    /// learned for them.
+    fn children_of<'p>(&self, parent: &'p Pending) -> Vec<(Node, Option<&'p PointHint>)> {
+        let hint = parent.hint.as_deref();
+        parent
+            .node
+            .children(&self.axis_step)
+            .into_iter()
+            .filter(|c| !self.grid.box_excluded(c.lo, c.hi))
+            .map(|c| (c, hint))
+            .collect()
+    }
+
+    /// Bounds a box, or scores a candidate, against `limit` (a box's bound summed up to `cut`).
+    fn outcome(
+        &self,
+        child: &Node,
+        hint: Option<&PointHint>,
+        limit: f64,
+        cut: f64,
+        correlator: &mut Option<Correlator<'a>>,
+    ) -> Outcome {
+        if child.is_leaf() {
+            let correlator = correlator.get_or_insert_with(|| self.correlator());
+            return self.try_leaf(correlator, child, limit);
+        }
+        let (bound, estimate, hint) = self.bound_below(child, cut, hint);
+        let pending = Pending {
+            bound,
+            estimate,
+            node: *child,
+            hint: hint.map(std::sync::Arc::new),
+        };
+        if bound > with_margin(limit) {
+            Outcome::Pruned(pending)
+        } else {
+            Outcome::Open(pending)
+        }
+    }
+
+    /// Bounds or scores the children of `parent` in parallel against the current limit; updates
+    /// the best candidate and returns the boxes still open (for the dive).
+    fn expand(&self, progress: &mut Progress, parent: &Pending) -> Vec<Pending> {
+        let children = self.children_of(parent);
+        let (limit, cut) = (progress.limit(), progress.cut());
         let outcomes: Vec<Outcome> = children
             .par_iter()
             .map_init(
                 || None,
-                |correlator: &mut Option<Correlator>, (child, mask)| {
-                    if child.is_leaf() {
-                        let correlator = correlator.get_or_insert_with(|| this.correlator());
-                        this.try_leaf(correlator, child, limit)
-                    } else {
-                        let (bound, estimate, hint) = this.bound_below(child, cut, *mask);
-                        let pending = Pending {
-                            bound,
-                            estimate,
-                            node: *child,
-                            hint: hint.map(std::sync::Arc::new),
-                        };
-                        if bound > with_margin(limit) {
-                            Outcome::Pruned(pending)
-                        } else {
-                            Outcome::Open(pending)
-                        }
-                    }
-                },
+                |correlator, (child, hint)| self.outcome(child, *hint, limit, cut, correlator),
             )
             .collect();
-        let mut open = Vec::new();
-        for ((child, _), outcome) in children.iter().zip(outcomes) {
-            if child.is_leaf() {
-                self.stats.leaves_evaluated += 1;
-            } else {
-                self.stats.nodes_bounded += 1;
-            }
-            match outcome {
-                Outcome::Leaf(s) => {
-                    if self.best.is_none_or(|b| better(&s, &b)) {
-                        if let Some(old) = self.best.replace(s) {
-                            let node = self.grid.index(old.1);
-                            self.set_aside_leaf(Node { lo: node, hi: node }, old.0);
-                        }
-                    } else {
-                        self.set_aside_leaf(*child, s.0);
-                    }
-                }
-                Outcome::LeafAbove(node, lower_bound) => self.set_aside_leaf(node, lower_bound),
-                Outcome::Open(p) => open.push(p),
-                Outcome::Pruned(p) => self.set_aside_box(p),
-                Outcome::Closed => {}
-            }
-        }
-        open
+        progress.absorb(self.grid, &children, outcomes)
     }
 
     /// A lower bound on the cost of every candidate in `node`, and an estimate of the cost at
@@ -1328,13 +1436,7 @@ pub(crate) fn search(
     cap: f64,
     reserve_ratio: Option<f64>,
 ) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
-    let mut bnb = BranchAndBound::new(prepared, grid, cap);
-    bnb.reserve = reserve_ratio.map(|ratio| Reserve {
-        ratio,
-        boxes: Vec::new(),
-        leaves: Vec::new(),
-    });
-    bnb.run()
+    BranchAndBound::new(prepared, grid, cap).run(Progress::new(cap, reserve_ratio))
 }
 
 /// The best candidate of `grid` (which leaves out the first search's peak) costing at most
@@ -1347,7 +1449,7 @@ pub(crate) fn runner_up(
     cap: f64,
     reserve: Reserve,
 ) -> (Option<Scored>, BranchAndBoundStats) {
-    BranchAndBound::new(prepared, grid, cap).run_from(reserve)
+    BranchAndBound::new(prepared, grid, cap).run_from(Progress::new(cap, None), reserve)
 }
 
 #[cfg(test)]
@@ -1664,5 +1766,59 @@ mod tests {
         }
         // Not vacuous: the higher caps do hold candidates.
         assert!(found >= 2, "only {found} of the caps held a runner-up");
+    }
+
+    /// The workers share one queue and finish in any order: the minimum and the runner-up are
+    /// the exhaustive ones with one worker, with three, and with eight (more than the cores,
+    /// so that they interleave at every step).
+    #[test]
+    fn the_answers_do_not_depend_on_the_workers() {
+        let truth = Vec3::new(-0.06, 0.1, 0.02);
+        let (r, q) = coarse_pair(7, truth, -1.5);
+        let cost = CostConfig::default();
+        let window = SearchWindow::around(&truth, [0.16, 0.16, 0.04]);
+        let yaws: Vec<f64> = (-4..=4).map(|k| (0.5 * k as f64).to_radians()).collect();
+        let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
+        let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
+        let prepared = Prepared::new(&correlator);
+        let costs: Vec<Option<f64>> = (0..grid.len())
+            .map(|f| {
+                let i = grid.index(f);
+                correlator
+                    .evaluate(&grid.offset(i), grid.yaw(i))
+                    .map(|c| c.cost)
+            })
+            .collect();
+        let oracle_below = |g: &CandidateGrid, cap: f64| {
+            (0..g.len())
+                .filter(|&f| !g.excluded(g.index(f)))
+                .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))
+                .fold(None, |b: Option<Scored>, s| match b {
+                    Some(b) if !better(&s, &b) => Some(b),
+                    _ => Some(s),
+                })
+        };
+        let best = oracle_below(&grid, f64::INFINITY).unwrap();
+        let mut outside = grid.clone();
+        outside.exclude = Some((grid.offset(grid.index(best.1)), 0.03));
+        let cap = 1.5 * best.0;
+        let second = oracle_below(&outside, cap);
+        assert!(
+            second.is_some(),
+            "no runner-up below the cap: the test would be vacuous"
+        );
+        for threads in [1, 3, 8] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let (found, found_second) = pool.install(|| {
+                let (found, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(1.5));
+                let (found_second, _) = runner_up(&prepared, &outside, cap, reserve.unwrap());
+                (found, found_second)
+            });
+            assert_eq!(found, Some(best), "{threads} workers");
+            assert_eq!(found_second, second, "{threads} workers");
+        }
     }
 }
