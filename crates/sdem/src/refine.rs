@@ -159,6 +159,7 @@ impl SurfaceNormals {
                 let centre = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
                 // Neighbours must lie within the patch the cells span at this range, plus noise.
                 let reach = 2.5 * k as f64 * grid.resolution() * centre.norm() + 0.02;
+                let reach_sq = reach * reach;
                 let mut sum = Vec3::zeros();
                 let mut outer = Matrix3::zeros();
                 let mut count = 0usize;
@@ -179,8 +180,9 @@ impl SurfaceNormals {
                             continue;
                         }
                         let q = points[j as usize];
-                        let q = Vec3::new(q[0] as f64, q[1] as f64, q[2] as f64);
-                        if (q - centre).norm() <= reach {
+                        // Relative to the centre: the sums stay small far from the sensor.
+                        let q = Vec3::new(q[0] as f64, q[1] as f64, q[2] as f64) - centre;
+                        if q.norm_squared() <= reach_sq {
                             sum += q;
                             outer += q * q.transpose();
                             count += 1;
@@ -192,15 +194,10 @@ impl SurfaceNormals {
                 }
                 let mean = sum / count as f64;
                 let cov = outer / count as f64 - mean * mean.transpose();
-                let eigen = cov.symmetric_eigen();
-                let mut order = [0usize, 1, 2];
-                order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
-                let (l0, l1) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
                 // Not a surface patch (a line, a corner, a blob): no normal.
-                if l1 <= 0.0 || l0 > 0.25 * l1 {
+                let Some(mut n) = plane_normal(&cov) else {
                     return [f32::NAN; 3];
-                }
-                let mut n: Vec3 = eigen.eigenvectors.column(order[0]).into_owned();
+                };
                 if n.dot(&centre) > 0.0 {
                     n = -n;
                 }
@@ -247,6 +244,49 @@ const REASSOCIATE_STEP: f64 = 1e-3;
 /// Below an update of this (metres, and radians) the kernel is no longer annealed but set to
 /// its scale (see [`refine`]).
 const SETTLED_STEP: f64 = 1e-4;
+
+/// The unit normal of a surface patch with point covariance `cov`: the eigenvector of its
+/// smallest eigenvalue `λ0`, or `None` where the patch is not a surface (`λ0 > λ1 / 4`: a line, a
+/// corner, a blob).
+///
+/// In closed form: the eigenvalues are the roots of the characteristic cubic (its trigonometric
+/// solution), the eigenvector the longest cross product of two rows of `cov − λ0 I` (of rank 2
+/// when `λ0 < λ1`). nalgebra's iterative `symmetric_eigen` it replaces took most of the 7 ms the
+/// normals of a 10,000-point S-DEM cost on one core.
+fn plane_normal(cov: &Matrix3<f64>) -> Option<Vec3> {
+    let off = cov[(0, 1)].powi(2) + cov[(0, 2)].powi(2) + cov[(1, 2)].powi(2);
+    let mean = cov.trace() / 3.0;
+    let spread = (0..3).map(|i| (cov[(i, i)] - mean).powi(2)).sum::<f64>() + 2.0 * off;
+    let p = (spread / 6.0).sqrt();
+    if p.is_nan() || p <= 0.0 {
+        // Isotropic (or not a number): no direction stands out.
+        return None;
+    }
+    let b = (cov - Matrix3::identity() * mean) / p;
+    let phi = (0.5 * b.determinant()).clamp(-1.0, 1.0).acos() / 3.0;
+    let largest = mean + 2.0 * p * phi.cos();
+    let smallest = mean + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    let middle = 3.0 * mean - largest - smallest;
+    if middle <= 0.0 || smallest > 0.25 * middle {
+        return None;
+    }
+    let m = cov - Matrix3::identity() * smallest;
+    let rows = [
+        m.row(0).transpose(),
+        m.row(1).transpose(),
+        m.row(2).transpose(),
+    ];
+    let n = [
+        rows[0].cross(&rows[1]),
+        rows[0].cross(&rows[2]),
+        rows[1].cross(&rows[2]),
+    ]
+    .into_iter()
+    .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
+    .expect("three products");
+    let length = n.norm();
+    (length > 0.0).then(|| n / length)
+}
 
 /// Geman-McClure weight of residual `r` at scale `s`.
 #[inline]
@@ -472,6 +512,58 @@ pub fn refine(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The closed-form normal agrees with nalgebra's iterative eigen-decomposition on random
+    /// patches: flat ones (the normal to 1e-9), and it refuses the lines and blobs nalgebra's
+    /// eigenvalues call not a surface.
+    #[test]
+    fn plane_normal_matches_the_iterative_eigenvectors() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let (mut flat, mut refused) = (0, 0);
+        for _ in 0..2000 {
+            let rotation = Rotation3::new(Vec3::new(
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+            ));
+            let scale: f64 = 10f64.powf(rng.random_range(-6.0..0.0));
+            let mut l = [
+                scale * rng.random_range(0.0..0.3),
+                scale * rng.random_range(0.1..1.0),
+                scale * rng.random_range(0.1..1.0),
+            ];
+            l.sort_by(f64::total_cmp);
+            let cov = rotation.matrix()
+                * Matrix3::from_diagonal(&Vec3::new(l[0], l[1], l[2]))
+                * rotation.matrix().transpose();
+            let eigen = cov.symmetric_eigen();
+            let mut order = [0usize, 1, 2];
+            order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
+            let (l0, l1) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
+            let surface = l1 > 0.0 && l0 <= 0.25 * l1;
+            // Too close to the threshold to tell apart by rounding: skipped.
+            if (l0 / l1 - 0.25).abs() < 1e-9 {
+                continue;
+            }
+            match plane_normal(&cov) {
+                Some(n) => {
+                    assert!(surface, "{l:?}: a normal where nalgebra sees no surface");
+                    let expected = eigen.eigenvectors.column(order[0]);
+                    assert!((n.dot(&expected).abs() - 1.0).abs() < 1e-9, "{l:?}");
+                    flat += 1;
+                }
+                None => {
+                    assert!(!surface, "{l:?}: no normal where nalgebra sees a surface");
+                    refused += 1;
+                }
+            }
+        }
+        assert!(
+            flat > 500 && refused > 500,
+            "{flat} flat, {refused} refused"
+        );
+    }
 
     #[test]
     fn bad_settings_are_refused_by_name() {
