@@ -10,7 +10,7 @@
 use crate::cost::OffsetPrior;
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
-use crate::sdem::Sdem;
+use crate::sdem::{CellSurfaces, GridSpec, Sdem};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector6};
 use rayon::prelude::*;
@@ -296,6 +296,166 @@ fn robust_weight(r: f64, s: f64) -> f64 {
     1.0 / (d * d)
 }
 
+/// Query points are paired and summed this many at a time (their directions' cells computed
+/// together, vectorized).
+const CHUNK: usize = 256;
+
+/// The Gauss-Newton normal equations of a set of point-to-plane residuals: `JᵀWJ` (its upper
+/// triangle, row by row), `JᵀWr`, `Σ w r²`, `Σ w` and the number of residuals.
+#[derive(Clone, Copy, Default)]
+struct NormalEquations {
+    h: [f64; 21],
+    g: [f64; 6],
+    chi2: f64,
+    wsum: f64,
+    count: usize,
+}
+
+impl NormalEquations {
+    #[inline(always)]
+    fn add(&mut self, w: f64, r: f64, jac: [f64; 6]) {
+        let mut k = 0;
+        for i in 0..6 {
+            let wi = w * jac[i];
+            for jj in &jac[i..] {
+                self.h[k] += wi * jj;
+                k += 1;
+            }
+            self.g[i] += wi * r;
+        }
+        self.chi2 += w * r * r;
+        self.wsum += w;
+        self.count += 1;
+    }
+
+    fn merged(mut self, other: Self) -> Self {
+        for (a, b) in self.h.iter_mut().zip(other.h) {
+            *a += b;
+        }
+        for (a, b) in self.g.iter_mut().zip(other.g) {
+            *a += b;
+        }
+        self.chi2 += other.chi2;
+        self.wsum += other.wsum;
+        self.count += other.count;
+        self
+    }
+
+    /// `(JᵀWJ, JᵀWr, Σ w r², Σ w, count)`.
+    fn parts(&self) -> (Matrix6<f64>, Vector6<f64>, f64, f64, usize) {
+        let mut h = Matrix6::zeros();
+        let mut k = 0;
+        for i in 0..6 {
+            for j in i..6 {
+                h[(i, j)] = self.h[k];
+                h[(j, i)] = self.h[k];
+                k += 1;
+            }
+        }
+        (h, Vector6::from(self.g), self.chi2, self.wsum, self.count)
+    }
+}
+
+/// What pairing a query point with the reference reads.
+struct Pairing<'a> {
+    grid: GridSpec,
+    surfaces: &'a CellSurfaces,
+    normals: &'a SurfaceNormals,
+    /// The reference's boundary points.
+    points: &'a [[f32; 3]],
+    association: Association,
+    /// Pairs farther apart than this are not associated, metres (and its square).
+    max_distance: f32,
+    max_distance_sq: f64,
+}
+
+impl Pairing<'_> {
+    /// The normal equations of `points` (query, levelled) moved by `pose`; with `fresh` each is
+    /// paired anew (`pairs[i]`: its reference point, `u32::MAX` for none), else with its last
+    /// pair. Residuals weigh by the Geman-McClure kernel at `scale`.
+    fn accumulate(
+        &self,
+        (rotation, translation): &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>),
+        points: &[[f32; 3]],
+        pairs: &mut [u32],
+        fresh: bool,
+        scale: f64,
+    ) -> NormalEquations {
+        let n = points.len();
+        let mut rotated = [[0f32; 3]; CHUNK];
+        let (mut xs, mut ys, mut zs) = ([0f32; CHUNK], [0f32; CHUNK], [0f32; CHUNK]);
+        for (i, q) in points.iter().enumerate() {
+            let y = rotation * nalgebra::Vector3::new(q[0], q[1], q[2]);
+            rotated[i] = [y.x, y.y, y.z];
+            (xs[i], ys[i], zs[i]) = (
+                y.x + translation.x,
+                y.y + translation.y,
+                y.z + translation.z,
+            );
+        }
+        let (mut cells, mut ranges) = ([u32::MAX; CHUNK], [0f32; CHUNK]);
+        if fresh {
+            self.grid.cells_of(
+                &xs[..n],
+                &ys[..n],
+                &zs[..n],
+                &mut cells[..n],
+                &mut ranges[..n],
+            );
+        }
+        let mut acc = NormalEquations::default();
+        for i in 0..n {
+            let x = [xs[i], ys[i], zs[i]];
+            let found = if fresh {
+                let cell = cells[i];
+                let found = match self.association {
+                    Association::Nearest => {
+                        // Only where the reference saw this direction, at about this range: a
+                        // point it could not have seen would pair with the edge of what it did
+                        // see and drag the estimate towards it.
+                        let seen = cell != u32::MAX
+                            && self
+                                .surfaces
+                                .squared_distance(cell as usize, x, ranges[i])
+                                .is_some_and(f32::is_finite);
+                        if seen {
+                            self.normals.nearest(x, self.max_distance)
+                        } else {
+                            None
+                        }
+                    }
+                    Association::Projective => (cell != u32::MAX)
+                        .then(|| self.normals.point_of_cell[cell as usize])
+                        .filter(|&j| j != u32::MAX),
+                };
+                pairs[i] = found.unwrap_or(u32::MAX);
+                found
+            } else {
+                (pairs[i] != u32::MAX).then_some(pairs[i])
+            };
+            let Some(j) = found else {
+                continue;
+            };
+            let normal = self.normals.normals[j as usize];
+            if normal[0].is_nan() {
+                continue;
+            }
+            let p = self.points[j as usize];
+            let d = [x[0] - p[0], x[1] - p[1], x[2] - p[2]];
+            if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > self.max_distance_sq {
+                continue;
+            }
+            let normal = Vec3::new(normal[0] as f64, normal[1] as f64, normal[2] as f64);
+            let r = normal.x * d[0] as f64 + normal.y * d[1] as f64 + normal.z * d[2] as f64;
+            let y = rotated[i];
+            let jr = Vec3::new(y[0] as f64, y[1] as f64, y[2] as f64).cross(&normal);
+            let jac = [normal.x, normal.y, normal.z, jr.x, jr.y, jr.z];
+            acc.add(robust_weight(r, scale), r, jac);
+        }
+        acc
+    }
+}
+
 /// Refines `initial` (`reference_level_from_query_level`) by robust point-to-plane Gauss-Newton,
 /// each query point paired with the nearest reference point (or, with
 /// [`Association::Projective`], the one in its S-DEM cell). A `prior` on the offset (the
@@ -323,13 +483,17 @@ pub fn refine(
             "refinement needs both S-DEMs on one grid".into(),
         ));
     }
-    let grid = *reference.grid();
-    let ref_points = reference.points();
-    let surfaces = reference.surfaces();
+    let pairing = Pairing {
+        grid: *reference.grid(),
+        surfaces: reference.surfaces(),
+        normals,
+        points: reference.points(),
+        association: config.association,
+        max_distance: config.max_correspondence_m as f32,
+        max_distance_sq: config.max_correspondence_m * config.max_correspondence_m,
+    };
     let mut rotation = initial.rotation.to_rotation_matrix();
     let mut translation = initial.translation.vector;
-    let max_corr_sq = config.max_correspondence_m * config.max_correspondence_m;
-    let max_corr = config.max_correspondence_m as f32;
     let mut last = None;
     let mut converged = false;
     let mut iterations = 0;
@@ -350,84 +514,14 @@ pub fn refine(
         };
         let r32 = rotation.matrix().cast::<f32>();
         let t32 = translation.cast::<f32>();
-        let (h, g, chi2, wsum, inliers) = query
+        let pose = (r32, t32);
+        let normal_equations = query
             .points()
-            .par_iter()
-            .zip(pairs.par_iter_mut())
-            .fold(
-                || {
-                    (
-                        Matrix6::<f64>::zeros(),
-                        Vector6::<f64>::zeros(),
-                        0.0,
-                        0.0,
-                        0usize,
-                    )
-                },
-                |mut acc, (q, pair)| {
-                    let qv = nalgebra::Vector3::new(q[0], q[1], q[2]);
-                    let y = r32 * qv;
-                    let x = y + t32;
-                    let found = if !fresh {
-                        (*pair != u32::MAX).then_some(*pair)
-                    } else {
-                        *pair = u32::MAX;
-                        let found = match config.association {
-                            Association::Nearest => {
-                                // Only where the reference saw this direction, at about this range:
-                                // a point it could not have seen would pair with the edge of what
-                                // it did see and drag the estimate towards it.
-                                let seen =
-                                    grid.cell_of([x.x, x.y, x.z]).is_some_and(|(cell, r)| {
-                                        surfaces
-                                            .squared_distance(cell as usize, [x.x, x.y, x.z], r)
-                                            .is_some_and(f32::is_finite)
-                                    });
-                                if !seen {
-                                    return acc;
-                                }
-                                normals.nearest([x.x, x.y, x.z], max_corr)
-                            }
-                            Association::Projective => grid
-                                .cell_of([x.x, x.y, x.z])
-                                .map(|(cell, _)| normals.point_of_cell[cell as usize])
-                                .filter(|&j| j != u32::MAX),
-                        };
-                        if let Some(j) = found {
-                            *pair = j;
-                        }
-                        found
-                    };
-                    let Some(j) = found else {
-                        return acc;
-                    };
-                    let n = normals.normals[j as usize];
-                    if n[0].is_nan() {
-                        return acc;
-                    }
-                    let p = ref_points[j as usize];
-                    let d = [x.x - p[0], x.y - p[1], x.z - p[2]];
-                    if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > max_corr_sq {
-                        return acc;
-                    }
-                    let n = Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
-                    let r = n.x * d[0] as f64 + n.y * d[1] as f64 + n.z * d[2] as f64;
-                    let w = robust_weight(r, scale);
-                    let y = Vec3::new(y.x as f64, y.y as f64, y.z as f64);
-                    let jr = y.cross(&n);
-                    let jac = Vector6::new(n.x, n.y, n.z, jr.x, jr.y, jr.z);
-                    acc.0 += w * jac * jac.transpose();
-                    acc.1 += w * r * jac;
-                    acc.2 += w * r * r;
-                    acc.3 += w;
-                    acc.4 += 1;
-                    acc
-                },
-            )
-            .reduce(
-                || (Matrix6::zeros(), Vector6::zeros(), 0.0, 0.0, 0usize),
-                |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3, a.4 + b.4),
-            );
+            .par_chunks(CHUNK)
+            .zip(pairs.par_chunks_mut(CHUNK))
+            .map(|(points, pairs)| pairing.accumulate(&pose, points, pairs, fresh, scale))
+            .reduce(NormalEquations::default, NormalEquations::merged);
+        let (h, g, chi2, wsum, inliers) = normal_equations.parts();
         if inliers < config.min_inliers {
             return Err(Error::Localize(format!(
                 "refinement associated {inliers} points, fewer than {}",
