@@ -31,8 +31,8 @@
 use crate::cost::{scrambled_order, Capped, Correlator};
 use crate::geometry::fast_atan2;
 use crate::geometry::FAST_ATAN2_MAX_ERROR;
-use crate::sdem::floor_i32;
 use crate::sdem::Sdem;
+use crate::sdem::{floor_i32, wrap_column};
 use crate::search::{better, CandidateGrid, Index, Scored};
 use rayon::prelude::*;
 
@@ -124,7 +124,7 @@ impl RangeTables {
             return None;
         }
         let a = if self.full_circle {
-            a.rem_euclid(self.n_az as i32)
+            wrap_column(a, self.n_az as i32)
         } else if a < 0 || a >= self.n_az as i32 {
             return None;
         } else {
@@ -1335,7 +1335,7 @@ fn reach_bound(tables: &RangeTables, planes: &crate::sdem::CellSurfaces, g: &Rea
         (a0, a1) = (0, n_az - 1);
     } else if tables.full_circle {
         // Columns run from a0 in [0, n_az) for at most n_az - 1 more, so wrap at most once.
-        let start = a0.rem_euclid(n_az);
+        let start = wrap_column(a0, n_az);
         (a0, a1) = (start, start + (a1 - a0));
     } else {
         if a1 < 0 || a0 >= n_az {
