@@ -461,8 +461,8 @@ pub struct PairResult {
     pub localization: Localization,
 }
 
-/// Builds both S-DEMs of `pair` (each levelled by its reading) and localizes the query against
-/// the reference with `config` (see [`localize_config`]).
+/// Builds both S-DEMs of `pair` (each levelled by its reading; the two at once) and localizes the
+/// query against the reference with `config` (see [`localize_config`]).
 ///
 /// # Errors
 /// Whatever [`Sdem::from_points`] or [`localize`] reports (an invalid configuration, no candidate
@@ -473,12 +473,17 @@ pub fn localize_pair(
     config: &LocalizeConfig,
 ) -> Result<PairResult> {
     let start = Instant::now();
-    let reference = Sdem::from_points(
-        &pair.reference_points,
-        &pair.reference_attitude.rotation(),
-        sdem,
-    )?;
-    let query = Sdem::from_points(&pair.query_points, &pair.query_attitude.rotation(), sdem)?;
+    let (reference, query) = rayon::join(
+        || {
+            Sdem::from_points(
+                &pair.reference_points,
+                &pair.reference_attitude.rotation(),
+                sdem,
+            )
+        },
+        || Sdem::from_points(&pair.query_points, &pair.query_attitude.rotation(), sdem),
+    );
+    let (reference, query) = (reference?, query?);
     let localization = localize(
         &reference,
         &pair.reference_attitude,
