@@ -17,9 +17,9 @@
 //!   reference does not see, costs `τ²`; the smallest over the cone bounds the point (large
 //!   cones fall back to the range tables: `τ²` when no cell of the cone can be reached, else 0).
 //!
-//! The search is best first: the box with the lowest bound is expanded next (a few at a time,
-//! their children bounded in parallel), after a first dive into the most promising child at each
-//! level finds a good candidate. Boxes whose bound exceeds the best cost so far are dropped, and
+//! The search is best first: the box with the lowest bound is expanded next (by one worker per
+//! thread, each taking the lowest box of a shared queue and bounding its children), after a first
+//! dive into the most promising child at each level finds a good candidate. Boxes whose bound exceeds the best cost so far are dropped, and
 //! every bound and every candidate is summed point block by point block and cut short as soon as
 //! the sum passes the best (the terms are >= 0). Points certainly at `τ²` in a box are not
 //! bounded again in its children. Single candidates are scored with the same [`Correlator`] the
@@ -28,7 +28,7 @@
 //! Query points are grouped (by cubes of 2, 4, 8 … cm) at coarser levels, so large boxes are
 //! bounded from a few hundred groups instead of every point: a group's reach covers its members'.
 
-use crate::cost::{scrambled_order, Capped, Correlator};
+use crate::cost::{Capped, Correlator};
 use crate::geometry::fast_atan2;
 use crate::geometry::FAST_ATAN2_MAX_ERROR;
 use crate::sdem::Sdem;
@@ -281,11 +281,13 @@ impl QueryGroups {
                 }
                 groups_of.last_mut().expect("pushed").push(*i);
             }
-            // Scrambled, so that a partial bound is a fair sample and can stop early.
-            let groups: Vec<Group> = scrambled_order(groups_of.len())
-                .into_iter()
-                .map(|i| make(&groups_of[i]))
-                .collect();
+            // In the order of their places (level 0: the S-DEM's cells, as the cost chose the
+            // points; coarser: the cubes' raster order), so that one ball after another reads
+            // neighbouring cells of the reference. Its planes and rows (~5 MB on the full
+            // sphere) do not fit the L2 cache: on the 50 bench pairs this order took 6 % less
+            // CPU (5.86-5.96 s against 6.21-6.36 s) than a scrambled one, which made a partial
+            // bound a fairer sample, cut short a little sooner.
+            let groups: Vec<Group> = groups_of.iter().map(|m| make(m)).collect();
             // A level that hardly groups anything would only lose the finer level's detail.
             if out
                 .last()
@@ -408,8 +410,8 @@ pub(crate) struct PointHint {
     saturated: u32,
     /// The other points (indices at level 0), those whose term was largest here first: a box
     /// inside whose bound passes the best cost so far is then cut short after fewer points.
-    /// On the bench pairs the boxes cut short had summed 80 % of their points in the
-    /// scrambled order.
+    /// On the bench pairs the boxes cut short had summed 80 % of their points with the points
+    /// in a scrambled order.
     order: Vec<u32>,
 }
 
