@@ -65,7 +65,7 @@ pub struct HeadingWindow {
     /// 180: a full turn).
     pub half_range_deg: f64,
     /// The heading step, degrees; `None` matches it to the scan's extent: the step that moves a
-    /// point at the query's 90th-percentile range by one translation step.
+    /// point at the query's median horizontal range by one translation step.
     pub step_deg: Option<f64>,
 }
 
