@@ -1727,6 +1727,30 @@ mod tests {
         assert!(compared > 100, "{compared} boxes compared");
     }
 
+    /// Every candidate's cost on `grid`, by flat index (`None`: too little overlap).
+    fn costs_of(correlator: &mut Correlator, grid: &CandidateGrid) -> Vec<Option<f64>> {
+        (0..grid.len())
+            .map(|f| {
+                let i = grid.index(f);
+                correlator
+                    .evaluate(&grid.offset(i), grid.yaw(i))
+                    .map(|c| c.cost)
+            })
+            .collect()
+    }
+
+    /// The exhaustive answer: the best candidate of `grid` (which may leave some out) costing at
+    /// most `cap`, from every candidate's cost.
+    fn oracle_below(costs: &[Option<f64>], grid: &CandidateGrid, cap: f64) -> Option<Scored> {
+        (0..grid.len())
+            .filter(|&f| !grid.excluded(grid.index(f)))
+            .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))
+            .fold(None, |b: Option<Scored>, s| match b {
+                Some(b) if !better(&s, &b) => Some(b),
+                _ => Some(s),
+            })
+    }
+
     /// The runner-up search, continued from what the first search set aside, finds the same
     /// candidate as the exhaustive search of the grid without the peak's neighbourhood, with the
     /// same cap: for several ratios (so the cap sits above a few, many or no candidates).
@@ -1740,14 +1764,7 @@ mod tests {
         let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
         let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
         let prepared = Prepared::new(&correlator);
-        let costs: Vec<Option<f64>> = (0..grid.len())
-            .map(|f| {
-                let i = grid.index(f);
-                correlator
-                    .evaluate(&grid.offset(i), grid.yaw(i))
-                    .map(|c| c.cost)
-            })
-            .collect();
+        let costs = costs_of(&mut correlator, &grid);
         let mut found = 0;
         for ratio in [1.05, 1.3, 2.0, 5.0, 20.0] {
             let (best, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(ratio));
@@ -1756,13 +1773,7 @@ mod tests {
             outside.exclude = Some((grid.offset(grid.index(best_flat)), 0.03));
             let cap = ratio * best_cost;
             let (second, _) = runner_up(&prepared, &outside, cap, reserve.unwrap());
-            let oracle = (0..grid.len())
-                .filter(|&f| !outside.excluded(grid.index(f)))
-                .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))
-                .fold(None, |b: Option<Scored>, s| match b {
-                    Some(b) if !better(&s, &b) => Some(b),
-                    _ => Some(s),
-                });
+            let oracle = oracle_below(&costs, &outside, cap);
             assert_eq!(second, oracle, "ratio {ratio}");
             found += oracle.is_some() as usize;
         }
@@ -1783,28 +1794,12 @@ mod tests {
         let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
         let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
         let prepared = Prepared::new(&correlator);
-        let costs: Vec<Option<f64>> = (0..grid.len())
-            .map(|f| {
-                let i = grid.index(f);
-                correlator
-                    .evaluate(&grid.offset(i), grid.yaw(i))
-                    .map(|c| c.cost)
-            })
-            .collect();
-        let oracle_below = |g: &CandidateGrid, cap: f64| {
-            (0..g.len())
-                .filter(|&f| !g.excluded(g.index(f)))
-                .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))
-                .fold(None, |b: Option<Scored>, s| match b {
-                    Some(b) if !better(&s, &b) => Some(b),
-                    _ => Some(s),
-                })
-        };
-        let best = oracle_below(&grid, f64::INFINITY).unwrap();
+        let costs = costs_of(&mut correlator, &grid);
+        let best = oracle_below(&costs, &grid, f64::INFINITY).unwrap();
         let mut outside = grid.clone();
         outside.exclude = Some((grid.offset(grid.index(best.1)), 0.03));
         let cap = 1.5 * best.0;
-        let second = oracle_below(&outside, cap);
+        let second = oracle_below(&costs, &outside, cap);
         assert!(
             second.is_some(),
             "no runner-up below the cap: the test would be vacuous"
