@@ -19,11 +19,12 @@
 //!
 //! The search is best first: the box with the lowest bound is expanded next (by one worker per
 //! thread, each taking the lowest box of a shared queue and bounding its children), after a first
-//! dive into the most promising child at each level finds a good candidate. Boxes whose bound exceeds the best cost so far are dropped, and
-//! every bound and every candidate is summed point block by point block and cut short as soon as
-//! the sum passes the best (the terms are >= 0). Points certainly at `τ²` in a box are not
-//! bounded again in its children. Single candidates are scored with the same [`Correlator`] the
-//! exhaustive search uses, so both return the same minimum, bit for bit.
+//! dive into the most promising child at each level finds a good candidate. Boxes whose bound
+//! exceeds the best cost so far are dropped, and every bound and every candidate is summed point
+//! block by point block and cut short as soon as the sum passes the best (the terms are >= 0).
+//! Points certainly at `τ²` in a box are not bounded again in its children. Single candidates are
+//! scored with the same [`Correlator`] the exhaustive search uses, so both return the same minimum,
+//! bit for bit.
 //!
 //! Query points are grouped (by cubes of 2, 4, 8 … cm) at coarser levels, so large boxes are
 //! bounded from a few hundred groups instead of every point: a group's reach covers its members'.
@@ -509,7 +510,9 @@ impl Progress {
     /// short at the best: one that ends below is set aside with its whole bound, one cut short
     /// above can hold no runner-up at all. Re-bounding the boxes cut short at the best cost the
     /// runner-up search 10–270 ms a bench pair; this way the first search's bounds take a few
-    /// more points, and 50 bench pairs went from 149–157 to 127–129 ms.
+    /// more points, and 50 bench pairs went from 149–157 to 127–129 ms. Resuming the bounds cut
+    /// short at the best from where they stopped, when the runner-up search reaches them, was
+    /// 1–3 ms a pair slower still: with no runner-up below the cap it sums on most of them.
     fn cut(&self) -> f64 {
         let limit = self.limit();
         self.reserve.as_ref().map_or(limit, |r| r.ratio * limit)
