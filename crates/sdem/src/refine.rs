@@ -462,10 +462,10 @@ impl Pairing<'_> {
 /// motion's prediction) weighs as one more residual of the kernel's scale at one `σ`, which
 /// holds the estimate where the surfaces leave a direction free.
 ///
-/// The pairs are found again only after an update of more than 1 mm (`REASSOCIATE_STEP`), and before
-/// convergence is declared (the last iteration always pairs afresh); the kernel is annealed from
-/// wide until an update moves less than 0.1 mm (`SETTLED_STEP`). On the 50 bench pairs this took the
-/// refinement from 17 to 11 ms (median) with the same errors to 0.02 mm.
+/// The pairs are found again only after an update of more than 1 mm (`REASSOCIATE_STEP`), and
+/// before convergence is declared (the last iteration always pairs afresh); the kernel is annealed
+/// from wide until an update moves less than 0.1 mm (`SETTLED_STEP`). On the 50 bench pairs this
+/// took the refinement from 17 to 11 ms (median) with the same errors to 0.02 mm.
 ///
 /// # Errors
 /// [`Error::Localize`] when too few points associate, the problem is degenerate, or the
