@@ -333,12 +333,18 @@ pub fn run(args: Args) -> Result<()> {
     let reference_points = dataset.load_scan(reference_index)?;
     let query_points = dataset.load_scan(query_index)?;
     let start = Instant::now();
-    let reference = Sdem::from_points(
-        &reference_points,
-        &reference_attitude.rotation(),
-        &sdem_config,
-    )?;
-    let query = Sdem::from_points(&query_points, &query_attitude.rotation(), &sdem_config)?;
+    // The two S-DEMs side by side, as `sdem bench` builds a pair's.
+    let (reference, query) = rayon::join(
+        || {
+            Sdem::from_points(
+                &reference_points,
+                &reference_attitude.rotation(),
+                &sdem_config,
+            )
+        },
+        || Sdem::from_points(&query_points, &query_attitude.rotation(), &sdem_config),
+    );
+    let (reference, query) = (reference?, query?);
     let found = localize(
         &reference,
         &reference_attitude,
