@@ -474,7 +474,7 @@ pub(crate) struct Reserve {
 
 /// What a search has found so far, and what it set aside: one per search, shared by its workers.
 struct Progress {
-    /// Only candidates costing at most this are of interest (∞: all).
+    /// [`BranchAndBound::cap`], which the limit never exceeds.
     cap: f64,
     best: Option<Scored>,
     stats: BranchAndBoundStats,
@@ -641,8 +641,9 @@ impl<'a> BranchAndBound<'a> {
     /// finds a good candidate early, against which every later box and candidate is cut short.
     fn run(
         &self,
-        mut progress: Progress,
+        reserve_ratio: Option<f64>,
     ) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
+        let mut progress = Progress::new(self.cap, reserve_ratio);
         let c = self.grid.counts;
         let root = Node {
             lo: [0; 4],
@@ -650,7 +651,7 @@ impl<'a> BranchAndBound<'a> {
         };
         if root.is_leaf() {
             let mut correlator = self.correlator();
-            progress.best = self.score_leaf(&mut correlator, &root, progress.cap);
+            progress.best = self.score_leaf(&mut correlator, &root, self.cap);
             progress.stats.leaves_evaluated += 1;
             return (progress.best, progress.stats, None);
         }
@@ -674,12 +675,9 @@ impl<'a> BranchAndBound<'a> {
 
     /// A search for the best candidate below the cap among what `reserve` holds (the grid may
     /// now leave out candidates the first search had).
-    fn run_from(
-        &self,
-        mut progress: Progress,
-        reserve: Reserve,
-    ) -> (Option<Scored>, BranchAndBoundStats) {
-        let cap = progress.cap;
+    fn run_from(&self, reserve: Reserve) -> (Option<Scored>, BranchAndBoundStats) {
+        let mut progress = Progress::new(self.cap, None);
+        let cap = self.cap;
         let leaves: Vec<Node> = reserve
             .leaves
             .iter()
@@ -1441,7 +1439,7 @@ pub(crate) fn search(
     cap: f64,
     reserve_ratio: Option<f64>,
 ) -> (Option<Scored>, BranchAndBoundStats, Option<Reserve>) {
-    BranchAndBound::new(prepared, grid, cap).run(Progress::new(cap, reserve_ratio))
+    BranchAndBound::new(prepared, grid, cap).run(reserve_ratio)
 }
 
 /// The best candidate of `grid` (which leaves out the first search's peak) costing at most
@@ -1454,7 +1452,7 @@ pub(crate) fn runner_up(
     cap: f64,
     reserve: Reserve,
 ) -> (Option<Scored>, BranchAndBoundStats) {
-    BranchAndBound::new(prepared, grid, cap).run_from(Progress::new(cap, None), reserve)
+    BranchAndBound::new(prepared, grid, cap).run_from(reserve)
 }
 
 #[cfg(test)]
