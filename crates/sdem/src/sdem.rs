@@ -358,7 +358,7 @@ impl CellSurfaces {
                 return None;
             }
             let a = if full_circle {
-                a.rem_euclid(n_az)
+                wrap_column(a as i32, n_az as i32) as i64
             } else if a < 0 || a >= n_az {
                 return None;
             } else {
@@ -560,7 +560,7 @@ pub(crate) fn floor_i32(x: f32) -> i32 {
 
 /// `a` modulo `n` (in `0..n`, `n > 0`): without a division where `a` lies within one turn of
 /// `0..n`, as the columns of a direction or of a cone about it do (an integer division for every
-/// point was a tenth of the exact search's bound).
+/// point and ball looked up cost 2–3 % of a bench pair's CPU).
 #[inline(always)]
 pub(crate) fn wrap_column(a: i32, n: i32) -> i32 {
     if a < 0 {
