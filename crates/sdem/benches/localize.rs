@@ -1,10 +1,10 @@
-//! Speed of one virtual-S-DEM evaluation and of whole searches, on the paper's experiment
+//! Speed of one candidate's evaluation (projective and virtual-S-DEM cost) and of whole searches, on the paper's experiment
 //! (Sec. V): a scan at the origin of the simulated room, a second after moving (22, 36, 5) cm.
 //! Fixed seeds, so every run measures the same problem.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use sdem::benchmark::{paper_pair, PAPER_MOVE_M};
-use sdem::cost::Correlator;
+use sdem::cost::{Correlator, CostModel};
 use sdem::geometry::Vec3;
 use sdem::localize::{
     localize, CostConfig, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow,
@@ -13,12 +13,22 @@ use std::hint::black_box;
 
 fn benches(c: &mut Criterion) {
     let (reference, ra, query, qa) = paper_pair().expect("the paper's pair");
-    let cost = CostConfig::default();
-    let mut correlator = Correlator::new(&reference, &query, &cost).expect("same grid");
     let origin = Vec3::from(PAPER_MOVE_M);
-    c.bench_function("virtual_sdem_evaluation", |b| {
-        b.iter(|| black_box(correlator.evaluate(black_box(&origin), 0.0)))
-    });
+    // One candidate scored in each form of eq. (1): the projective one every search uses by
+    // default, and the paper's virtual S-DEM (what its brute force pays per candidate).
+    for (name, model) in [
+        ("projective_evaluation", CostModel::Projective),
+        ("virtual_sdem_evaluation", CostModel::VirtualSdem),
+    ] {
+        let cost = CostConfig {
+            model,
+            ..Default::default()
+        };
+        let mut correlator = Correlator::new(&reference, &query, &cost).expect("same grid");
+        c.bench_function(name, |b| {
+            b.iter(|| black_box(correlator.evaluate(black_box(&origin), 0.0)))
+        });
+    }
     let mut group = c.benchmark_group("search");
     group.sample_size(10);
     group.bench_function("branch_and_bound_paper_window_1cm", |b| {
