@@ -334,17 +334,11 @@ pub fn run(args: Args) -> Result<()> {
     let query_points = dataset.load_scan(query_index)?;
     let start = Instant::now();
     // The two S-DEMs side by side, as `sdem bench` builds a pair's.
-    let (reference, query) = rayon::join(
-        || {
-            Sdem::from_points(
-                &reference_points,
-                &reference_attitude.rotation(),
-                &sdem_config,
-            )
-        },
-        || Sdem::from_points(&query_points, &query_attitude.rotation(), &sdem_config),
-    );
-    let (reference, query) = (reference?, query?);
+    let (reference, query) = Sdem::pair_from_points(
+        (&reference_points, &reference_attitude.rotation()),
+        (&query_points, &query_attitude.rotation()),
+        &sdem_config,
+    )?;
     let found = localize(
         &reference,
         &reference_attitude,

@@ -473,17 +473,11 @@ pub fn localize_pair(
     config: &LocalizeConfig,
 ) -> Result<PairResult> {
     let start = Instant::now();
-    let (reference, query) = rayon::join(
-        || {
-            Sdem::from_points(
-                &pair.reference_points,
-                &pair.reference_attitude.rotation(),
-                sdem,
-            )
-        },
-        || Sdem::from_points(&pair.query_points, &pair.query_attitude.rotation(), sdem),
-    );
-    let (reference, query) = (reference?, query?);
+    let (reference, query) = Sdem::pair_from_points(
+        (&pair.reference_points, &pair.reference_attitude.rotation()),
+        (&pair.query_points, &pair.query_attitude.rotation()),
+        sdem,
+    )?;
     let localization = localize(
         &reference,
         &pair.reference_attitude,

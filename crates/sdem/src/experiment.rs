@@ -101,8 +101,11 @@ fn trial(
     config: &LocalizeConfig,
 ) -> Result<Trial> {
     let start = Instant::now();
-    let r = Sdem::from_points(&reference.points, &reference.attitude.rotation(), sdem)?;
-    let q = Sdem::from_points(&query.points, &query.attitude.rotation(), sdem)?;
+    let (r, q) = Sdem::pair_from_points(
+        (&reference.points, &reference.attitude.rotation()),
+        (&query.points, &query.attitude.rotation()),
+        sdem,
+    )?;
     let localization = localize(&r, &reference.attitude, &q, &query.attitude, config)?;
     let time_ms = start.elapsed().as_secs_f64() * 1e3;
     let estimate = localization.reference_from_query;

@@ -466,6 +466,23 @@ impl Sdem {
     }
 
     /// Builds an S-DEM on `spec` from points already in the levelled frame, nearest per cell.
+    /// Builds the S-DEMs of two scans side by side ([`Self::from_points`] for each, on two
+    /// cores): a localization's reference and query.
+    ///
+    /// # Errors
+    /// The first of the two builds' errors (an invalid configuration).
+    pub fn pair_from_points(
+        reference: (&[Vec3], &Rotation3<f64>),
+        query: (&[Vec3], &Rotation3<f64>),
+        config: &SdemConfig,
+    ) -> Result<(Self, Self)> {
+        let (r, q) = rayon::join(
+            || Self::from_points(reference.0, reference.1, config),
+            || Self::from_points(query.0, query.1, config),
+        );
+        Ok((r?, q?))
+    }
+
     fn from_levelled(spec: GridSpec, config: SdemConfig, points: &[[f32; 3]]) -> Self {
         let mut ranges = vec![f32::NAN; spec.len()];
         let mut best: Vec<u32> = vec![u32::MAX; spec.len()];
@@ -695,6 +712,29 @@ mod tests {
             "elevation {}",
             el.to_degrees()
         );
+    }
+
+    #[test]
+    fn a_pair_is_built_as_each_alone() {
+        let a = sphere_points(2.0, 1.0);
+        let b: Vec<Vec3> = sphere_points(3.0, 0.9)
+            .into_iter()
+            .map(|p| p * 0.5)
+            .collect();
+        let (ra, rb) = (
+            Attitude::from_degrees(2.0, -4.0, 30.0).rotation(),
+            Attitude::from_degrees(-1.0, 3.0, -75.0).rotation(),
+        );
+        let config = SdemConfig::default();
+        let (sa, sb) = Sdem::pair_from_points((&a, &ra), (&b, &rb), &config).unwrap();
+        assert_eq!(sa, Sdem::from_points(&a, &ra, &config).unwrap());
+        assert_eq!(sb, Sdem::from_points(&b, &rb, &config).unwrap());
+        assert_ne!(sa, sb);
+        let bad = SdemConfig {
+            resolution_deg: -1.0,
+            ..config
+        };
+        assert!(Sdem::pair_from_points((&a, &ra), (&b, &rb), &bad).is_err());
     }
 
     #[test]
