@@ -7,7 +7,9 @@
 //! 2. Accuracy and time over seeded pairs in the simulated collapsed building
 //!    ([`sdem::benchmark::bench_pairs`]): the query anywhere within ±0.5 m (±0.1 m in height) of
 //!    the reference, turned up to ±15°, tilted up to ±3°, its compass off by up to ±10°; 5 mm
-//!    range noise. Each is localized with the ±10° heading search, refinement and diagnostics.
+//!    range noise. Each is localized with the ±10° heading search, refinement and diagnostics,
+//!    and again with the compass ignored (a full turn of heading searched).
+//! 3. The pose graph's optimization on a 1,000-node synthetic loop.
 
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
@@ -101,6 +103,8 @@ struct Report {
     /// The paper's window with the default heading search.
     exact_heading: ExactReport,
     pairs: PairsReport,
+    /// The same pairs with the compass ignored: a full turn of heading searched.
+    pairs_no_compass: PairsReport,
     pose_graph: PoseGraphReport,
 }
 
@@ -229,7 +233,8 @@ impl Tally {
     }
 }
 
-fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
+/// The seeded pairs localized with the heading searched within `±heading_deg` of the compass.
+fn accuracy(args: &Args, heading_deg: f64, say: &dyn Fn(&str)) -> Result<PairsReport> {
     let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
     if count == 0 {
         anyhow::bail!("--pairs must be at least 1");
@@ -238,12 +243,15 @@ fn accuracy(args: &Args, say: &dyn Fn(&str)) -> Result<PairsReport> {
         anyhow::bail!("--step {} must be a positive number of metres", args.step);
     }
     let pair_config = PairConfig::default();
-    say(&format!("pairs: simulating {count} seeded pairs ..."));
+    say(&format!(
+        "pairs, heading ±{heading_deg}°: simulating {count} seeded pairs ..."
+    ));
     let pairs = bench_pairs(args.seed, count, &pair_config)?;
-    let config = LocalizeConfig {
+    let mut config = LocalizeConfig {
         step_m: args.step,
         ..localize_config(&pair_config)
     };
+    config.heading.half_range_deg = heading_deg;
     let sdem_config = SdemConfig::default();
     let (mut tally, mut failures) = (Tally::default(), Vec::new());
     let bar = crate::progress::bar(count as u64, args.json, "pairs localized");
@@ -335,7 +343,8 @@ pub fn run(args: Args) -> Result<()> {
         HeadingWindow::default().half_range_deg
     };
     let exact_heading = exact_vs_exhaustive(args.quick, heading_deg, &say)?;
-    let pairs = accuracy(&args, &say)?;
+    let pairs = accuracy(&args, HeadingWindow::default().half_range_deg, &say)?;
+    let pairs_no_compass = accuracy(&args, 180.0, &say)?;
     say("pose graph: optimizing a 1,000-node loop ...");
     let graph = sdem::posegraph::bench_1000_nodes()?;
     let report = Report {
@@ -343,6 +352,7 @@ pub fn run(args: Args) -> Result<()> {
         exact,
         exact_heading,
         pairs,
+        pairs_no_compass,
         pose_graph: PoseGraphReport {
             nodes: graph.nodes,
             edges: graph.edges,
@@ -385,6 +395,19 @@ pub fn run(args: Args) -> Result<()> {
     println!("   success (< 2 cm)   {:.1} %", p.success_rate_2cm * 100.0);
     for f in &p.failures {
         println!("   failed: {f}");
+    }
+    let n = &report.pairs_no_compass;
+    println!(
+        "   no compass at all (heading ±{}°): time median {:.0} ms, 95th percentile {:.0} ms; \
+         error median {:.2} mm; success {:.1} %",
+        n.heading_window_deg,
+        n.time_ms.median,
+        n.time_ms.p95,
+        n.translation_error_mm.median,
+        n.success_rate_2cm * 100.0
+    );
+    for f in &n.failures {
+        println!("   failed without the compass: {f}");
     }
     let g = &report.pose_graph;
     println!();

@@ -778,12 +778,18 @@ fn bench_quick_json_reports_identical_minima_and_figures() {
         exact["candidates_scored"].as_u64().unwrap() < exact["candidates"].as_u64().unwrap(),
         "{exact}"
     );
-    let pairs = &report["pairs"];
-    assert_eq!(pairs["count"], 1, "{pairs}");
-    for key in ["translation_error_mm", "rotation_error_deg", "time_ms"] {
-        for stat in ["median", "p95", "max"] {
-            assert!(pairs[key][stat].is_number(), "{key}.{stat} in {pairs}");
+    for (name, heading) in [("pairs", 10.0), ("pairs_no_compass", 180.0)] {
+        let pairs = &report[name];
+        assert_eq!(pairs["count"], 1, "{name}: {pairs}");
+        assert_eq!(num(pairs, "heading_window_deg"), heading, "{name}: {pairs}");
+        for key in ["translation_error_mm", "rotation_error_deg", "time_ms"] {
+            for stat in ["median", "p95", "max"] {
+                assert!(
+                    pairs[key][stat].is_number(),
+                    "{name}: {key}.{stat} in {pairs}"
+                );
+            }
         }
+        assert!(num(pairs, "success_rate_2cm") >= 0.0, "{name}: {pairs}");
     }
-    assert!(num(pairs, "success_rate_2cm") >= 0.0, "{pairs}");
 }

@@ -885,6 +885,60 @@ mod tests {
         }
     }
 
+    /// With the compass no use at all (150° off), a full turn of heading finds the pose, which the
+    /// default ±10° cannot.
+    #[test]
+    fn a_full_turn_of_heading_finds_a_compass_half_a_turn_off() {
+        let scene = sim::paper_room();
+        let grid = SdemConfig::default();
+        let sensor = SensorConfig::default();
+        let truth = pose_from_parts(
+            Vec3::new(0.2, 0.1, 0.0),
+            Attitude::from_degrees(0.0, 0.0, -40.0),
+        );
+        let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 11);
+        let mut rng = ChaCha8Rng::seed_from_u64(12);
+        let sweep = sim::scan(&scene, &sensor, &truth, 0.0, &mut rng);
+        let mut qa = sweep.mean_attitude();
+        qa.yaw += 150f64.to_radians();
+        let query = Sdem::from_points(&sweep.points_in_sensor(), &qa.rotation(), &grid).unwrap();
+        let config = LocalizeConfig {
+            window: SearchWindow::around(&truth.translation.vector, [0.05, 0.05, 0.03]),
+            heading: HeadingWindow {
+                half_range_deg: 180.0,
+                step_deg: None,
+            },
+            ..Default::default()
+        };
+        let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+        let (dt, dr) = crate::geometry::pose_error(&truth, &found.reference_from_query);
+        assert!(
+            dt < 0.005 && dr.to_degrees() < 0.1,
+            "error {dt} m, {} deg",
+            dr.to_degrees()
+        );
+        assert!(
+            (found.heading_correction.to_degrees() + 150.0).abs() < 0.2,
+            "heading correction {}°",
+            found.heading_correction.to_degrees()
+        );
+        assert!(!found.diagnostics.ambiguous, "{:?}", found.diagnostics);
+        // The ±10° default cannot reach it: the best it finds is far off, or nothing matches.
+        let narrow = LocalizeConfig {
+            heading: HeadingWindow::default(),
+            refine: false,
+            ..config
+        };
+        if let Ok(f) = localize(&reference, &ra, &query, &qa, &narrow) {
+            let (dt, dr) = crate::geometry::pose_error(&truth, &f.reference_from_query);
+            assert!(
+                dt > 0.02 || dr.to_degrees() > 10.0,
+                "±10° should not reach a compass 150° off: {dt} m, {}°",
+                dr.to_degrees()
+            );
+        }
+    }
+
     #[test]
     fn a_corridor_is_ambiguous_along_its_axis_and_a_room_is_not() {
         let grid = SdemConfig::default();
