@@ -720,6 +720,26 @@ mod tests {
         (s, attitude)
     }
 
+    /// The paper room scanned at the origin (seed `seeds.0`) and at `truth` (seed `seeds.1`), the
+    /// second scan's compass reading `compass_off_deg` off (steel nearby): reference, its reading,
+    /// query, its reading.
+    fn pair_with_compass_off(
+        truth: &Pose,
+        compass_off_deg: f64,
+        seeds: (u64, u64),
+    ) -> (Sdem, Attitude, Sdem, Attitude) {
+        let scene = sim::paper_room();
+        let grid = SdemConfig::default();
+        let sensor = SensorConfig::default();
+        let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seeds.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(seeds.1);
+        let sweep = sim::scan(&scene, &sensor, truth, 0.0, &mut rng);
+        let mut qa = sweep.mean_attitude();
+        qa.yaw += compass_off_deg.to_radians();
+        let query = Sdem::from_points(&sweep.points_in_sensor(), &qa.rotation(), &grid).unwrap();
+        (reference, ra, query, qa)
+    }
+
     fn noise_free(step_deg: f64) -> SensorConfig {
         SensorConfig {
             range_noise_m: 0.0,
@@ -845,20 +865,12 @@ mod tests {
 
     #[test]
     fn compass_error_is_found_by_the_heading_search() {
-        let scene = sim::paper_room();
-        let grid = SdemConfig::default();
-        let sensor = SensorConfig::default();
         let truth = pose_from_parts(
             Vec3::new(0.3, -0.1, 0.0),
             Attitude::from_degrees(0.0, 0.0, 25.0),
         );
-        let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 9);
-        let mut rng = ChaCha8Rng::seed_from_u64(10);
-        let sweep = sim::scan(&scene, &sensor, &truth, 0.0, &mut rng);
         // The compass reads 8° off (steel nearby).
-        let mut qa = sweep.mean_attitude();
-        qa.yaw += 8f64.to_radians();
-        let query = Sdem::from_points(&sweep.points_in_sensor(), &qa.rotation(), &grid).unwrap();
+        let (reference, ra, query, qa) = pair_with_compass_off(&truth, 8.0, (9, 10));
         // The default ±10° heading window; a translation window of ±5 cm around the truth keeps
         // the test quick (the benchmarks run the paper's window).
         let config = LocalizeConfig {
@@ -889,19 +901,11 @@ mod tests {
     /// default ±10° cannot.
     #[test]
     fn a_full_turn_of_heading_finds_a_compass_half_a_turn_off() {
-        let scene = sim::paper_room();
-        let grid = SdemConfig::default();
-        let sensor = SensorConfig::default();
         let truth = pose_from_parts(
             Vec3::new(0.2, 0.1, 0.0),
             Attitude::from_degrees(0.0, 0.0, -40.0),
         );
-        let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 11);
-        let mut rng = ChaCha8Rng::seed_from_u64(12);
-        let sweep = sim::scan(&scene, &sensor, &truth, 0.0, &mut rng);
-        let mut qa = sweep.mean_attitude();
-        qa.yaw += 150f64.to_radians();
-        let query = Sdem::from_points(&sweep.points_in_sensor(), &qa.rotation(), &grid).unwrap();
+        let (reference, ra, query, qa) = pair_with_compass_off(&truth, 150.0, (11, 12));
         let config = LocalizeConfig {
             window: SearchWindow::around(&truth.translation.vector, [0.05, 0.05, 0.03]),
             heading: HeadingWindow {
