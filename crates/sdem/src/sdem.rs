@@ -465,7 +465,6 @@ impl Sdem {
         Ok(Self::from_levelled(spec, config.clone(), &levelled))
     }
 
-    /// Builds an S-DEM on `spec` from points already in the levelled frame, nearest per cell.
     /// Builds the S-DEMs of two scans side by side ([`Self::from_points`] for each, on two
     /// cores): a localization's reference and query.
     ///
@@ -483,6 +482,7 @@ impl Sdem {
         Ok((r?, q?))
     }
 
+    /// Builds an S-DEM on `spec` from points already in the levelled frame, nearest per cell.
     fn from_levelled(spec: GridSpec, config: SdemConfig, points: &[[f32; 3]]) -> Self {
         let mut ranges = vec![f32::NAN; spec.len()];
         let mut best: Vec<u32> = vec![u32::MAX; spec.len()];
