@@ -14,8 +14,8 @@
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
 use sdem::benchmark::{
-    bench_pairs, localize_config, localize_pair, paper_pair, success_rate, summarize, PairConfig,
-    PairResult, Stats, PAPER_MOVE_M,
+    bench_pairs, localize_config, localize_pair, paper_pair, success_rate, summarize, BenchPair,
+    PairConfig, PairResult, Stats, PAPER_MOVE_M,
 };
 use sdem::geometry::Vec3;
 use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow};
@@ -233,8 +233,8 @@ impl Tally {
     }
 }
 
-/// The seeded pairs localized with the heading searched within `±heading_deg` of the compass.
-fn accuracy(args: &Args, heading_deg: f64, say: &dyn Fn(&str)) -> Result<PairsReport> {
+/// The seeded pairs of `args` (checked), simulated once for every heading window measured.
+fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
     let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
     if count == 0 {
         anyhow::bail!("--pairs must be at least 1");
@@ -242,19 +242,25 @@ fn accuracy(args: &Args, heading_deg: f64, say: &dyn Fn(&str)) -> Result<PairsRe
     if !(args.step.is_finite() && args.step > 0.0) {
         anyhow::bail!("--step {} must be a positive number of metres", args.step);
     }
-    let pair_config = PairConfig::default();
-    say(&format!(
-        "pairs, heading ±{heading_deg}°: simulating {count} seeded pairs ..."
-    ));
-    let pairs = bench_pairs(args.seed, count, &pair_config)?;
+    say(&format!("pairs: simulating {count} seeded pairs ..."));
+    Ok(bench_pairs(args.seed, count, &PairConfig::default())?)
+}
+
+/// `pairs` localized with the heading searched within `±heading_deg` of the compass.
+fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
+    let count = pairs.len();
     let mut config = LocalizeConfig {
         step_m: args.step,
-        ..localize_config(&pair_config)
+        ..localize_config(&PairConfig::default())
     };
     config.heading.half_range_deg = heading_deg;
     let sdem_config = SdemConfig::default();
     let (mut tally, mut failures) = (Tally::default(), Vec::new());
-    let bar = crate::progress::bar(count as u64, args.json, "pairs localized");
+    let bar = crate::progress::bar(
+        count as u64,
+        args.json,
+        &format!("pairs localized, heading ±{heading_deg}°"),
+    );
     for (i, pair) in pairs.iter().enumerate() {
         bar.inc(1);
         match localize_pair(pair, &sdem_config, &config) {
@@ -274,7 +280,7 @@ fn accuracy(args: &Args, heading_deg: f64, say: &dyn Fn(&str)) -> Result<PairsRe
         }
     }
     bar.finish_and_clear();
-    Ok(PairsReport {
+    PairsReport {
         count,
         seed: args.seed,
         step_m: args.step,
@@ -285,7 +291,7 @@ fn accuracy(args: &Args, heading_deg: f64, say: &dyn Fn(&str)) -> Result<PairsRe
         time_ms: tally.time_ms(),
         success_rate_2cm: tally.success_rate(),
         failures,
-    })
+    }
 }
 
 fn print_exact(e: &ExactReport) {
@@ -343,8 +349,9 @@ pub fn run(args: Args) -> Result<()> {
         HeadingWindow::default().half_range_deg
     };
     let exact_heading = exact_vs_exhaustive(args.quick, heading_deg, &say)?;
-    let pairs = accuracy(&args, HeadingWindow::default().half_range_deg, &say)?;
-    let pairs_no_compass = accuracy(&args, 180.0, &say)?;
+    let seeded = seeded_pairs(&args, &say)?;
+    let pairs = accuracy(&args, &seeded, HeadingWindow::default().half_range_deg);
+    let pairs_no_compass = accuracy(&args, &seeded, 180.0);
     say("pose graph: optimizing a 1,000-node loop ...");
     let graph = sdem::posegraph::bench_1000_nodes()?;
     let report = Report {
