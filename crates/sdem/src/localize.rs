@@ -740,6 +740,16 @@ mod tests {
         (reference, ra, query, qa)
     }
 
+    /// The localization's pose lies within 5 mm and 0.1° of the truth.
+    fn assert_within_5mm_and_a_tenth_degree(truth: &Pose, found: &Localization) {
+        let (dt, dr) = crate::geometry::pose_error(truth, &found.reference_from_query);
+        assert!(
+            dt < 0.005 && dr.to_degrees() < 0.1,
+            "error {dt} m, {} deg",
+            dr.to_degrees()
+        );
+    }
+
     fn noise_free(step_deg: f64) -> SensorConfig {
         SensorConfig {
             range_noise_m: 0.0,
@@ -854,12 +864,7 @@ mod tests {
             ..Default::default()
         };
         let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
-        let (dt, dr) = crate::geometry::pose_error(&truth, &found.reference_from_query);
-        assert!(
-            dt < 0.005 && dr.to_degrees() < 0.1,
-            "error {dt} m, {} deg",
-            dr.to_degrees()
-        );
+        assert_within_5mm_and_a_tenth_degree(&truth, &found);
         assert_eq!(found.refined, RefineOutcome::SixDof);
     }
 
@@ -878,12 +883,7 @@ mod tests {
             ..Default::default()
         };
         let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
-        let (dt, dr) = crate::geometry::pose_error(&truth, &found.reference_from_query);
-        assert!(
-            dt < 0.005 && dr.to_degrees() < 0.1,
-            "error {dt} m, {} deg",
-            dr.to_degrees()
-        );
+        assert_within_5mm_and_a_tenth_degree(&truth, &found);
         assert!((found.heading_correction.to_degrees() + 8.0).abs() < 0.2);
         // Trusting the compass, the same pair localizes badly or not at all.
         let trusting = LocalizeConfig {
@@ -915,12 +915,7 @@ mod tests {
             ..Default::default()
         };
         let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
-        let (dt, dr) = crate::geometry::pose_error(&truth, &found.reference_from_query);
-        assert!(
-            dt < 0.005 && dr.to_degrees() < 0.1,
-            "error {dt} m, {} deg",
-            dr.to_degrees()
-        );
+        assert_within_5mm_and_a_tenth_degree(&truth, &found);
         assert!(
             (found.heading_correction.to_degrees() + 150.0).abs() < 0.2,
             "heading correction {}°",
