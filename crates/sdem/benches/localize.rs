@@ -1,5 +1,6 @@
-//! Speed of one candidate's evaluation (projective and virtual-S-DEM cost) and of whole searches, on the paper's experiment
-//! (Sec. V): a scan at the origin of the simulated room, a second after moving (22, 36, 5) cm.
+//! Speed of one candidate's evaluation (projective and virtual-S-DEM cost) and of whole
+//! searches, on the paper's experiment (Sec. V): a scan at the origin of the simulated room, a
+//! second after moving (22, 36, 5) cm.
 //! Fixed seeds, so every run measures the same problem.
 
 use criterion::{criterion_group, criterion_main, Criterion};
