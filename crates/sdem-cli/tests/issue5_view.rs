@@ -1,5 +1,5 @@
 //! Issue 5: `sdem view` pictures and the 3D viewer page, from a real `sdem slam` run on a small
-//! simulated dataset; the page is rendered in headless Chromium (installed by `.ci/run`).
+//! simulated dataset; the page is rendered in headless Chromium (installed by `scripts/test`).
 
 mod common;
 
@@ -199,8 +199,10 @@ fn chromium() -> PathBuf {
         .unwrap_or_default();
     on_path.unwrap_or_else(|| {
         panic!(
-            "Chromium is not installed, and the viewer page's test needs it: run .ci/run (it \
-             installs it with `apt-get install -y chromium`), or set SDEM_CHROMIUM to its path"
+            "Chromium is missing (looked at $SDEM_CHROMIUM, /usr/bin/chromium and chromium on the \
+             PATH), and the viewer page's test renders the page in it. Install it with \
+             `sudo apt-get install -y chromium` (scripts/test does this when it can), or set \
+             SDEM_CHROMIUM to a Chromium binary"
         )
     })
 }
