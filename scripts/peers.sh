@@ -3,7 +3,7 @@
 # small_gicp, KISS-ICP, GenZ-ICP) on a folder of exported bench pairs, twice per pair: from no
 # initial guess (identity) and from the seeded guess 0.2 m / 5° off the truth. Then aggregates.
 #
-#   cargo run --release -p sdem --example export_bench_pairs -- --out /tmp/pairs --count 50 --seed 1 --localize
+#   cargo run --release -p sdem-cli --example export_bench_pairs -- --out /tmp/pairs --count 50 --seed 1 --localize
 #   scripts/peers.sh /tmp/pairs docs/peers
 #
 # PAIRS holds pair_NNN/{query.ply,reference.ply,truth.txt,guess.txt} (and optionally sdem.jsonl).

@@ -5,7 +5,7 @@
 //!    exhaustively and several times by branch-and-bound; times, ratio, and whether both return
 //!    the same grid candidate with the same cost.
 //! 2. Accuracy and time over seeded pairs in the simulated collapsed building
-//!    ([`sdem::benchmark::bench_pairs`]): the query anywhere within ±0.5 m (±0.1 m in height) of
+//!    ([`sdem_sim::benchmark::bench_pairs`]): the query anywhere within ±0.5 m (±0.1 m in height) of
 //!    the reference, turned up to ±15°, tilted up to ±3°, its compass off by up to ±10°; 5 mm
 //!    range noise. Each is localized with the ±10° heading search, refinement and diagnostics,
 //!    and again with the compass ignored (a full turn of heading searched).
@@ -13,13 +13,13 @@
 
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
-use sdem::benchmark::{
-    bench_pairs, localize_config, localize_pair, paper_pair, success_rate, summarize, BenchPair,
-    PairConfig, PairResult, Stats, PAPER_MOVE_M,
-};
 use sdem::geometry::Vec3;
 use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow};
 use sdem::sdem::SdemConfig;
+use sdem_sim::benchmark::{
+    bench_pairs, localize_config, localize_pair, paper_pair, success_rate, summarize, BenchPair,
+    PairConfig, PairResult, Stats, PAPER_MOVE_M,
+};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -36,7 +36,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Grid step of the pairs' search, metres (the refinement goes below it).
-    #[arg(long, default_value_t = sdem::benchmark::PAIRS_STEP_M)]
+    #[arg(long, default_value_t = sdem_sim::benchmark::PAIRS_STEP_M)]
     step: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -353,7 +353,7 @@ pub fn run(args: Args) -> Result<()> {
     let pairs = accuracy(&args, &seeded, HeadingWindow::default().half_range_deg);
     let pairs_no_compass = accuracy(&args, &seeded, 180.0);
     say("pose graph: optimizing a 1,000-node loop ...");
-    let graph = sdem::posegraph::bench_1000_nodes()?;
+    let graph = sdem_sim::pose_graphs::bench_1000_nodes()?;
     let report = Report {
         threads: rayon::current_num_threads(),
         exact,

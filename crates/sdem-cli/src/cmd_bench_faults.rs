@@ -1,8 +1,8 @@
 //! `sdem bench --faults`: localization under the faults of a disaster site.
 //!
 //! For each case (no fault, each [`Fault`] alone, all together) the same number of seeded pairs
-//! ([`sdem::faults::fault_pairs`]) are localized as the robot would in the field
-//! ([`sdem::faults::localize_config`]: ±0.15 m around the odometry prior, headings within ±25°
+//! ([`sdem_sim::faults::fault_pairs`]) are localized as the robot would in the field
+//! ([`sdem_sim::faults::localize_config`]: ±0.15 m around the odometry prior, headings within ±25°
 //! of the compass) and scored against the truth: success rate (error < 2 cm), translation and
 //! rotation errors, time, and how many failures the diagnostics flagged (`ambiguous`, or an
 //! error) so the robot knows not to trust them.
@@ -10,9 +10,9 @@
 use crate::cmd_bench::Tally;
 use crate::output::print_json;
 use anyhow::{bail, Result};
-use sdem::benchmark::Stats;
-use sdem::faults::{fault_pairs, localize_fault_pair, Fault, FaultConfig};
 use sdem::sdem::SdemConfig;
+use sdem_sim::benchmark::Stats;
+use sdem_sim::faults::{fault_pairs, localize_fault_pair, Fault, FaultConfig};
 use serde::Serialize;
 use std::collections::BTreeMap;
 

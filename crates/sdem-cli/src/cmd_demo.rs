@@ -3,8 +3,8 @@
 
 use crate::output::{pose_line, print_json};
 use anyhow::{Context, Result};
-use sdem::experiment::{paper_experiment, stop_and_go_run, ExperimentConfig, RunStop, Trial};
 use sdem::geometry::{PoseRecord, Vec3};
+use sdem_sim::experiment::{paper_experiment, stop_and_go_run, ExperimentConfig, RunStop, Trial};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -112,8 +112,8 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
     let estimates: Vec<_> = stops.iter().map(|s| s.estimate).collect();
     let truths: Vec<_> = stops.iter().map(|s| s.truth).collect();
-    sdem::io::write_poses(&out.join("poses.txt"), &estimates)?;
-    sdem::io::write_poses(&out.join("poses_truth.txt"), &truths)?;
+    sdem_io::write_poses(&out.join("poses.txt"), &estimates)?;
+    sdem_io::write_poses(&out.join("poses_truth.txt"), &truths)?;
     let map: Vec<Vec3> = stops
         .iter()
         .flat_map(|s| {
@@ -123,8 +123,8 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
         })
         .map(|p| p.coords)
         .collect();
-    sdem::io::write_points_ply(&out.join("map.ply"), &map)?;
-    // Pictures and the 3D viewer page of the run's map (issue 5).
+    sdem_io::write_points_ply(&out.join("map.ply"), &map)?;
+    // Pictures and the 3D viewer page of the run's map.
     let sdem_config = sdem::sdem::SdemConfig::default();
     let nodes = stops
         .iter()
@@ -140,7 +140,7 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
         &map,
     )?;
     let text = serde_json::to_string_pretty(report)?;
-    sdem::io::write_atomic(&out.join("report.json"), |w| w.write_all(text.as_bytes()))?;
+    sdem_io::write_atomic(&out.join("report.json"), |w| w.write_all(text.as_bytes()))?;
     Ok(())
 }
 

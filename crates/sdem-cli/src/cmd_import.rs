@@ -2,7 +2,7 @@
 
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
-use sdem::io::{import_dataset, ImportFormat, ImportOptions};
+use sdem_io::{import_dataset, ImportFormat, ImportOptions};
 use std::path::PathBuf;
 
 /// Arguments of `sdem import`.
@@ -92,7 +92,7 @@ pub fn run(args: Args) -> Result<()> {
         None => ImportFormat::detect(&args.source)?,
     };
     if args.force {
-        sdem::io::clear_dataset(&args.out).with_context(|| {
+        sdem_io::clear_dataset(&args.out).with_context(|| {
             format!(
                 "cannot remove the old dataset in {} for --force",
                 args.out.display()
@@ -123,9 +123,9 @@ pub fn run(args: Args) -> Result<()> {
         println!(
             "  dropped {} points beyond {} m (no return) and {} nearer than {} m (the robot)",
             summary.dropped_far,
-            sdem::io::UOS_MAX_RANGE_M,
+            sdem_io::UOS_MAX_RANGE_M,
             summary.dropped_near,
-            sdem::io::UOS_MIN_RANGE_M
+            sdem_io::UOS_MIN_RANGE_M
         );
     }
     println!("  wrote {}", summary.written.join(", "));

@@ -4,13 +4,13 @@ use crate::output::{elapsed_ms, pose_line, print_json};
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, PoseRecord};
-use sdem::io::Dataset;
 use sdem::localize::{
     localize, Diagnostics, HeadingWindow, LocalizeConfig, OffsetPrior, RefineOutcome,
     RefinementSummary, SearchMode, SearchWindow,
 };
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::slam::Near;
+use sdem_io::Dataset;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -196,14 +196,14 @@ fn parse_prior(text: &str) -> Result<OffsetPrior> {
 
 /// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.
 fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
-    let folder = if map.join(sdem::io::MAP_MANIFEST).exists() {
+    let folder = if map.join(sdem_io::MAP_MANIFEST).exists() {
         map.to_path_buf()
     } else {
         map.join("map")
     };
-    let saved = sdem::io::load_map(&folder)?;
+    let saved = sdem_io::load_map(&folder)?;
     let scan = args.scan.as_ref().context("--map needs --scan FILE")?;
-    let points = sdem::io::read_points(scan)?;
+    let points = sdem_io::read_points(scan)?;
     let attitude = match &args.attitude {
         Some(text) => {
             let [r, p, y] = parse_triple("--attitude", text)?;

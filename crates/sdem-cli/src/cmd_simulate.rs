@@ -2,10 +2,10 @@
 
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
-use sdem::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected};
-use sdem::odometry::{simulate_odometry, OdometryNoise};
 use sdem::sensor::SensorConfig;
-use sdem::sim;
+use sdem_sim::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected};
+use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
+use sdem_sim::sim;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -158,7 +158,7 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         Some(simulate_odometry(&truth, &odometry_noise, args.seed)?)
     };
-    sdem::io::write_dataset(
+    sdem_io::write_dataset(
         &args.out,
         &sensor,
         &scans,
@@ -213,7 +213,7 @@ pub fn run(args: Args) -> Result<()> {
 
 /// Removes the files of the dataset in `root` that sdem writes (and nothing else).
 fn remove_old_dataset(root: &Path) -> Result<()> {
-    sdem::io::clear_dataset(root).with_context(|| {
+    sdem_io::clear_dataset(root).with_context(|| {
         format!(
             "cannot remove the old dataset in {} for --force",
             root.display()

@@ -3,11 +3,11 @@
 use crate::output::{elapsed_ms, pose_line, print_json};
 use anyhow::{bail, Context, Result};
 use sdem::geometry::Pose;
-use sdem::io::{
+use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamConfig, TrajectoryErrors};
+use sdem_io::{
     load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
     write_voxel_map, Dataset, NodeFiles,
 };
-use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamConfig, TrajectoryErrors};
 use serde::Serialize;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -87,7 +87,7 @@ pub fn run(args: Args) -> Result<()> {
     let start = Instant::now();
     let dataset = Dataset::open(&args.dataset)?;
     let map_dir = args.out.join(MAP_DIR);
-    let has_map = map_dir.join(sdem::io::MAP_MANIFEST).exists();
+    let has_map = map_dir.join(sdem_io::MAP_MANIFEST).exists();
     if has_map && !args.resume && !args.force {
         bail!(
             "{} already holds a map; pass --resume to continue it or --force to replace it",
@@ -98,7 +98,7 @@ pub fn run(args: Args) -> Result<()> {
         bail!(
             "--resume: {} holds no saved map ({} is missing); run without --resume",
             args.out.display(),
-            map_dir.join(sdem::io::MAP_MANIFEST).display()
+            map_dir.join(sdem_io::MAP_MANIFEST).display()
         );
     }
     std::fs::create_dir_all(&args.out)
@@ -115,7 +115,7 @@ pub fn run(args: Args) -> Result<()> {
         (slam, steps, Some(next), saved.node_files)
     } else {
         let mut config = match &args.config {
-            Some(path) => sdem::io::read_slam_config(path)?,
+            Some(path) => sdem_io::read_slam_config(path)?,
             None => {
                 let mut config = SlamConfig::default();
                 if let Some(sensor) = &dataset.sensor {

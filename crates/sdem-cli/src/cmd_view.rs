@@ -1,16 +1,16 @@
 //! `sdem view`: pictures of S-DEMs, maps and localizations for people (PNG), and the 3D viewer
-//! page. The pictures are drawn by `sdem::viz`; this module reads the inputs and writes files.
+//! page. The pictures are drawn by `sdem_viz`; this module reads the inputs and writes files.
 
 use crate::cmd_localize::parse_window;
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
-use sdem::io::{load_map, read_points, write_atomic, Dataset};
 use sdem::localize::{localize, LocalizeConfig, SearchWindow};
 use sdem::map::{LoopClosure, Map};
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::slam::SlamConfig;
-use sdem::viz::{
+use sdem_io::{load_map, read_points, write_atomic, Dataset};
+use sdem_viz::{
     cost_surface, encode_png, map_plan, map_section, sample_cost_slice, sdem_panorama,
     sdem_polar_slice, viewer_html, MapView, RgbImage, Section,
 };
@@ -133,11 +133,11 @@ pub fn run(args: Args) -> Result<()> {
         }
         What::Map(map) => {
             let map_dir = map.slam_out.join("map");
-            if !map_dir.join(sdem::io::MAP_MANIFEST).exists() {
+            if !map_dir.join(sdem_io::MAP_MANIFEST).exists() {
                 bail!(
                     "{} is not a `sdem slam` output folder: {} is missing",
                     map.slam_out.display(),
-                    map_dir.join(sdem::io::MAP_MANIFEST).display()
+                    map_dir.join(sdem_io::MAP_MANIFEST).display()
                 );
             }
             let saved = load_map(&map_dir)?;
@@ -201,7 +201,7 @@ pub fn map_name(dataset: Option<&Path>, out_dir: &Path) -> String {
 /// * `out_dir` — the folder to write into (e.g. the `sdem slam` output folder).
 /// * `name` — what the titles call the map ([`map_name`]).
 /// * `map`, `loop_closures`, `config` — the map, its loop closures and the configuration it
-///   was made with (a live `Slam`'s, or `sdem::io::load_map`'s).
+///   was made with (a live `Slam`'s, or `sdem_io::load_map`'s).
 /// * `cloud` — the fused map's points, world frame (`Slam::merged_cloud`, or `map.ply`).
 pub fn write_map_pictures(
     out_dir: &Path,

@@ -4,12 +4,12 @@
 //! Fixed seeds, so every run measures the same problem.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use sdem::benchmark::{paper_pair, PAPER_MOVE_M};
 use sdem::cost::{Correlator, CostModel};
 use sdem::geometry::Vec3;
 use sdem::localize::{
     localize, CostConfig, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow,
 };
+use sdem_sim::benchmark::{paper_pair, PAPER_MOVE_M};
 use std::hint::black_box;
 
 fn benches(c: &mut Criterion) {

@@ -1,13 +1,11 @@
-//! Speed of the robust pose-graph optimizer on the 1,000-node synthetic loop (issue 4): dead
-//! reckoning with a drifting gyro, closed by three loop-closure edges. Fixed seed
-//! ([`BENCH_SEED`]), so every run measures the same problem; `sdem bench` prints the same figure
-//! through [`sdem::posegraph::bench_1000_nodes`].
+//! Speed of the robust pose-graph optimizer on the 1,000-node synthetic loop: dead reckoning with
+//! a drifting gyro, closed by three loop-closure edges. Fixed seed ([`BENCH_SEED`]), so every run
+//! measures the same problem; `sdem bench` prints the same figure through
+//! [`sdem_sim::pose_graphs::bench_1000_nodes`].
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use sdem::posegraph::{
-    optimize, position_rmse, synthetic_loop, OptimizeConfig, SyntheticLoopConfig, BENCH_NODES,
-    BENCH_SEED,
-};
+use sdem::posegraph::{optimize, position_rmse, OptimizeConfig};
+use sdem_sim::pose_graphs::{synthetic_loop, SyntheticLoopConfig, BENCH_NODES, BENCH_SEED};
 use std::hint::black_box;
 
 fn benches(c: &mut Criterion) {

@@ -1,4 +1,4 @@
-//! Speed of the occupancy voxel map (issue 4): one scan like the simulator's (15,480 rays of
+//! Speed of the occupancy voxel map: one scan like the simulator's (15,480 rays of
 //! 2–3 m, as the tilting LRF sweeps ±90° × −45°..40°) inserted into the default 5 cm map, once
 //! into an empty map (its blocks are allocated) and again into the same map (the steady state
 //! of a long run, where the blocks exist).

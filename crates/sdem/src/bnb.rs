@@ -39,7 +39,8 @@ use rayon::prelude::*;
 
 /// The reference S-DEM's cells as the search reads them: each cell's plane (for the cone loop),
 /// and the range gates' extent over coarse blocks of cells (for cones too large to visit).
-pub(crate) struct RangeTables {
+#[doc(hidden)]
+pub struct RangeTables {
     n_az: usize,
     n_el: usize,
     full_circle: bool,
@@ -217,7 +218,8 @@ struct Group {
 
 /// The query's points at several groupings: level 0 one point per group; level `m` the points in
 /// one cube of side `2^m` cm.
-pub(crate) struct QueryGroups {
+#[doc(hidden)]
+pub struct QueryGroups {
     /// The groups of each level, one field per array (for the vectorized bound).
     balls: Vec<Balls>,
     /// The 75th-percentile group radius of each level, metres.
@@ -328,9 +330,12 @@ struct Balls {
 /// A box of candidates: inclusive index intervals per axis (x, y, z, heading), halved at powers
 /// of two (see [`Node::children`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Node {
-    lo: Index,
-    hi: Index,
+#[doc(hidden)]
+pub struct Node {
+    #[doc(hidden)]
+    pub lo: Index,
+    #[doc(hidden)]
+    pub hi: Index,
 }
 
 impl Node {
@@ -345,7 +350,8 @@ impl Node {
     /// widest axis alone 228 in 23–25 ms and 1,762 in 134–154 ms, the same minima: a thin axis
     /// (the window's ±10 cm of height) is no longer halved with the wide ones, and a box's
     /// children are no more than it takes to tell where the minimum is not.
-    fn children(&self, step: &[f64; 4]) -> Vec<Node> {
+    #[doc(hidden)]
+    pub fn children(&self, step: &[f64; 4]) -> Vec<Node> {
         let reach = |a: usize| (self.hi[a] - self.lo[a] + 1) as f64 * step[a];
         let widest = (0..4)
             .filter(|&a| self.hi[a] > self.lo[a])
@@ -400,15 +406,18 @@ const GROUP_REACH_FRACTION: f64 = 0.1;
 const SPLIT_TIE: f64 = 0.99;
 
 /// What a box's bound, taken point by point (grouping level 0), learned for the boxes inside it.
-pub(crate) struct PointHint {
+#[doc(hidden)]
+pub struct PointHint {
     /// The points whose term is `τ²` at every candidate of the box: they are `τ²` in every box
     /// inside it too, and are counted without being bounded again.
-    saturated: u32,
+    #[doc(hidden)]
+    pub saturated: u32,
     /// The other points (indices at level 0), those whose term was largest here first: a box
     /// inside whose bound passes the best cost so far is then cut short after fewer points.
     /// On the bench pairs the boxes cut short had summed 80 % of their points with the points
     /// in a scrambled order.
-    order: Vec<u32>,
+    #[doc(hidden)]
+    pub order: Vec<u32>,
 }
 
 /// A box waiting in the queue, ordered by bound, then by the estimated cost at its centre.
@@ -460,7 +469,8 @@ enum Outcome {
 /// [`runner_up`]): every box it dropped and every candidate it scored or cut short whose bound
 /// or cost lay within `ratio` × the best of the moment. With it, the second search starts where
 /// the first stopped instead of bounding the whole window again.
-pub(crate) struct Reserve {
+#[doc(hidden)]
+pub struct Reserve {
     ratio: f64,
     boxes: Vec<Pending>,
     /// Candidates, with a lower bound on their cost (their cost, when scored).
@@ -592,7 +602,8 @@ struct Shared {
 }
 
 /// The search: what it reads, the same for every worker.
-pub(crate) struct BranchAndBound<'a> {
+#[doc(hidden)]
+pub struct BranchAndBound<'a> {
     reference: &'a Sdem,
     grid: &'a CandidateGrid,
     tables: &'a RangeTables,
@@ -604,12 +615,14 @@ pub(crate) struct BranchAndBound<'a> {
     prototype: &'a Correlator<'a>,
     /// Metres per index along x, y, z and heading (a heading step times the query's median
     /// horizontal range: how far it moves a typical point), for choosing which axes to split.
-    axis_step: [f64; 4],
+    #[doc(hidden)]
+    pub axis_step: [f64; 4],
 }
 
 impl<'a> BranchAndBound<'a> {
     /// A search of `grid` for candidates costing at most `cap`.
-    fn new(prepared: &'a Prepared<'a>, grid: &'a CandidateGrid, cap: f64) -> Self {
+    #[doc(hidden)]
+    pub fn new(prepared: &'a Prepared<'a>, grid: &'a CandidateGrid, cap: f64) -> Self {
         Self {
             reference: prepared.correlator.reference(),
             grid,
@@ -889,8 +902,8 @@ impl<'a> BranchAndBound<'a> {
 
     /// A lower bound on the cost of every candidate in `node`, and an estimate of the cost at
     /// its centre (the groups' centres looked up in their cells; only for ordering the search).
-    #[cfg(test)]
-    fn bound(&self, node: &Node) -> (f64, f64) {
+    #[doc(hidden)]
+    pub fn bound(&self, node: &Node) -> (f64, f64) {
         let (bound, estimate, _) = self.bound_below(node, f64::INFINITY, None);
         (bound, estimate)
     }
@@ -926,7 +939,8 @@ impl<'a> BranchAndBound<'a> {
     /// [`Self::bound_below`] with AVX2 instructions.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn bound_below_avx2(
+    #[doc(hidden)]
+    pub unsafe fn bound_below_avx2(
         &self,
         node: &Node,
         limit: f64,
@@ -937,7 +951,8 @@ impl<'a> BranchAndBound<'a> {
 
     /// [`Self::bound_below`]'s body, inlined into each of its builds.
     #[inline(always)]
-    fn bound_below_any(
+    #[doc(hidden)]
+    pub fn bound_below_any(
         &self,
         node: &Node,
         limit: f64,
@@ -1386,7 +1401,8 @@ fn reach_bound(tables: &RangeTables, planes: &crate::sdem::CellSurfaces, g: &Rea
 /// What the search precomputes for one reference/query pair: the reference's range tables, the
 /// query's groups, and the correlator that scores candidates. Built once per localization and
 /// shared by its searches (the best and the runner-up).
-pub(crate) struct Prepared<'a> {
+#[doc(hidden)]
+pub struct Prepared<'a> {
     tables: RangeTables,
     groups: QueryGroups,
     /// The compared points' median horizontal distance from the query's origin, metres.
@@ -1428,7 +1444,8 @@ impl<'a> Prepared<'a> {
 ///
 /// With `reserve_ratio`, the search also returns what it set aside for [`runner_up`]: the boxes
 /// and candidates that may cost up to that multiple of the best.
-pub(crate) fn search(
+#[doc(hidden)]
+pub fn search(
     prepared: &Prepared,
     grid: &CandidateGrid,
     cap: f64,
@@ -1441,7 +1458,8 @@ pub(crate) fn search(
 /// `cap`, searched among what the first search set aside: the same answer as a search of the
 /// whole grid with that cap, since every box and candidate the first search dropped below the
 /// cap is in the reserve (`cap` must be at most the reserve's ratio × the first search's best).
-pub(crate) fn runner_up(
+#[doc(hidden)]
+pub fn runner_up(
     prepared: &Prepared,
     grid: &CandidateGrid,
     cap: f64,
@@ -1453,118 +1471,8 @@ pub(crate) fn runner_up(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cost::CostConfig;
-    use crate::geometry::{pose_from_parts, Attitude, Pose, Vec3};
-    use crate::localize::SearchWindow;
-    use crate::sdem::SdemConfig;
-    use crate::sensor::SensorConfig;
-    use crate::sim;
+    use crate::geometry::FAST_ATAN2_MAX_ERROR;
     use rand::SeedableRng;
-
-    /// A scan at the origin of the paper's room and one at `truth` turned by `yaw_deg`, both
-    /// coarse (2° sweeps and cells, to keep the brute-force checks quick).
-    fn coarse_pair(seed: u64, truth: Vec3, yaw_deg: f64) -> (Sdem, Sdem) {
-        let scene = sim::paper_room();
-        let sensor = SensorConfig {
-            tilt_step_deg: 2.0,
-            pan_step_deg: 2.0,
-            ..Default::default()
-        };
-        let grid_cfg = SdemConfig {
-            resolution_deg: 2.0,
-            ..Default::default()
-        };
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-        let mut at = |p: &Pose| {
-            let s = sim::scan(&scene, &sensor, p, 0.0, &mut rng);
-            let a = s.mean_attitude();
-            Sdem::from_points(&s.points_in_sensor(), &a.rotation(), &grid_cfg).unwrap()
-        };
-        let r = at(&Pose::identity());
-        let q = at(&pose_from_parts(
-            truth,
-            Attitude::from_degrees(0.0, 0.0, yaw_deg),
-        ));
-        (r, q)
-    }
-
-    /// The bound of every box is at most the smallest cost of its candidates (the property the
-    /// exactness rests on), at every box size, with and without a heading interval; and it is
-    /// tight enough near the optimum to prune most small boxes.
-    #[test]
-    fn bound_never_exceeds_the_boxes_minimum() {
-        let truth = Vec3::new(0.22, 0.36, 0.05);
-        let (r, q) = coarse_pair(1, truth, 1.0);
-        let cost = CostConfig::default();
-        let window = SearchWindow::around(&truth, [0.08, 0.08, 0.04]);
-        let yaws: Vec<f64> = (-2..=2).map(|k| (k as f64).to_radians()).collect();
-        let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-        let mut c = Correlator::new(&r, &q, &cost).unwrap();
-        let prepared = Prepared::new(&c);
-        let bnb = BranchAndBound::new(&prepared, &grid, f64::INFINITY);
-        let n = grid.counts;
-        let costs: Vec<f64> = (0..grid.len())
-            .map(|f| {
-                let i = grid.index(f);
-                c.evaluate(&grid.offset(i), grid.yaw(i))
-                    .map_or(f64::INFINITY, |x| x.cost)
-            })
-            .collect();
-        let best = costs.iter().cloned().fold(f64::INFINITY, f64::min);
-        assert!(best.is_finite());
-        for (size, yaw_size) in [
-            (1, 1),
-            (2, 1),
-            (4, 1),
-            (8, 1),
-            (2, 2),
-            (4, 5),
-            (9, 5),
-            (16, 5),
-        ] {
-            let (mut pruned, mut boxes) = (0, 0);
-            for l in (0..n[3]).step_by(yaw_size) {
-                for z in (0..n[2]).step_by(size) {
-                    for y in (0..n[1]).step_by(size) {
-                        for x in (0..n[0]).step_by(size) {
-                            let lo = [x, y, z, l];
-                            let hi = [
-                                (x + size).min(n[0]) - 1,
-                                (y + size).min(n[1]) - 1,
-                                (z + size).min(n[2]) - 1,
-                                (l + yaw_size).min(n[3]) - 1,
-                            ];
-                            let node = Node { lo, hi };
-                            let (bound, _) = bnb.bound(&node);
-                            let mut min = f64::INFINITY;
-                            for ll in lo[3]..=hi[3] {
-                                for zz in lo[2]..=hi[2] {
-                                    for yy in lo[1]..=hi[1] {
-                                        for xx in lo[0]..=hi[0] {
-                                            min = min.min(costs[grid.flat([xx, yy, zz, ll])]);
-                                        }
-                                    }
-                                }
-                            }
-                            assert!(
-                                bound <= min,
-                                "box {lo:?}..{hi:?}: bound {bound:e} above its minimum {min:e}"
-                            );
-                            boxes += 1;
-                            pruned += (bound > best) as usize;
-                        }
-                    }
-                }
-            }
-            println!("boxes of {size}^3 x {yaw_size} headings: {pruned} of {boxes} pruned");
-            if (size, yaw_size) == (2, 1) {
-                assert!(
-                    pruned * 2 > boxes,
-                    "only {pruned} of {boxes} small boxes pruned"
-                );
-            }
-        }
-    }
 
     /// Every position a member can take over a box (the translation box's corners and inside,
     /// plus a horizontal arc and an offset of up to the spread in any direction) lies in the
@@ -1658,160 +1566,5 @@ mod tests {
             azimuth_checked > 1000,
             "{azimuth_checked} of 2000 off the axis"
         );
-    }
-
-    /// The AVX2 build of the bound and the baseline one give the same bounds, estimates and
-    /// hints, bit for bit, on boxes of every size, with and without a heading interval and a
-    /// parent's hint (the search's exactness is proved against the oracle with whichever build
-    /// the machine runs; this ties the other one to it).
-    #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn both_builds_of_the_bound_agree_bit_for_bit() {
-        if !std::is_x86_feature_detected!("avx2") {
-            println!("no AVX2 here: only the baseline build runs");
-            return;
-        }
-        let truth = Vec3::new(0.22, 0.36, 0.05);
-        let (r, q) = coarse_pair(3, truth, 4.0);
-        let window = SearchWindow::around(&truth, [0.3, 0.3, 0.08]);
-        let yaws: Vec<f64> = (-8..=8).map(|k| (k as f64).to_radians()).collect();
-        let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-        let c = Correlator::new(&r, &q, &CostConfig::default()).unwrap();
-        let prepared = Prepared::new(&c);
-        let bnb = BranchAndBound::new(&prepared, &grid, f64::INFINITY);
-        let n = grid.counts;
-        let mut compared = 0;
-        for size in [1usize, 2, 3, 5, 8, 13, 31] {
-            for yaw_size in [1usize, 2, 5, 17] {
-                for x in (0..n[0]).step_by(size.max(7)) {
-                    for l in (0..n[3]).step_by(yaw_size.max(4)) {
-                        let lo = [x, x % n[1], 0, l];
-                        let hi = [
-                            (lo[0] + size).min(n[0]) - 1,
-                            (lo[1] + size).min(n[1]) - 1,
-                            (lo[2] + size).min(n[2]) - 1,
-                            (lo[3] + yaw_size).min(n[3]) - 1,
-                        ];
-                        let node = Node { lo, hi };
-                        let (b0, e0, h0) = bnb.bound_below_any(&node, f64::INFINITY, None);
-                        // SAFETY: AVX2 was found above.
-                        let (b1, e1, h1) =
-                            unsafe { bnb.bound_below_avx2(&node, f64::INFINITY, None) };
-                        assert_eq!((b0.to_bits(), e0.to_bits()), (b1.to_bits(), e1.to_bits()));
-                        assert_eq!(h0.is_some(), h1.is_some());
-                        if let (Some(h0), Some(h1)) = (h0, h1) {
-                            assert_eq!((h0.saturated, &h0.order), (h1.saturated, &h1.order));
-                            // The children's bounds with the parent's hint, cut short or not.
-                            for child in node.children(&bnb.axis_step) {
-                                for limit in [f64::INFINITY, b0 * 1.5] {
-                                    let a = bnb.bound_below_any(&child, limit, Some(&h0));
-                                    // SAFETY: as above.
-                                    let b =
-                                        unsafe { bnb.bound_below_avx2(&child, limit, Some(&h1)) };
-                                    assert_eq!(
-                                        (a.0.to_bits(), a.1.to_bits()),
-                                        (b.0.to_bits(), b.1.to_bits())
-                                    );
-                                }
-                            }
-                        }
-                        compared += 1;
-                    }
-                }
-            }
-        }
-        assert!(compared > 100, "{compared} boxes compared");
-    }
-
-    /// Every candidate's cost on `grid`, by flat index (`None`: too little overlap).
-    fn costs_of(correlator: &mut Correlator, grid: &CandidateGrid) -> Vec<Option<f64>> {
-        (0..grid.len())
-            .map(|f| {
-                let i = grid.index(f);
-                correlator
-                    .evaluate(&grid.offset(i), grid.yaw(i))
-                    .map(|c| c.cost)
-            })
-            .collect()
-    }
-
-    /// The exhaustive answer: the best candidate of `grid` (which may leave some out) costing at
-    /// most `cap`, from every candidate's cost.
-    fn oracle_below(costs: &[Option<f64>], grid: &CandidateGrid, cap: f64) -> Option<Scored> {
-        (0..grid.len())
-            .filter(|&f| !grid.excluded(grid.index(f)))
-            .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))
-            .fold(None, |b: Option<Scored>, s| match b {
-                Some(b) if !better(&s, &b) => Some(b),
-                _ => Some(s),
-            })
-    }
-
-    /// The runner-up search, continued from what the first search set aside, finds the same
-    /// candidate as the exhaustive search of the grid without the peak's neighbourhood, with the
-    /// same cap: for several ratios (so the cap sits above a few, many or no candidates).
-    #[test]
-    fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
-        let truth = Vec3::new(0.12, -0.08, 0.03);
-        let (r, q) = coarse_pair(4, truth, 2.0);
-        let cost = CostConfig::default();
-        let window = SearchWindow::around(&truth, [0.12, 0.12, 0.04]);
-        let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
-        let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-        let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
-        let prepared = Prepared::new(&correlator);
-        let costs = costs_of(&mut correlator, &grid);
-        let mut found = 0;
-        for ratio in [1.05, 1.3, 2.0, 5.0, 20.0] {
-            let (best, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(ratio));
-            let (best_cost, best_flat) = best.unwrap();
-            let mut outside = grid.clone();
-            outside.exclude = Some((grid.offset(grid.index(best_flat)), 0.03));
-            let cap = ratio * best_cost;
-            let (second, _) = runner_up(&prepared, &outside, cap, reserve.unwrap());
-            let oracle = oracle_below(&costs, &outside, cap);
-            assert_eq!(second, oracle, "ratio {ratio}");
-            found += oracle.is_some() as usize;
-        }
-        // Not vacuous: the higher caps do hold candidates.
-        assert!(found >= 2, "only {found} of the caps held a runner-up");
-    }
-
-    /// The workers share one queue and finish in any order: the minimum and the runner-up are
-    /// the exhaustive ones with one worker, with three, and with eight (more than the cores,
-    /// so that they interleave at every step).
-    #[test]
-    fn the_answers_do_not_depend_on_the_workers() {
-        let truth = Vec3::new(-0.06, 0.1, 0.02);
-        let (r, q) = coarse_pair(7, truth, -1.5);
-        let cost = CostConfig::default();
-        let window = SearchWindow::around(&truth, [0.16, 0.16, 0.04]);
-        let yaws: Vec<f64> = (-4..=4).map(|k| (0.5 * k as f64).to_radians()).collect();
-        let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-        let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
-        let prepared = Prepared::new(&correlator);
-        let costs = costs_of(&mut correlator, &grid);
-        let best = oracle_below(&costs, &grid, f64::INFINITY).unwrap();
-        let mut outside = grid.clone();
-        outside.exclude = Some((grid.offset(grid.index(best.1)), 0.03));
-        let cap = 1.5 * best.0;
-        let second = oracle_below(&costs, &outside, cap);
-        assert!(
-            second.is_some(),
-            "no runner-up below the cap: the test would be vacuous"
-        );
-        for threads in [1, 3, 8] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            let (found, found_second) = pool.install(|| {
-                let (found, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(1.5));
-                let (found_second, _) = runner_up(&prepared, &outside, cap, reserve.unwrap());
-                (found, found_second)
-            });
-            assert_eq!(found, Some(best), "{threads} workers");
-            assert_eq!(found_second, second, "{threads} workers");
-        }
     }
 }

@@ -199,7 +199,8 @@ impl CostConfig {
     }
 
     /// `τ²` in single precision, as every term is computed.
-    pub(crate) fn truncation_sq(&self) -> f32 {
+    #[doc(hidden)]
+    pub fn truncation_sq(&self) -> f32 {
         let t = self.truncation_m as f32;
         t * t
     }
@@ -225,7 +226,8 @@ pub struct Correlation {
 /// much as a mismatch, rather than being left out. So a candidate cannot win by seeing less, and
 /// each cell's term depends on that cell alone, which is what gives the exact search its bound
 /// (a normalization by the cells compared would couple every term to every other).
-pub(crate) struct CostSum {
+#[doc(hidden)]
+pub struct CostSum {
     sum: f64,
     count: usize,
     inliers: usize,
@@ -234,7 +236,8 @@ pub(crate) struct CostSum {
 }
 
 impl CostSum {
-    pub(crate) fn new(truncation_sq: f32) -> Self {
+    #[doc(hidden)]
+    pub fn new(truncation_sq: f32) -> Self {
         Self {
             sum: 0.0,
             count: 0,
@@ -245,7 +248,8 @@ impl CostSum {
     }
 
     #[inline]
-    pub(crate) fn add(&mut self, a: f32, b: f32) {
+    #[doc(hidden)]
+    pub fn add(&mut self, a: f32, b: f32) {
         // Nagatani 2003, Sec. III-C, eq. (1): the difference of the two ranges in one direction,
         // here squared and truncated (robust), summed over the query's cells.
         let e = a - b;
@@ -254,7 +258,8 @@ impl CostSum {
 
     /// A compared cell whose squared difference is `e2` (truncated here; `∞` for a mismatch).
     #[inline]
-    pub(crate) fn add_squared(&mut self, e2: f32) {
+    #[doc(hidden)]
+    pub fn add_squared(&mut self, e2: f32) {
         self.sum += e2.min(self.truncation_sq) as f64;
         self.count += 1;
         self.inliers += (e2 < self.truncation_sq) as usize;
@@ -262,18 +267,21 @@ impl CostSum {
 
     /// A query cell whose direction the reference does not see: a full mismatch.
     #[inline]
-    pub(crate) fn add_unseen(&mut self) {
+    #[doc(hidden)]
+    pub fn add_unseen(&mut self) {
         self.sum += self.truncation_sq as f64;
         self.unseen += 1;
     }
 
     /// The sum so far (never decreases: every term is >= 0).
     #[inline]
-    pub(crate) fn partial(&self) -> f64 {
+    #[doc(hidden)]
+    pub fn partial(&self) -> f64 {
         self.sum
     }
 
-    pub(crate) fn finish(self, min_overlap: usize) -> Option<Correlation> {
+    #[doc(hidden)]
+    pub fn finish(self, min_overlap: usize) -> Option<Correlation> {
         // Eq. (1) as the mean over the query's cells; too little overlap is no candidate at all.
         let total = self.count + self.unseen;
         (self.count >= min_overlap && self.count > 0).then(|| Correlation {
@@ -370,7 +378,8 @@ const BLOCK: usize = 512;
 
 /// A fixed permutation of `0..n` that spreads neighbours apart: `i ↦ i · s mod n` with a stride
 /// `s` near `n / φ` coprime to `n` (every index once).
-pub(crate) fn scrambled_order(n: usize) -> Vec<usize> {
+#[doc(hidden)]
+pub fn scrambled_order(n: usize) -> Vec<usize> {
     if n < 3 {
         return (0..n).collect();
     }
@@ -389,7 +398,8 @@ pub(crate) fn scrambled_order(n: usize) -> Vec<usize> {
 
 /// A capped evaluation's answer (see [`Correlator::evaluate_capped`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) enum Capped {
+#[doc(hidden)]
+pub enum Capped {
     /// At or below the cap.
     Scored(Correlation),
     /// Above the cap: the mean cost reached when the sum was cut short (at most the full cost).
@@ -399,7 +409,8 @@ pub(crate) enum Capped {
 }
 
 /// `Rz(yaw)` in single precision.
-pub(crate) fn yaw_matrix(yaw: f64) -> Matrix3<f32> {
+#[doc(hidden)]
+pub fn yaw_matrix(yaw: f64) -> Matrix3<f32> {
     let (s, c) = yaw.sin_cos();
     Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0).cast::<f32>()
 }
@@ -479,18 +490,21 @@ impl<'a> Correlator<'a> {
     }
 
     /// The reference S-DEM.
-    pub(crate) fn reference(&self) -> &'a Sdem {
+    #[doc(hidden)]
+    pub fn reference(&self) -> &'a Sdem {
         self.reference
     }
 
     /// `τ²` in single precision.
-    pub(crate) fn truncation_sq(&self) -> f32 {
+    #[doc(hidden)]
+    pub fn truncation_sq(&self) -> f32 {
         self.truncation_sq
     }
 
     /// The query points it compares (projective model), in the order [`search_points_of`]
     /// chose them (the correlator keeps them scrambled).
-    pub(crate) fn search_points(&self) -> Vec<[f32; 3]> {
+    #[doc(hidden)]
+    pub fn search_points(&self) -> Vec<[f32; 3]> {
         let [x, y, z] = &self.query_xyz;
         let mut points = vec![[0.0; 3]; x.len()];
         for (k, i) in scrambled_order(x.len()).into_iter().enumerate() {
@@ -508,7 +522,8 @@ impl<'a> Correlator<'a> {
     }
 
     /// The smallest prediction term over the box of offsets `lo ≤ t ≤ hi` (0 without one).
-    pub(crate) fn prior_bound(&self, lo: &Vec3, hi: &Vec3) -> f64 {
+    #[doc(hidden)]
+    pub fn prior_bound(&self, lo: &Vec3, hi: &Vec3) -> f64 {
         self.prior
             .as_ref()
             .map_or(0.0, |(p, w)| w * p.squared_distance_to_box(lo, hi))
@@ -559,7 +574,8 @@ impl<'a> Correlator<'a> {
     /// [`Self::evaluate_capped`], saying why there is no score: above the cap (with the mean
     /// cost reached when the sum was cut short, a lower bound on the full cost), or too little
     /// overlap.
-    pub(crate) fn evaluate_within(&mut self, offset: &Vec3, yaw: f64, cap: f64) -> Capped {
+    #[doc(hidden)]
+    pub fn evaluate_within(&mut self, offset: &Vec3, yaw: f64, cap: f64) -> Capped {
         match self.model {
             CostModel::Projective => self.evaluate_projective(offset, &yaw_matrix(yaw), cap),
             CostModel::VirtualSdem => match self.evaluate_virtual(offset, &yaw_matrix(yaw)) {
@@ -665,90 +681,5 @@ impl<'a> Correlator<'a> {
             cost: c.cost + prior,
             ..c
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The cap grows the cubes until the points fit, keeps a scan that fits as it is, and 0
-    /// lifts it; every chosen point is one of the scan's.
-    #[test]
-    fn search_points_respect_the_cap() {
-        let (_, _, query, _) = crate::benchmark::paper_pair().unwrap();
-        let base = CostConfig {
-            max_search_points: 0,
-            ..CostConfig::default()
-        };
-        let all = search_points_of(&query, &base);
-        assert_eq!(all, search_points(&query, base.search_voxel_m));
-        assert!(all.len() > 2000, "{}", all.len());
-        for cap in [1500, 1000, 300] {
-            let capped = search_points_of(
-                &query,
-                &CostConfig {
-                    max_search_points: cap,
-                    ..base.clone()
-                },
-            );
-            assert!(
-                capped.len() <= cap && capped.len() > cap / 3,
-                "{cap}: {}",
-                capped.len()
-            );
-            assert!(capped.iter().all(|p| query.points().contains(p)));
-        }
-        let roomy = CostConfig {
-            max_search_points: all.len(),
-            ..base
-        };
-        assert_eq!(search_points_of(&query, &roomy), all);
-    }
-
-    /// Settling runs of points that share a cube keeps, per cube, the same point as one table
-    /// lookup per point: the first of those nearest to the cube's centre (ties included: the
-    /// grid of points below puts several at one distance from a centre).
-    #[test]
-    fn search_points_keep_the_first_nearest_point_of_each_cube() {
-        use rand::{Rng, SeedableRng};
-        let one_lookup_per_point = |query: &Sdem, v: f32| -> Vec<[f32; 3]> {
-            let mut chosen: std::collections::HashMap<[i32; 3], (usize, f32)> = Default::default();
-            for (i, p) in query.points().iter().enumerate() {
-                let key = p.map(|c| (c / v).floor() as i32);
-                let off = [0, 1, 2].map(|a| p[a] - (key[a] as f32 + 0.5) * v);
-                let d = off[0] * off[0] + off[1] * off[1] + off[2] * off[2];
-                let e = chosen.entry(key).or_insert((i, d));
-                if d < e.1 {
-                    *e = (i, d);
-                }
-            }
-            let mut kept: Vec<usize> = chosen.values().map(|e| e.0).collect();
-            kept.sort_unstable();
-            kept.iter().map(|&i| query.points()[i]).collect()
-        };
-        let (_, _, paper, _) = crate::benchmark::paper_pair().unwrap();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        // Points on a lattice of 1/32 m: with cubes of 1/16, 1/8 and 1/4 m every distance is
-        // exact in f32, so many points tie for their cube.
-        let lattice: Vec<Vec3> = (0..4000)
-            .map(|_| {
-                let mut c = |n: i32| f64::from(rng.random_range(-n..n)) / 32.0;
-                Vec3::new(c(48), c(48), c(12))
-            })
-            .collect();
-        let lattice = Sdem::from_points(
-            &lattice,
-            &nalgebra::Rotation3::identity(),
-            &crate::sdem::SdemConfig::default(),
-        )
-        .unwrap();
-        for query in [&paper, &lattice] {
-            for v in [0.0625, 0.08, 0.125, 0.25, 0.3] {
-                let chosen = search_points(query, v);
-                assert!(!chosen.is_empty());
-                assert_eq!(chosen, one_lookup_per_point(query, v as f32), "cube {v} m");
-            }
-        }
     }
 }

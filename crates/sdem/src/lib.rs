@@ -9,28 +9,23 @@
 //! around candidate origins into *virtual S-DEMs* and picking the candidate whose virtual S-DEM
 //! differs least from the new one ([`localize`]).
 //!
-//! The modules hold pure algorithms over plain values, except [`io`], which reads and writes files.
+//! Every module here holds algorithms over plain values: nothing reads or writes a file or prints.
+//! File formats live in `sdem-io`, the simulator in `sdem-sim`, pictures in `sdem-viz` and the
+//! `sdem` command in `sdem-cli`.
 #![deny(missing_docs)]
 
-pub mod benchmark;
 pub mod bnb;
 pub mod cost;
 pub mod error;
-pub mod experiment;
-pub mod faults;
 pub mod geometry;
-pub mod io;
 pub mod localize;
 pub mod map;
-pub mod odometry;
 pub mod posegraph;
 pub mod refine;
 pub mod sdem;
 pub mod search;
 pub mod sensor;
-pub mod sim;
 pub mod slam;
-pub mod viz;
 pub mod voxel;
 
 pub use error::{Error, Result};

@@ -295,12 +295,14 @@ impl PartialEq for Sdem {
 #[derive(Debug, Clone)]
 pub struct CellSurfaces {
     /// Per cell; the normal is NaN where the cell is unknown.
-    pub(crate) cells: Vec<CellPlane>,
+    #[doc(hidden)]
+    pub cells: Vec<CellPlane>,
 }
 
 /// The plane of one cell.
 #[derive(Debug, Clone, Copy)]
-pub(crate) struct CellPlane {
+#[doc(hidden)]
+pub struct CellPlane {
     /// Unit normal, pointing away from the sensor (NaN: unknown cell).
     pub n: [f32; 3],
     /// `n · p` (> 0) for the cell's boundary point `p`.
@@ -326,7 +328,8 @@ impl CellSurfaces {
     /// The squared distance of `x` (at range `range = |x|`, in `cell`'s directions) from the
     /// cell's plane, `∞` where the range is out of the cell's gate, `None` for an unknown cell.
     #[inline(always)]
-    pub(crate) fn squared_distance(&self, cell: usize, x: [f32; 3], range: f32) -> Option<f32> {
+    #[doc(hidden)]
+    pub fn squared_distance(&self, cell: usize, x: [f32; 3], range: f32) -> Option<f32> {
         let c = &self.cells[cell];
         if c.n[0].is_nan() {
             return None;
@@ -570,7 +573,8 @@ impl Sdem {
 
 /// `floor` to `i32` without a library call (see [`floor_i64`]); exact for the cell indices here.
 #[inline(always)]
-pub(crate) fn floor_i32(x: f32) -> i32 {
+#[doc(hidden)]
+pub fn floor_i32(x: f32) -> i32 {
     let i = x as i32;
     i - ((i as f32) > x) as i32
 }
@@ -579,7 +583,8 @@ pub(crate) fn floor_i32(x: f32) -> i32 {
 /// `0..n`, as the columns of a direction or of a cone about it do (an integer division for every
 /// point and ball looked up cost 2–3 % of a bench pair's CPU).
 #[inline(always)]
-pub(crate) fn wrap_column(a: i32, n: i32) -> i32 {
+#[doc(hidden)]
+pub fn wrap_column(a: i32, n: i32) -> i32 {
     if a < 0 {
         if a >= -n {
             a + n

@@ -19,7 +19,8 @@ pub struct SearchWindow {
     pub max: [f64; 3],
 }
 
-pub(crate) const AXES: [&str; 3] = ["x", "y", "z"];
+#[doc(hidden)]
+pub const AXES: [&str; 3] = ["x", "y", "z"];
 
 impl SearchWindow {
     /// The paper's window (Sec. V, P-3): x −0.5..0.5, y −0.3..0.6, z −0.1..0.1 m.
@@ -146,7 +147,8 @@ pub fn matched_heading_step(query: &Sdem, step_m: f64) -> f64 {
 
 /// The regular grid of candidates: translation on `counts[0..3]`, heading on `yaws`.
 #[derive(Debug, Clone)]
-pub(crate) struct CandidateGrid {
+#[doc(hidden)]
+pub struct CandidateGrid {
     pub min: [f64; 3],
     pub step: f64,
     pub counts: [usize; 4],
@@ -157,7 +159,8 @@ pub(crate) struct CandidateGrid {
 }
 
 /// Integer coordinates of a candidate: x, y, z, heading.
-pub(crate) type Index = [usize; 4];
+#[doc(hidden)]
+pub type Index = [usize; 4];
 
 impl CandidateGrid {
     pub fn new(window: &SearchWindow, step: f64, yaws: Vec<f64>) -> Result<Self> {
@@ -214,6 +217,11 @@ impl CandidateGrid {
 
     pub fn len(&self) -> usize {
         self.counts.iter().product()
+    }
+
+    /// Whether the grid has no candidate.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
     }
 
     pub fn index(&self, flat: usize) -> Index {
@@ -278,14 +286,17 @@ impl CandidateGrid {
 
 /// A scored candidate: `(cost, flat index)`, ordered by cost then index so every search breaks
 /// ties the same way.
-pub(crate) type Scored = (f64, usize);
+#[doc(hidden)]
+pub type Scored = (f64, usize);
 
-pub(crate) fn better(a: &Scored, b: &Scored) -> bool {
+#[doc(hidden)]
+pub fn better(a: &Scored, b: &Scored) -> bool {
     a.0 < b.0 || (a.0 == b.0 && a.1 < b.1)
 }
 
 /// Scores candidates in parallel and memoizes them, so each is evaluated once.
-pub(crate) struct Evaluator<'a> {
+#[doc(hidden)]
+pub struct Evaluator<'a> {
     pub grid: &'a CandidateGrid,
     pub memo: HashMap<usize, Option<Correlation>>,
     /// Candidates scored so far.

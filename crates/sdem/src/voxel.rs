@@ -26,7 +26,7 @@ pub type VoxelKey = [i32; 3];
 
 /// Keys beyond this magnitude are not used, so that key arithmetic never overflows (at 5 cm this
 /// is ±50,000 km).
-pub(crate) const MAX_KEY: f64 = 1e9;
+pub const MAX_KEY: f64 = 1e9;
 
 /// The log-odds `ln(p / (1 − p))` of a probability.
 fn logit(p: f64) -> f64 {
@@ -186,7 +186,8 @@ fn split_key(key: VoxelKey) -> (VoxelKey, usize) {
 /// A key wrapped so that it hashes as one `u64` write (the std array hash writes a length and a
 /// byte slice).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) struct Key(pub(crate) VoxelKey);
+#[doc(hidden)]
+pub struct Key(pub(crate) VoxelKey);
 
 impl Hash for Key {
     #[inline]
@@ -211,7 +212,8 @@ fn folded_multiply(a: u64, b: u64) -> u64 {
 /// The hasher of the voxel table: the key's hash already mixes all bits, so this only passes it
 /// on.
 #[derive(Default)]
-pub(crate) struct KeyHasher(u64);
+#[doc(hidden)]
+pub struct KeyHasher(u64);
 
 impl Hasher for KeyHasher {
     #[inline]
@@ -235,7 +237,8 @@ impl Hasher for KeyHasher {
 }
 
 /// A hash map keyed by integer voxel coordinates (also used by the refinement's neighbour grid).
-pub(crate) type KeyMap<V> = HashMap<Key, V, BuildHasherDefault<KeyHasher>>;
+#[doc(hidden)]
+pub type KeyMap<V> = HashMap<Key, V, BuildHasherDefault<KeyHasher>>;
 
 /// A sparse occupancy voxel map (see the module documentation).
 #[derive(Debug, Clone)]

@@ -1,0 +1,217 @@
+//! Bad input at the command line: a dataset, saved map or import source with a malformed
+//! file makes `sdem` exit with status 1 and one line on stderr that names the file and the place
+//! (line, element or byte offset) — never a panic, never a result computed from garbage. The
+//! readers' own table of malformed inputs is `crates/sdem-io/tests/bad_input.rs`.
+
+mod common;
+
+use common::run_err;
+use sdem::geometry::{pose_from_parts, Attitude, Vec3};
+use sdem::map::{Map, Node};
+use std::path::Path;
+
+fn s(path: &Path) -> &str {
+    path.to_str().expect("temporary paths are UTF-8")
+}
+
+/// A small dataset of `.xyz` scans with attitude.csv and sensor.toml, in `DIR/ds`. The scans
+/// are valid; each test damages one file.
+fn dataset(dir: &Path) -> std::path::PathBuf {
+    let ds = dir.join("ds");
+    std::fs::create_dir_all(ds.join("scans")).unwrap();
+    let mut scan = String::new();
+    for i in 0..200 {
+        let a = f64::from(i) * 0.0314;
+        scan.push_str(&format!(
+            "{} {} {}\n",
+            3.0 * a.cos(),
+            2.0 * a.sin(),
+            0.5 * (3.0 * a).sin()
+        ));
+    }
+    for i in 0..3 {
+        std::fs::write(ds.join(format!("scans/{i:06}.xyz")), &scan).unwrap();
+    }
+    std::fs::write(
+        ds.join("attitude.csv"),
+        "index,roll_deg,pitch_deg,yaw_deg\n0,0.5,-1,10\n1,0.5,-1,12\n2,0.5,-1,14\n",
+    )
+    .unwrap();
+    std::fs::write(ds.join("sensor.toml"), "max_range_m = 8.0\n").unwrap();
+    ds
+}
+
+/// The one-line error of `sdem ARGS` (exit status 1, nothing on stdout, no panic), which must
+/// contain every one of `wanted`.
+fn error_naming(dir: &Path, args: &[&str], wanted: &[&str]) -> String {
+    let line = run_err(dir, args);
+    for w in wanted {
+        assert!(line.contains(w), "sdem {args:?}: {line:?} lacks {w:?}");
+    }
+    line
+}
+
+#[test]
+fn localize_names_a_nan_coordinate_in_a_scan() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    std::fs::write(ds.join("scans/000001.xyz"), "1 2 0.5\n1 nan 0.5\n").unwrap();
+    let args = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    error_naming(dir.path(), &args, &["000001.xyz:2:", "NaN"]);
+}
+
+#[test]
+fn localize_names_a_bad_sensor_toml() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    std::fs::write(
+        ds.join("sensor.toml"),
+        "max_range_m = 8.0\nmin_range_m = nan\n",
+    )
+    .unwrap();
+    let args = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    error_naming(dir.path(), &args, &["sensor.toml:2:", "min_range_m"]);
+    std::fs::write(ds.join("sensor.toml"), "").unwrap();
+    error_naming(dir.path(), &args, &["sensor.toml", "empty"]);
+}
+
+#[test]
+fn localize_refuses_a_scan_in_millimetres() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    let text = std::fs::read_to_string(ds.join("scans/000000.xyz")).unwrap();
+    let mm: String = text
+        .lines()
+        .map(|l| {
+            let v: Vec<String> = l
+                .split(' ')
+                .map(|x| (x.parse::<f64>().unwrap() * 1000.0).to_string())
+                .collect();
+            v.join(" ") + "\n"
+        })
+        .collect();
+    std::fs::write(ds.join("scans/000000.xyz"), mm).unwrap();
+    let args = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    error_naming(dir.path(), &args, &["000000.xyz", "millimetres"]);
+}
+
+#[test]
+fn slam_names_a_bad_attitude_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    let out = dir.path().join("out");
+    // Hundredths of a degree where degrees are expected (a robot on a 12° slope; a nearly
+    // level one would read within ±360 and could not be told apart).
+    std::fs::write(
+        ds.join("attitude.csv"),
+        "index,roll_deg,pitch_deg,yaw_deg\n0,50,-100,1000\n1,500,-1200,1200\n2,50,-100,1400\n",
+    )
+    .unwrap();
+    let args = ["slam", s(&ds), "--out", s(&out)];
+    error_naming(dir.path(), &args, &["attitude.csv:3:", "roll"]);
+    // A row cut short.
+    std::fs::write(
+        ds.join("attitude.csv"),
+        "index,roll_deg,pitch_deg,yaw_deg\n0,0.5,-1,10\n1,0.5,",
+    )
+    .unwrap();
+    error_naming(dir.path(), &args, &["attitude.csv:3:"]);
+    assert!(
+        !out.join("map").exists(),
+        "nothing may be mapped from a bad dataset"
+    );
+}
+
+#[test]
+fn slam_names_a_bad_config_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    let out = dir.path().join("out");
+    let config = dir.path().join("slam.toml");
+    let args = ["slam", s(&ds), "--out", s(&out), "--config", s(&config)];
+    std::fs::write(&config, "heading_half_deg = 3.0\nheading_hlaf_deg = 4.0\n").unwrap();
+    error_naming(dir.path(), &args, &["slam.toml:2:", "heading_hlaf_deg"]);
+    std::fs::write(&config, "[voxel]\nvoxel_m = nan\n").unwrap();
+    error_naming(dir.path(), &args, &["slam.toml:2:", "voxel_m"]);
+}
+
+#[test]
+fn slam_names_a_truncated_binary_scan() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dataset(dir.path());
+    let out = dir.path().join("out");
+    for i in 0..3 {
+        std::fs::remove_file(ds.join(format!("scans/{i:06}.xyz"))).unwrap();
+        let points: Vec<Vec3> = (0..200)
+            .map(|k| {
+                let a = f64::from(k) * 0.0314;
+                Vec3::new(3.0 * a.cos(), 2.0 * a.sin(), 0.5)
+            })
+            .collect();
+        sdem_io::write_points_ply(&ds.join(format!("scans/{i:06}.ply")), &points).unwrap();
+    }
+    let first = ds.join("scans/000000.ply");
+    let bytes = std::fs::read(&first).unwrap();
+    std::fs::write(&first, &bytes[..bytes.len() - 7]).unwrap();
+    let args = ["slam", s(&ds), "--out", s(&out)];
+    error_naming(
+        dir.path(),
+        &args,
+        &["000000.ply:4:", "'vertex' element 199", "byte offset"],
+    );
+}
+
+#[test]
+fn localize_map_names_a_damaged_node_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let map_dir = dir.path().join("map");
+    let nodes: Vec<Node> = (0..2)
+        .map(|i| Node {
+            node_id: i,
+            scan_index: i,
+            world_from_sensor: pose_from_parts(
+                Vec3::new(0.5 * i as f64, 0.0, 0.0),
+                Attitude::default(),
+            ),
+            attitude_reading: None,
+            points_in_sensor: (0..50).map(|k| [k as f32 * 0.1, 1.0, 0.3]).collect(),
+        })
+        .collect();
+    sdem_io::save_map(
+        &map_dir,
+        &mut sdem_io::NodeFiles::default(),
+        &sdem::slam::SlamConfig::default(),
+        &Map { nodes },
+        &[],
+        &[],
+        None,
+    )
+    .unwrap();
+    let node = map_dir.join("nodes/000001.pts");
+    let bytes = std::fs::read(&node).unwrap();
+    std::fs::write(&node, &bytes[..bytes.len() - 7]).unwrap();
+    let scan = dir.path().join("scan.xyz");
+    std::fs::write(&scan, "1 2 0.5\n-3 0.25 1.5\n2 -1 -0.5\n").unwrap();
+    let args = ["localize", "--map", s(&map_dir), "--scan", s(&scan)];
+    error_naming(dir.path(), &args, &["000001.pts", "truncated"]);
+}
+
+#[test]
+fn import_names_a_bad_3dtk_pose() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = dir.path().join("uos");
+    std::fs::create_dir_all(&source).unwrap();
+    for i in 0..2 {
+        std::fs::write(
+            source.join(format!("scan{i:03}.3d")),
+            "100 50 200\n-150 20 300\n80 -10 -250\n",
+        )
+        .unwrap();
+        std::fs::write(source.join(format!("scan{i:03}.pose")), "0 0 0\n0 0 0\n").unwrap();
+    }
+    std::fs::write(source.join("scan001.pose"), "0 0 inf\n0 0 0\n").unwrap();
+    let out = dir.path().join("out");
+    let args = ["import", s(&source), "--out", s(&out)];
+    error_naming(dir.path(), &args, &["scan001.pose:1:"]);
+    assert!(!out.join("scans").exists(), "nothing may be imported");
+}

@@ -1,0 +1,689 @@
+//! Dataset folders (DESIGN.md, "Dataset folder"): `scans/`, optional `sweeps/`, optional
+//! `attitude.csv`, optional `odometry.txt` and `poses_truth.txt` (+ `.tum`), optional
+//! `sensor.toml`.
+
+use super::{
+    read_attitude_csv, read_kitti_poses, read_points, read_sensor_toml, read_sweep,
+    write_attitude_csv, write_points_ply, write_poses, write_sensor_toml, write_sweep, PointFormat,
+    POINT_EXTENSIONS,
+};
+use sdem::error::{Error, Result};
+use sdem::geometry::{Attitude, Pose, Vec3};
+use sdem::sensor::{SensorConfig, Sweep};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// The folder of point clouds, one file per stop.
+pub const SCANS_DIR: &str = "scans";
+/// The optional folder of raw sweeps, `NNNNNN.sweep` beside `scans/NNNNNN.*`.
+pub const SWEEPS_DIR: &str = "sweeps";
+/// The optional attitude file (the gyro/compass reading per scan).
+pub const ATTITUDE_FILE: &str = "attitude.csv";
+/// The optional dead-reckoned `world_from_sensor` poses (KITTI; a `.tum` twin is written beside
+/// it). Only the relative motion between consecutive scans is meant to be used.
+pub const ODOMETRY_FILE: &str = "odometry.txt";
+/// The optional slam6D result of an imported 3DTK folder (KITTI; a `.tum` twin beside it): a
+/// reference for comparison, not ground truth.
+pub const SLAM6D_FILE: &str = "poses_slam6d.txt";
+/// The optional ground-truth poses (KITTI; a `.tum` twin is written beside it).
+pub const TRUTH_FILE: &str = "poses_truth.txt";
+/// The optional sensor model.
+pub const SENSOR_FILE: &str = "sensor.toml";
+
+/// A dataset folder, opened: the scan files (not yet read) and, when the folder has them, the
+/// attitude, odometry and true pose of each scan and the sensor model.
+#[derive(Debug, Clone)]
+pub struct Dataset {
+    /// The dataset folder.
+    pub root: PathBuf,
+    /// One point-cloud file per stop, in `scans/`, sorted by file name.
+    pub scan_paths: Vec<PathBuf>,
+    /// The gyro/compass attitude of each scan, from `attitude.csv`, when present (one per scan).
+    ///
+    /// Without it there is no attitude measurement: a single localization takes the level
+    /// attitude (roll = pitch = yaw = 0, see [`Dataset::attitude_or_level`]), and the SLAM loop
+    /// takes the previous scan's estimated attitude as the prior of the next one and searches
+    /// heading wider, since no compass bounds it.
+    pub attitudes: Option<Vec<Attitude>>,
+    /// The robot's dead-reckoned `world_from_sensor` of each scan, from `odometry.txt`, when
+    /// present (one per scan). Odometry drifts: only the relative motion between consecutive
+    /// scans, `odometry[i - 1].inverse() * odometry[i]`, is meant to be used, as a prior.
+    pub odometry: Option<Vec<Pose>>,
+    /// The true `world_from_sensor` of each scan, from `poses_truth.txt`, when present.
+    pub truth: Option<Vec<Pose>>,
+    /// The sensor model from `sensor.toml`, when present.
+    pub sensor: Option<SensorConfig>,
+}
+
+fn is_hidden(path: &Path) -> bool {
+    path.file_name()
+        .and_then(|n| n.to_str())
+        .is_none_or(|n| n.starts_with('.'))
+}
+
+/// The visible regular files of `folder` that have a point-cloud extension, sorted by name.
+fn point_files(folder: &Path) -> Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| Error::io(folder, e))?.path();
+        if is_hidden(&path) || PointFormat::from_path(&path).is_none() || !path.is_file() {
+            continue;
+        }
+        files.push(path);
+    }
+    files.sort();
+    Ok(files)
+}
+
+impl Dataset {
+    /// Opens a dataset folder: lists `scans/` and reads `attitude.csv`, `odometry.txt`,
+    /// `poses_truth.txt` and `sensor.toml` when present. Point clouds are read later, one at a
+    /// time, by [`Dataset::load_scan`].
+    ///
+    /// In `scans/`, files with a point-cloud extension ([`POINT_EXTENSIONS`]) are the scans,
+    /// sorted by file name; hidden files and other files are ignored. Errors: no `scans/` folder,
+    /// no scan in it, two scans with the same name stem (`000001.ply` and `000001.pcd`), a row
+    /// count in `attitude.csv`, `odometry.txt` or `poses_truth.txt` different from the scan count
+    /// (the message names the file and both counts), and any error reading those files.
+    ///
+    /// # Example
+    /// ```
+    /// # let dir = std::env::temp_dir().join(format!("sdem-doc-dataset-{}", std::process::id()));
+    /// use sdem::geometry::{Attitude, Vec3};
+    /// let scans = vec![(vec![Vec3::new(1.0, 0.0, 0.0)], Attitude::default())];
+    /// sdem_io::write_dataset(&dir, &Default::default(), &scans, None, None, None).unwrap();
+    /// let dataset = sdem_io::Dataset::open(&dir).unwrap();
+    /// assert_eq!(dataset.len(), 1);
+    /// assert_eq!(dataset.load_scan(0).unwrap(), scans[0].0);
+    /// # std::fs::remove_dir_all(&dir).unwrap();
+    /// ```
+    pub fn open(root: &Path) -> Result<Dataset> {
+        let scans_dir = root.join(SCANS_DIR);
+        if !scans_dir.is_dir() {
+            let what = if root.is_dir() {
+                "has no scans/ folder"
+            } else {
+                "is not a folder"
+            };
+            return Err(Error::Invalid(format!(
+                "{} {what}; a dataset needs {} holding one point-cloud file per stop (.{})",
+                root.display(),
+                scans_dir.display(),
+                POINT_EXTENSIONS.join(", .")
+            )));
+        }
+        let scan_paths = point_files(&scans_dir)?;
+        if scan_paths.is_empty() {
+            return Err(Error::Invalid(format!(
+                "{} holds no point-cloud file; put one file per stop there (.{})",
+                scans_dir.display(),
+                POINT_EXTENSIONS.join(", .")
+            )));
+        }
+        let mut stems: HashMap<&std::ffi::OsStr, &Path> = HashMap::new();
+        for path in &scan_paths {
+            if let Some(stem) = path.file_stem() {
+                if let Some(other) = stems.insert(stem, path) {
+                    return Err(Error::Invalid(format!(
+                        "{} and {} are two scans of the same stop; keep one",
+                        other.display(),
+                        path.display()
+                    )));
+                }
+            }
+        }
+
+        let attitude_path = root.join(ATTITUDE_FILE);
+        let attitudes = if attitude_path.exists() {
+            let attitudes = read_attitude_csv(&attitude_path)?;
+            if attitudes.len() != scan_paths.len() {
+                return Err(Error::Invalid(format!(
+                    "{} has {} rows but {} holds {} scans; they must match one to one",
+                    attitude_path.display(),
+                    attitudes.len(),
+                    scans_dir.display(),
+                    scan_paths.len()
+                )));
+            }
+            Some(attitudes)
+        } else {
+            None
+        };
+        let odometry = read_poses_if_present(&root.join(ODOMETRY_FILE), &scans_dir, &scan_paths)?;
+        let truth = read_poses_if_present(&root.join(TRUTH_FILE), &scans_dir, &scan_paths)?;
+
+        let sensor_path = root.join(SENSOR_FILE);
+        let sensor = if sensor_path.exists() {
+            Some(read_sensor_toml(&sensor_path)?)
+        } else {
+            None
+        };
+
+        Ok(Dataset {
+            root: root.to_path_buf(),
+            scan_paths,
+            attitudes,
+            odometry,
+            truth,
+            sensor,
+        })
+    }
+
+    /// The gyro/compass attitude of scan `index`, or the level attitude (roll = pitch = yaw = 0)
+    /// when the dataset has no `attitude.csv`. `None` when `index` is out of range.
+    pub fn attitude_or_level(&self, index: usize) -> Option<Attitude> {
+        if index >= self.len() {
+            return None;
+        }
+        Some(
+            self.attitudes
+                .as_ref()
+                .and_then(|a| a.get(index).copied())
+                .unwrap_or_default(),
+        )
+    }
+
+    /// The number of scans.
+    pub fn len(&self) -> usize {
+        self.scan_paths.len()
+    }
+
+    /// True when the dataset has no scans (an opened dataset always has at least one).
+    pub fn is_empty(&self) -> bool {
+        self.scan_paths.is_empty()
+    }
+
+    fn check_index(&self, index: usize) -> Result<&PathBuf> {
+        self.scan_paths.get(index).ok_or_else(|| {
+            Error::Invalid(format!(
+                "scan index {index} is out of range: {} has scans 0..={}",
+                self.root.display(),
+                self.len().saturating_sub(1)
+            ))
+        })
+    }
+
+    /// Reads scan `index` (0-based): its points in the sensor frame, metres.
+    pub fn load_scan(&self, index: usize) -> Result<Vec<Vec3>> {
+        read_points(self.check_index(index)?)
+    }
+
+    /// The raw sweep of scan `index` from `sweeps/STEM.sweep`, where `STEM` is the scan file's
+    /// name without extension; `None` when the dataset has no such file.
+    pub fn load_sweep(&self, index: usize) -> Result<Option<Sweep>> {
+        let scan = self.check_index(index)?;
+        let Some(stem) = scan.file_stem() else {
+            return Ok(None);
+        };
+        let mut name = stem.to_os_string();
+        name.push(".sweep");
+        let path = self.root.join(SWEEPS_DIR).join(name);
+        if path.is_file() {
+            read_sweep(&path).map(Some)
+        } else {
+            Ok(None)
+        }
+    }
+}
+
+/// Reads a KITTI pose file of the dataset when it exists, checking one pose per scan.
+fn read_poses_if_present(
+    path: &Path,
+    scans_dir: &Path,
+    scan_paths: &[PathBuf],
+) -> Result<Option<Vec<Pose>>> {
+    if !path.exists() {
+        return Ok(None);
+    }
+    let poses = read_kitti_poses(path)?;
+    if poses.len() != scan_paths.len() {
+        return Err(Error::Invalid(format!(
+            "{} has {} poses but {} holds {} scans; they must match one to one",
+            path.display(),
+            poses.len(),
+            scans_dir.display(),
+            scan_paths.len()
+        )));
+    }
+    Ok(Some(poses))
+}
+
+/// Refuses to write into a folder whose existing files would silently become part of the new
+/// dataset: point-cloud or sweep files that this write does not replace.
+fn check_no_stale(folder: &Path, keep: &[String], what: &str) -> Result<()> {
+    if !folder.is_dir() {
+        return Ok(());
+    }
+    let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
+    for entry in entries {
+        let path = entry.map_err(|e| Error::io(folder, e))?.path();
+        if is_hidden(&path) || !path.is_file() || PointFormat::from_path(&path).is_none() {
+            continue;
+        }
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default();
+        if !keep.iter().any(|k| k == name) {
+            return Err(Error::Invalid(format!(
+                "{} already exists and is not part of the dataset being written ({what}); write \
+                 into an empty folder or remove it",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Refuses to write a dataset without the optional pose file `name` while an old one is left in
+/// `root`: it would silently become part of the new dataset.
+pub(crate) fn check_no_stale_file(root: &Path, name: &str, what: &str) -> Result<()> {
+    let path = root.join(name);
+    if path.exists() {
+        return Err(Error::Invalid(format!(
+            "cannot write dataset {}: {} is left from an earlier dataset and this one has no \
+             {what}; remove it or write into an empty folder",
+            root.display(),
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Checks that an optional per-scan list has one entry per scan.
+fn check_count(root: &Path, what: &str, count: Option<usize>, scans: usize) -> Result<()> {
+    match count {
+        Some(n) if n != scans => Err(Error::Invalid(format!(
+            "cannot write dataset {}: {n} {what} for {scans} scans; they must match one to one",
+            root.display()
+        ))),
+        _ => Ok(()),
+    }
+}
+
+/// Writes a dataset folder: `scans/000000.ply`, … (binary PLY), `attitude.csv`, `sensor.toml`,
+/// and when given `sweeps/000000.sweep`, …, `poses_truth.txt` with `poses_truth.tum` and
+/// `odometry.txt` with `odometry.tum`. Folders are created as needed and every file is written
+/// atomically.
+///
+/// # Arguments
+/// * `root` — the dataset folder (created if missing).
+/// * `sensor` — the sensor model, written as `sensor.toml`.
+/// * `scans` — per stop, the points in the sensor frame (metres) and the measured attitude.
+/// * `sweeps` — optional raw sweeps, one per scan.
+/// * `truth` — optional true `world_from_sensor` poses, one per scan.
+/// * `odometry` — optional dead-reckoned `world_from_sensor` poses, one per scan.
+///
+/// Errors: no scans; `sweeps`, `truth` or `odometry` of another length than `scans`; an empty or
+/// non-finite scan or attitude; and, to keep an old dataset's files from mixing into the new one,
+/// a point-cloud file in `scans/` (or a sweep in `sweeps/`) that this write would not replace, or
+/// a `poses_truth.txt` (`odometry.txt`) left over when `truth` (`odometry`) is `None` — all
+/// checked before anything is written.
+pub fn write_dataset(
+    root: &Path,
+    sensor: &SensorConfig,
+    scans: &[(Vec<Vec3>, Attitude)],
+    sweeps: Option<&[Sweep]>,
+    truth: Option<&[Pose]>,
+    odometry: Option<&[Pose]>,
+) -> Result<()> {
+    if scans.is_empty() {
+        return Err(Error::Invalid(format!(
+            "cannot write dataset {}: there are no scans",
+            root.display()
+        )));
+    }
+    check_count(root, "sweeps", sweeps.map(<[_]>::len), scans.len())?;
+    check_count(root, "truth poses", truth.map(<[_]>::len), scans.len())?;
+    check_count(
+        root,
+        "odometry poses",
+        odometry.map(<[_]>::len),
+        scans.len(),
+    )?;
+    sensor.validate()?;
+
+    let scans_dir = root.join(SCANS_DIR);
+    let sweeps_dir = root.join(SWEEPS_DIR);
+    let names =
+        |ext: &str| -> Vec<String> { (0..scans.len()).map(|i| format!("{i:06}.{ext}")).collect() };
+    let scan_names = names("ply");
+    let sweep_names = if sweeps.is_some() {
+        names("sweep")
+    } else {
+        Vec::new()
+    };
+    check_no_stale(&scans_dir, &scan_names, "a scan")?;
+    check_no_stale(&sweeps_dir, &sweep_names, "a raw sweep")?;
+    if truth.is_none() {
+        check_no_stale_file(root, TRUTH_FILE, "truth")?;
+    }
+    if odometry.is_none() {
+        check_no_stale_file(root, ODOMETRY_FILE, "odometry")?;
+    }
+
+    std::fs::create_dir_all(&scans_dir).map_err(|e| Error::io(&scans_dir, e))?;
+    for ((points, _), name) in scans.iter().zip(&scan_names) {
+        write_points_ply(&scans_dir.join(name), points)?;
+    }
+    if let Some(sweeps) = sweeps {
+        std::fs::create_dir_all(&sweeps_dir).map_err(|e| Error::io(&sweeps_dir, e))?;
+        for (sweep, name) in sweeps.iter().zip(&sweep_names) {
+            write_sweep(&sweeps_dir.join(name), sweep)?;
+        }
+    }
+    let attitudes: Vec<Attitude> = scans.iter().map(|(_, a)| *a).collect();
+    write_attitude_csv(&root.join(ATTITUDE_FILE), &attitudes)?;
+    if let Some(truth) = truth {
+        write_poses(&root.join(TRUTH_FILE), truth)?;
+    }
+    if let Some(odometry) = odometry {
+        write_poses(&root.join(ODOMETRY_FILE), odometry)?;
+    }
+    write_sensor_toml(&root.join(SENSOR_FILE), sensor)
+}
+
+/// The files and folders of a dataset folder that sdem writes (`scans/`, `sweeps/`,
+/// `attitude.csv`, the pose files with their `.tum` twins, `sensor.toml`).
+pub const DATASET_ENTRIES: &[&str] = &[
+    SCANS_DIR,
+    SWEEPS_DIR,
+    ATTITUDE_FILE,
+    TRUTH_FILE,
+    "poses_truth.tum",
+    ODOMETRY_FILE,
+    "odometry.tum",
+    SLAM6D_FILE,
+    "poses_slam6d.tum",
+    SENSOR_FILE,
+];
+
+/// Removes from `root` the dataset entries listed in [`DATASET_ENTRIES`] (and nothing else), so
+/// that a new dataset can be written there without mixing with the old one. Entries that do not
+/// exist are skipped; a missing `root` is fine.
+///
+/// # Example
+/// ```
+/// # let dir = std::env::temp_dir().join(format!("sdem-doc-clear-{}", std::process::id()));
+/// use sdem::geometry::{Attitude, Vec3};
+/// let scans = vec![(vec![Vec3::new(1.0, 0.0, 0.0)], Attitude::default())];
+/// sdem_io::write_dataset(&dir, &Default::default(), &scans, None, None, None).unwrap();
+/// std::fs::write(dir.join("notes.md"), "mine").unwrap();
+/// sdem_io::clear_dataset(&dir).unwrap();
+/// assert!(!dir.join("scans").exists() && dir.join("notes.md").exists());
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// ```
+pub fn clear_dataset(root: &Path) -> Result<()> {
+    for name in DATASET_ENTRIES {
+        let path = root.join(name);
+        let Ok(meta) = std::fs::symlink_metadata(&path) else {
+            continue;
+        };
+        let removed = if meta.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed.map_err(|e| Error::io(&path, e))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sdem::geometry::{pose_error, pose_from_parts};
+    use sdem::sensor::SweepLine;
+
+    fn scans(n: usize) -> Vec<(Vec<Vec3>, Attitude)> {
+        (0..n)
+            .map(|i| {
+                let points = (0..10)
+                    .map(|k| Vec3::new(k as f64 * 0.5, i as f64, 1.0 - k as f64 * 0.125))
+                    .collect();
+                (
+                    points,
+                    Attitude::from_degrees(0.5 * i as f64, -1.0, 10.0 * i as f64),
+                )
+            })
+            .collect()
+    }
+
+    fn sweep() -> Sweep {
+        Sweep {
+            pan_min_deg: -90.0,
+            pan_step_deg: 90.0,
+            lift_slide_m: 0.3,
+            lines: vec![SweepLine {
+                tilt_deg: 0.0,
+                attitude: Attitude::default(),
+                ranges: vec![1.0, f32::NAN, 2.0],
+            }],
+        }
+    }
+
+    #[test]
+    fn write_then_open_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("run");
+        let scans = scans(3);
+        let truth: Vec<Pose> = (0..3)
+            .map(|i| pose_from_parts(Vec3::new(i as f64, 0.1, 0.0), scans[i].1))
+            .collect();
+        let sweeps = vec![sweep(); 3];
+        let sensor = SensorConfig {
+            trusted_range_m: Some(3.0),
+            ..Default::default()
+        };
+        let odometry: Vec<Pose> = truth
+            .iter()
+            .map(|t| Pose::translation(0.01, 0.0, 0.0) * t)
+            .collect();
+        write_dataset(
+            &root,
+            &sensor,
+            &scans,
+            Some(&sweeps),
+            Some(&truth),
+            Some(&odometry),
+        )
+        .unwrap();
+        assert!(root.join("poses_truth.tum").is_file());
+        assert!(root.join("odometry.tum").is_file());
+
+        let dataset = Dataset::open(&root).unwrap();
+        assert_eq!(dataset.len(), 3);
+        assert!(!dataset.is_empty());
+        assert_eq!(dataset.scan_paths[2], root.join("scans/000002.ply"));
+        assert_eq!(dataset.sensor, Some(sensor.clone()));
+        for (i, (points, attitude)) in scans.iter().enumerate() {
+            assert_eq!(&dataset.load_scan(i).unwrap(), points);
+            let a = dataset.attitudes.as_ref().unwrap()[i];
+            assert_eq!(dataset.attitude_or_level(i), Some(a));
+            assert!((a.yaw - attitude.yaw).abs() < 1e-12 && (a.roll - attitude.roll).abs() < 1e-12);
+            let (dt, dr) = pose_error(&truth[i], &dataset.truth.as_ref().unwrap()[i]);
+            assert!(dt < 1e-9 && dr < 1e-9);
+            let (dt, dr) = pose_error(&odometry[i], &dataset.odometry.as_ref().unwrap()[i]);
+            assert!(dt < 1e-9 && dr < 1e-9);
+            assert_eq!(dataset.load_sweep(i).unwrap().unwrap().lines.len(), 1);
+        }
+
+        // Writing again over the same dataset is fine; a smaller one without truth is refused
+        // (stale scans and truth), before anything is written.
+        write_dataset(
+            &root,
+            &sensor,
+            &scans,
+            Some(&sweeps),
+            Some(&truth),
+            Some(&odometry),
+        )
+        .unwrap();
+        let err = write_dataset(&root, &sensor, &scans[..2], None, None, None).unwrap_err();
+        assert!(err.to_string().contains("000002.ply"), "{err}");
+        assert_eq!(Dataset::open(&root).unwrap().len(), 3);
+        // Same scans, truth, no odometry: the old odometry.txt is refused.
+        let err = write_dataset(&root, &sensor, &scans, Some(&sweeps), Some(&truth), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("odometry.txt") && err.contains("odometry"),
+            "{err}"
+        );
+        let err = write_dataset(&root, &sensor, &scans, Some(&sweeps), None, Some(&odometry))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("poses_truth.txt"), "{err}");
+
+        // clear_dataset removes every dataset entry and nothing else.
+        std::fs::write(root.join("notes.md"), "mine").unwrap();
+        clear_dataset(&root).unwrap();
+        let left: Vec<_> = std::fs::read_dir(&root)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().into_string().unwrap())
+            .collect();
+        assert_eq!(left, vec!["notes.md".to_string()]);
+        write_dataset(&root, &sensor, &scans[..2], None, None, None).unwrap();
+        let dataset = Dataset::open(&root).unwrap();
+        assert!(dataset.odometry.is_none() && dataset.truth.is_none());
+    }
+
+    #[test]
+    fn open_ignores_hidden_and_foreign_files_and_sorts() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        std::fs::create_dir(root.join("scans")).unwrap();
+        std::fs::write(root.join("scans/b.xyz"), "1 2 3\n").unwrap();
+        std::fs::write(root.join("scans/a.xyz"), "4 5 6\n").unwrap();
+        std::fs::write(root.join("scans/.a.xyz.tmp-1-0"), "junk").unwrap();
+        std::fs::write(root.join("scans/.hidden.ply"), "junk").unwrap();
+        std::fs::write(root.join("scans/README.md"), "notes").unwrap();
+        std::fs::create_dir(root.join("scans/sub.ply")).unwrap();
+        std::fs::write(
+            root.join("attitude.csv"),
+            "index,roll_deg,pitch_deg,yaw_deg\n0,0,0,0\n1,0,0,90\n",
+        )
+        .unwrap();
+        let dataset = Dataset::open(root).unwrap();
+        assert_eq!(
+            dataset.scan_paths,
+            vec![root.join("scans/a.xyz"), root.join("scans/b.xyz")]
+        );
+        assert_eq!(
+            dataset.load_scan(0).unwrap(),
+            vec![Vec3::new(4.0, 5.0, 6.0)]
+        );
+        assert!(dataset.truth.is_none() && dataset.sensor.is_none());
+        assert!(dataset.load_sweep(0).unwrap().is_none());
+    }
+
+    #[test]
+    fn open_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("ds");
+
+        // Not a folder / no scans folder.
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(err.contains("ds") && err.contains("scans"), "{err}");
+        std::fs::create_dir(&root).unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(
+            err.contains("scans") && err.contains("one point-cloud file per stop"),
+            "{err}"
+        );
+
+        // Empty scans folder.
+        std::fs::create_dir(root.join("scans")).unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(err.contains("no point-cloud file"), "{err}");
+
+        // No attitude.csv: fine, the attitude is unknown (level when asked for).
+        write_points_ply(&root.join("scans/000000.ply"), &scans(1)[0].0).unwrap();
+        write_points_ply(&root.join("scans/000001.ply"), &scans(1)[0].0).unwrap();
+        let dataset = Dataset::open(&root).unwrap();
+        assert!(dataset.attitudes.is_none() && dataset.odometry.is_none());
+        assert_eq!(dataset.attitude_or_level(1), Some(Attitude::default()));
+        assert_eq!(dataset.attitude_or_level(2), None);
+
+        // Count mismatch names both counts and both paths.
+        write_attitude_csv(&root.join("attitude.csv"), &[Attitude::default()]).unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(
+            err.contains("1 rows")
+                && err.contains("2 scans")
+                && err.contains("attitude.csv")
+                && err.contains("scans"),
+            "{err}"
+        );
+        write_attitude_csv(&root.join("attitude.csv"), &[Attitude::default(); 2]).unwrap();
+        Dataset::open(&root).unwrap();
+
+        // Truth count mismatch.
+        crate::write_kitti_poses(&root.join("poses_truth.txt"), &[Pose::identity(); 3]).unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(
+            err.contains("3 poses") && err.contains("2 scans") && err.contains("poses_truth.txt"),
+            "{err}"
+        );
+        std::fs::remove_file(root.join("poses_truth.txt")).unwrap();
+
+        // Odometry count mismatch, and a malformed odometry line.
+        crate::write_kitti_poses(&root.join("odometry.txt"), &[Pose::identity(); 1]).unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(
+            err.contains("1 poses") && err.contains("2 scans") && err.contains("odometry.txt"),
+            "{err}"
+        );
+        std::fs::write(
+            root.join("odometry.txt"),
+            "1 0 0 0 0 1 0 0 0 0 1 0
+1 2 3
+",
+        )
+        .unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(err.contains("odometry.txt:2"), "{err}");
+        crate::write_kitti_poses(&root.join("odometry.txt"), &[Pose::identity(); 2]).unwrap();
+        assert_eq!(Dataset::open(&root).unwrap().odometry.unwrap().len(), 2);
+        std::fs::remove_file(root.join("odometry.txt")).unwrap();
+
+        // A broken sensor.toml.
+        std::fs::write(root.join("sensor.toml"), "bogus = 1\n").unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(err.contains("sensor.toml:1"), "{err}");
+        std::fs::remove_file(root.join("sensor.toml")).unwrap();
+
+        // Out-of-range index.
+        let dataset = Dataset::open(&root).unwrap();
+        let err = dataset.load_scan(2).unwrap_err();
+        assert!(matches!(err, Error::Invalid(_)));
+        assert!(err.to_string().contains("0..=1"), "{err}");
+        assert!(dataset.load_sweep(7).is_err());
+
+        // Two files for the same stop.
+        std::fs::write(root.join("scans/000001.xyz"), "1 2 3\n").unwrap();
+        let err = Dataset::open(&root).unwrap_err().to_string();
+        assert!(
+            err.contains("000001.ply") && err.contains("000001.xyz"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn write_dataset_checks_lengths() {
+        let dir = tempfile::tempdir().unwrap();
+        let sensor = SensorConfig::default();
+        let s = scans(2);
+        assert!(write_dataset(dir.path(), &sensor, &[], None, None, None).is_err());
+        assert!(write_dataset(dir.path(), &sensor, &s, Some(&[sweep()]), None, None).is_err());
+        let one = [Pose::identity()];
+        assert!(write_dataset(dir.path(), &sensor, &s, None, Some(&one), None).is_err());
+        let err = write_dataset(dir.path(), &sensor, &s, None, None, Some(&one)).unwrap_err();
+        assert!(
+            err.to_string().contains("1 odometry poses for 2 scans"),
+            "{err}"
+        );
+        assert!(!dir.path().join("scans").exists());
+    }
+}

@@ -1,0 +1,1268 @@
+//! Importing other datasets into sdem's dataset layout: 3DTK folders and KITTI odometry sequences.
+//!
+//! # 3DTK folders (`scanNNN.3d` + `scanNNN.pose`, [`import_3dtk`])
+//!
+//! 3DTK's frame is **left-handed**: x right, y up, z forward, centimetres. A point maps to sdem's
+//! frame (x forward, y left, z up, metres) by the fixed axis map `C`:
+//! `p_sdem = C · p_3dtk / 100` with `C · (x, y, z) = (z, −x, y)`. `C` has determinant −1 (a
+//! reflection), so a rigid transform `M = [R | t]` between two 3DTK frames becomes
+//! `C · M · C⁻¹ = [C R Cᵀ | C t / 100]` between the matching sdem frames, again a proper rotation.
+//! A rotation by θ about 3DTK's y (up) axis becomes a yaw of **−θ** about sdem's z: 3DTK's angles
+//! turn the left-handed way.
+//!
+//! - **Scans**: each `scanNNN.3d` is read with [`crate::read_points`] (which already applies
+//!   `C` and the centimetres), and written as `scans/000000.ply`, … (binary PLY, numbered from 0
+//!   in the order of `NNN`). Points farther than [`UOS_MAX_RANGE_M`] (30 m; 3DTK's "no return"
+//!   sentinel sits at ~32.76 m) and nearer than [`UOS_MIN_RANGE_M`] (0.2 m; the robot itself and
+//!   invalid returns) are dropped; the summary counts them.
+//! - **`scanNNN.pose`** (two lines: `x y z` in cm, then `θx θy θz` in degrees, with
+//!   `world_from_scan = [Rx(θx)·Ry(θy)·Rz(θz) | t]` in 3DTK's frame, see [`read_uos_pose`]) is
+//!   the robot's initial estimate, i.e. its odometry. It is converted as above and written as
+//!   `odometry.txt`, and the roll, pitch and yaw of the converted rotation (sdem's
+//!   `R = Rz·Ry·Rx`) as `attitude.csv`, since 3DTK data has no separate gyro/compass reading.
+//! - **`sensor.toml`**: the scanner's geometry as measured from the example scans
+//!   ([`uos_sensor`]).
+//!   A `.pose` must exist for every imported `.3d`.
+//! - **`scanNNN.frames`** (slam6D's output; one line per registration step, a 4×4 matrix in
+//!   OpenGL column-major order in cm, then a flag), when a frames folder is given or found
+//!   (`slam6d_frames_2009/`, or `.frames` files beside the scans): the **last** line of each,
+//!   slam6D's final registration, is converted as above and written as `poses_slam6d.txt`. It is
+//!   a reference to compare with, not ground truth, so it never becomes `poses_truth.txt`.
+//!
+//! 3DTK's poses are in 3DTK's world frame, the frame of its scan 0, and are kept there (not
+//! re-based on the first imported scan) so that the attitude keeps its roll and pitch.
+//!
+//! # KITTI odometry sequences (`velodyne/NNNNNN.bin`, `poses.txt`, `calib.txt`, [`import_kitti`])
+//!
+//! The Velodyne frame is already sdem's (x forward, y left, z up, metres): the selected `.bin`
+//! files are checked and copied unchanged to `scans/000000.bin`, …. KITTI's `poses.txt` holds the
+//! poses `P_i` of the left camera (x right, y down, z forward), so the Velodyne poses are
+//! `T_velo_i = Tr⁻¹ · P_i · Tr` with `Tr` the `Tr:` line of `calib.txt` (velodyne → camera), then
+//! re-based so that the first imported scan is the identity (DESIGN.md: the world origin is the
+//! first scan's sensor), and written as `poses_truth.txt` (KITTI's GPS/INS ground truth). KITTI
+//! has no gyro/compass reading here, so no `attitude.csv` is written. Without `poses.txt` (the
+//! test sequences 11–21) the scans are imported without truth.
+
+use super::dataset::{check_no_stale_file, ODOMETRY_FILE, SLAM6D_FILE};
+use super::poses::{parse_row_major_pose, to_rotation};
+use super::{
+    clear_dataset, numbered_lines, parse_finite, read_bytes, read_kitti_poses, read_points,
+    read_text, write_atomic, write_attitude_csv, write_points_ply, write_poses, write_sensor_toml,
+    ATTITUDE_FILE, DATASET_ENTRIES, SCANS_DIR, SENSOR_FILE, TRUTH_FILE,
+};
+use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
+use sdem::error::{Error, Result};
+use sdem::geometry::{attitude_of, Attitude, Pose, Vec3};
+use sdem::sensor::SensorConfig;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// 3DTK points farther than this (metres) are dropped on import: the scanner's "no return"
+/// sentinel (~32.76 m) and beyond.
+pub const UOS_MAX_RANGE_M: f64 = 30.0;
+
+/// 3DTK points nearer than this (metres) are dropped on import: returns from the robot itself and
+/// invalid ones.
+pub const UOS_MIN_RANGE_M: f64 = 0.2;
+
+/// The scanner behind 3DTK's example scans, measured from the files (see
+/// `../shared/data/3dtk-dat/README.txt`): a nodded 2D LRF, 360 beams 0.5° apart over 180° per
+/// line, 226 lines pitched from −48.7° to +67.6° (0.517° apart). The range noise is not stated
+/// anywhere; a SICK LMS's 1 cm is assumed. Written as the dataset's `sensor.toml`, so that `sdem
+/// slam` matches its S-DEM to the scanner's step.
+pub fn uos_sensor() -> SensorConfig {
+    SensorConfig {
+        tilt_min_deg: -48.7,
+        tilt_max_deg: 67.6,
+        tilt_step_deg: 0.517,
+        pan_min_deg: -90.0,
+        pan_max_deg: 90.0,
+        pan_step_deg: 0.5,
+        max_range_m: UOS_MAX_RANGE_M,
+        min_range_m: UOS_MIN_RANGE_M,
+        range_noise_m: 0.01,
+        ..SensorConfig::default()
+    }
+}
+
+/// The folder name under which the 3DTK example data keeps slam6D's `.frames` files.
+const DEFAULT_FRAMES_DIR: &str = "slam6d_frames_2009";
+
+/// What kind of folder is imported.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum ImportFormat {
+    /// A 3DTK folder: `scanNNN.3d` with `scanNNN.pose`, optionally `.frames`.
+    #[serde(rename = "3dtk")]
+    Uos3dtk,
+    /// A KITTI odometry sequence: `velodyne/NNNNNN.bin`, optionally `poses.txt` + `calib.txt`.
+    #[serde(rename = "kitti")]
+    Kitti,
+}
+
+impl ImportFormat {
+    /// Guesses the format of `source` from its content: a `velodyne/` folder means KITTI, a
+    /// `scanNNN.3d` file means 3DTK.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] when `source` is not a folder or looks like neither.
+    pub fn detect(source: &Path) -> Result<ImportFormat> {
+        check_source(source)?;
+        if source.join("velodyne").is_dir() {
+            return Ok(ImportFormat::Kitti);
+        }
+        if !numbered_files(source, "scan", "3d")?.is_empty() {
+            return Ok(ImportFormat::Uos3dtk);
+        }
+        Err(Error::Invalid(format!(
+            "{} is neither a 3DTK folder (scanNNN.3d + scanNNN.pose) nor a KITTI sequence \
+             (velodyne/NNNNNN.bin); name the format or check the folder",
+            source.display()
+        )))
+    }
+}
+
+/// Which scans to import and where extra inputs are.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct ImportOptions {
+    /// The first scan number to import (the `NNN` of the file names); scans with a smaller
+    /// number are skipped.
+    pub first: usize,
+    /// How many scans to import from `first` on (in the order of their numbers); `None` for all.
+    pub count: Option<usize>,
+    /// 3DTK only: the folder of slam6D's `scanNNN.frames`. `None` looks for
+    /// `SOURCE/slam6d_frames_2009/`, then for `.frames` files in `SOURCE`.
+    pub frames_dir: Option<PathBuf>,
+}
+
+/// What an import read and wrote.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ImportSummary {
+    /// The format imported.
+    pub format: ImportFormat,
+    /// The source folder.
+    pub source: PathBuf,
+    /// The dataset folder written.
+    pub out: PathBuf,
+    /// The number of scans imported.
+    pub scans: usize,
+    /// The source file of each imported scan, in dataset order.
+    pub source_scans: Vec<PathBuf>,
+    /// The points kept in each scan.
+    pub points_per_scan: Vec<usize>,
+    /// Points dropped as farther than [`UOS_MAX_RANGE_M`] (3DTK), over all scans.
+    pub dropped_far: usize,
+    /// Points dropped as nearer than [`UOS_MIN_RANGE_M`] (3DTK), over all scans.
+    pub dropped_near: usize,
+    /// The files written, relative to `out` (`scans/` stands for the scan files).
+    pub written: Vec<String>,
+}
+
+impl ImportSummary {
+    /// The summary before any scan is written: what is imported from where, nothing counted yet.
+    fn empty<T>(format: ImportFormat, source: &Path, out: &Path, scans: &[(T, PathBuf)]) -> Self {
+        Self {
+            format,
+            source: source.to_path_buf(),
+            out: out.to_path_buf(),
+            scans: scans.len(),
+            source_scans: scans.iter().map(|(_, p)| p.clone()).collect(),
+            points_per_scan: Vec::with_capacity(scans.len()),
+            dropped_far: 0,
+            dropped_near: 0,
+            written: Vec::new(),
+        }
+    }
+}
+
+/// Imports `source` into the dataset folder `out`, guessing the format when `format` is `None`
+/// ([`ImportFormat::detect`]). See [`import_3dtk`] and [`import_kitti`].
+pub fn import_dataset(
+    source: &Path,
+    out: &Path,
+    format: Option<ImportFormat>,
+    options: &ImportOptions,
+) -> Result<ImportSummary> {
+    let format = match format {
+        Some(f) => f,
+        None => ImportFormat::detect(source)?,
+    };
+    match format {
+        ImportFormat::Uos3dtk => import_3dtk(source, out, options),
+        ImportFormat::Kitti => {
+            if let Some(frames) = &options.frames_dir {
+                return Err(Error::Invalid(format!(
+                    "a frames folder ({}) is for 3DTK imports only; {} is a KITTI sequence",
+                    frames.display(),
+                    source.display()
+                )));
+            }
+            import_kitti(source, out, options)
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Frames and poses
+// ---------------------------------------------------------------------------------------------
+
+/// `C`: 3DTK axes (x right, y up, z forward) to sdem's (x forward, y left, z up); a reflection.
+fn sdem_from_uos() -> Matrix3<f64> {
+    Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+}
+
+/// Converts a 3DTK `world_from_scan` (4×4, left-handed frames, centimetres) into sdem's
+/// `world_from_sensor` (right-handed, metres): `C · M · C⁻¹`, translation divided by 100.
+///
+/// # Errors
+/// A message when the 3×3 block is not a rotation (to within 1e-3) or the bottom row is not
+/// `0 0 0 1`.
+///
+/// # Example
+/// ```
+/// use nalgebra::Matrix4;
+/// // 3DTK: 150 cm forward (z) and 20 cm to the right (x).
+/// let m = Matrix4::new_translation(&nalgebra::Vector3::new(20.0, 0.0, 150.0));
+/// let pose = sdem_io::uos_matrix_to_world_from_sensor(&m).unwrap();
+/// let t = pose.translation.vector;
+/// assert!((t - nalgebra::Vector3::new(1.5, -0.2, 0.0)).norm() < 1e-12);
+/// ```
+pub fn uos_matrix_to_world_from_sensor(m: &Matrix4<f64>) -> std::result::Result<Pose, String> {
+    let bottom = [m[(3, 0)], m[(3, 1)], m[(3, 2)], m[(3, 3)]];
+    if (bottom[0].abs() + bottom[1].abs() + bottom[2].abs() + (bottom[3] - 1.0).abs()) > 1e-6 {
+        return Err(format!(
+            "the bottom row is {bottom:?}, not [0, 0, 0, 1]; not a rigid transform"
+        ));
+    }
+    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let rotation = to_rotation(&r)?;
+    let c = sdem_from_uos();
+    let r_sdem = to_rotation(&(c * rotation.matrix() * c.transpose()))?;
+    let t: Vector3<f64> = m.fixed_view::<3, 1>(0, 3).into_owned();
+    let t_sdem = c * t / 100.0;
+    Ok(Pose::from_parts(
+        Translation3::from(t_sdem),
+        UnitQuaternion::from_rotation_matrix(&r_sdem),
+    ))
+}
+
+/// Converts a 3DTK pose (translation in cm; `θx θy θz` in degrees, `R = Rx(θx)·Ry(θy)·Rz(θz)`,
+/// as 3DTK's `EulerToMatrix4` builds it) into sdem's `world_from_sensor`.
+///
+/// # Example
+/// ```
+/// // 3DTK turns +90° about its up axis (y): its forward (z) becomes its right (x), which is
+/// // sdem's −y, so the sdem yaw is −90°.
+/// let pose = sdem_io::uos_pose_to_world_from_sensor([0.0; 3], [0.0, 90.0, 0.0]);
+/// let yaw = sdem::geometry::attitude_of(&pose).yaw.to_degrees();
+/// assert!((yaw + 90.0).abs() < 1e-9);
+/// ```
+pub fn uos_pose_to_world_from_sensor(translation_cm: [f64; 3], angles_deg: [f64; 3]) -> Pose {
+    let [ax, ay, az] = angles_deg.map(f64::to_radians);
+    let r = Rotation3::from_axis_angle(&Vector3::x_axis(), ax)
+        * Rotation3::from_axis_angle(&Vector3::y_axis(), ay)
+        * Rotation3::from_axis_angle(&Vector3::z_axis(), az);
+    let mut m = r.to_homogeneous();
+    m[(0, 3)] = translation_cm[0];
+    m[(1, 3)] = translation_cm[1];
+    m[(2, 3)] = translation_cm[2];
+    uos_matrix_to_world_from_sensor(&m).expect("a product of rotations is a rotation")
+}
+
+/// Reads a 3DTK `.pose` file (two lines: `x y z` in cm, then `θx θy θz` in degrees; blank lines
+/// ignored) as sdem's `world_from_sensor` ([`uos_pose_to_world_from_sensor`]).
+///
+/// # Errors
+/// [`Error::Parse`] naming the file and line for a line without exactly 3 numbers, a non-number
+/// or a non-finite value, and for a file with other than 2 such lines.
+pub fn read_uos_pose(path: &Path) -> Result<Pose> {
+    let text = read_text(path)?;
+    let mut rows: Vec<[f64; 3]> = Vec::new();
+    for (line_no, line) in numbered_lines(&text) {
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        if tokens.is_empty() {
+            continue;
+        }
+        let what = ["translation (x y z, cm)", "rotation (θx θy θz, degrees)"];
+        if rows.len() == 2 {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                "a 3DTK .pose has two lines, 'x y z' (cm) then 'θx θy θz' (degrees); this is a third",
+            ));
+        }
+        let what = what[rows.len()];
+        if tokens.len() != 3 {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!("expected 3 numbers, the {what}; found {}", tokens.len()),
+            ));
+        }
+        let mut row = [0.0; 3];
+        for (k, (slot, token)) in row.iter_mut().zip(&tokens).enumerate() {
+            *slot = parse_finite(
+                path,
+                line_no,
+                token,
+                &format!("value {} of the {what}", k + 1),
+            )?;
+        }
+        rows.push(row);
+    }
+    match rows.as_slice() {
+        [t, r] => Ok(uos_pose_to_world_from_sensor(*t, *r)),
+        _ => Err(Error::parse(
+            path,
+            None,
+            format!(
+                "{} line(s) of numbers; a 3DTK .pose has two, 'x y z' (cm) then 'θx θy θz' (degrees)",
+                rows.len()
+            ),
+        )),
+    }
+}
+
+/// Reads a slam6D `.frames` file and returns its **last** line (slam6D's final registration)
+/// as sdem's `world_from_sensor`. Each non-blank line holds 16 numbers, a 4×4 matrix in OpenGL
+/// column-major order (elements 12–14 the translation, cm), and optionally a 17th, a flag; every
+/// line is checked.
+///
+/// # Errors
+/// [`Error::Parse`] naming the file and line: a wrong number count, a non-number, a non-finite
+/// value, or a matrix that is not a rigid transform; a file without lines.
+pub fn read_uos_frames_last(path: &Path) -> Result<Pose> {
+    let text = read_text(path)?;
+    let mut last = None;
+    for (line_no, line) in numbered_lines(&text) {
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        if tokens.is_empty() {
+            continue;
+        }
+        if tokens.len() != 16 && tokens.len() != 17 {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!(
+                    "{} numbers on this line; a .frames line is a 4×4 matrix in column-major order \
+                     (16 numbers) and a flag",
+                    tokens.len()
+                ),
+            ));
+        }
+        let mut v = [0f64; 16];
+        for (k, (slot, token)) in v.iter_mut().zip(&tokens).enumerate() {
+            *slot = parse_finite(path, line_no, token, &format!("value {}", k + 1))?;
+        }
+        let m = Matrix4::from_column_slice(&v);
+        let pose = uos_matrix_to_world_from_sensor(&m)
+            .map_err(|why| Error::parse(path, Some(line_no), format!("the matrix: {why}")))?;
+        last = Some(pose);
+    }
+    last.ok_or_else(|| {
+        Error::parse(
+            path,
+            None,
+            "the file holds no frames; expected lines of 16 numbers (a column-major 4×4) and a flag",
+        )
+    })
+}
+
+/// Parses the `Tr:` line of a KITTI `calib.txt` (the row-major 3×4 `camera_from_velodyne`;
+/// `Tr_velo_to_cam:` is accepted too) from `text`, which was read from `path`.
+///
+/// # Errors
+/// [`Error::Parse`] naming the line for a wrong number count, a non-number or a non-rotation;
+/// naming the file when there is no such line.
+pub fn parse_kitti_calib_tr(path: &Path, text: &str) -> Result<Pose> {
+    for (line_no, line) in numbered_lines(text) {
+        let Some((key, rest)) = line.split_once(':') else {
+            continue;
+        };
+        if !matches!(key.trim(), "Tr" | "Tr_velo_to_cam") {
+            continue;
+        }
+        let tokens: Vec<&str> = rest.split_whitespace().collect();
+        if tokens.len() != 12 {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!(
+                    "{} numbers after '{}:'; Tr is 12 numbers, the row-major 3×4 [R | t] from \
+                     velodyne to camera",
+                    tokens.len(),
+                    key.trim()
+                ),
+            ));
+        }
+        return parse_row_major_pose(path, line_no, &tokens, "Tr");
+    }
+    Err(Error::parse(
+        path,
+        None,
+        "no 'Tr:' line (the velodyne-to-camera transform, 12 numbers); KITTI odometry's \
+         calib.txt has one",
+    ))
+}
+
+/// Reads the `Tr:` line of a KITTI `calib.txt` ([`parse_kitti_calib_tr`]).
+pub fn read_kitti_calib_tr(path: &Path) -> Result<Pose> {
+    let text = read_text(path)?;
+    parse_kitti_calib_tr(path, &text)
+}
+
+/// KITTI camera poses to Velodyne poses re-based on the first: with
+/// `T_velo_i = Tr⁻¹ · P_i · Tr`, returns `T_velo_0⁻¹ · T_velo_i` for each `i`, so the first
+/// is the identity.
+///
+/// # Arguments
+/// * `camera_poses` — `P_i`, the left camera's pose in `poses.txt` (camera 0 of frame 0 as world).
+/// * `camera_from_velodyne` — `Tr` from `calib.txt`.
+///
+/// # Example
+/// ```
+/// use sdem::geometry::Pose;
+/// // Camera axes: x right, y down, z forward. A camera that moved 1 m forward (its z)...
+/// let tr = Pose::from_parts(
+///     nalgebra::Translation3::identity(),
+///     nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(
+///         nalgebra::Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0),
+///     )),
+/// );
+/// let cams = [Pose::identity(), Pose::translation(0.0, 0.0, 1.0)];
+/// let velo = sdem_io::kitti_velodyne_poses(&cams, &tr);
+/// // ...moved 1 m along the Velodyne's x (forward).
+/// assert!((velo[1].translation.vector - nalgebra::Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
+/// ```
+pub fn kitti_velodyne_poses(camera_poses: &[Pose], camera_from_velodyne: &Pose) -> Vec<Pose> {
+    let tr = camera_from_velodyne;
+    let velo: Vec<Pose> = camera_poses.iter().map(|p| tr.inverse() * p * tr).collect();
+    let Some(first) = velo.first() else {
+        return Vec::new();
+    };
+    let first_inv = first.inverse();
+    let mut rebased: Vec<Pose> = velo.iter().map(|v| first_inv * v).collect();
+    // Exactly the identity, not the identity up to round-off.
+    rebased[0] = Pose::identity();
+    rebased
+}
+
+// ---------------------------------------------------------------------------------------------
+// Folders
+// ---------------------------------------------------------------------------------------------
+
+fn check_source(source: &Path) -> Result<()> {
+    if source.is_dir() {
+        Ok(())
+    } else if source.exists() {
+        Err(Error::Invalid(format!(
+            "{} is not a folder; import reads a 3DTK folder or a KITTI sequence folder",
+            source.display()
+        )))
+    } else {
+        Err(Error::Invalid(format!(
+            "{} does not exist; import reads a 3DTK folder or a KITTI sequence folder",
+            source.display()
+        )))
+    }
+}
+
+/// The visible files of `folder` named `PREFIX` + digits + `.EXT`, as `(number, path)` sorted
+/// by number.
+fn numbered_files(folder: &Path, prefix: &str, ext: &str) -> Result<Vec<(usize, PathBuf)>> {
+    let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
+    let mut files = Vec::new();
+    for entry in entries {
+        let path = entry.map_err(|e| Error::io(folder, e))?.path();
+        let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
+            continue;
+        };
+        let Some(digits) = name
+            .strip_prefix(prefix)
+            .and_then(|n| n.strip_suffix(ext))
+            .and_then(|n| n.strip_suffix('.'))
+        else {
+            continue;
+        };
+        if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || !path.is_file() {
+            continue;
+        }
+        if let Ok(number) = digits.parse::<usize>() {
+            files.push((number, path));
+        }
+    }
+    files.sort();
+    Ok(files)
+}
+
+/// Applies `first` and `count` to the numbered scan files.
+fn select(
+    files: Vec<(usize, PathBuf)>,
+    options: &ImportOptions,
+    folder: &Path,
+    what: &str,
+) -> Result<Vec<(usize, PathBuf)>> {
+    if files.is_empty() {
+        return Err(Error::Invalid(format!(
+            "{} holds no scans ({what})",
+            folder.display()
+        )));
+    }
+    let available: Vec<_> = files
+        .into_iter()
+        .filter(|(n, _)| *n >= options.first)
+        .collect();
+    let selected: Vec<_> = match options.count {
+        Some(0) => {
+            return Err(Error::Invalid(
+                "the scan count is 0; import at least one scan".into(),
+            ))
+        }
+        Some(count) if count > available.len() => {
+            return Err(Error::Invalid(format!(
+                "{count} scans asked from number {} on, but {} holds {} ({what})",
+                options.first,
+                folder.display(),
+                available.len()
+            )))
+        }
+        Some(count) => available.into_iter().take(count).collect(),
+        None => available,
+    };
+    if selected.is_empty() {
+        return Err(Error::Invalid(format!(
+            "{} holds no scan numbered {} or more ({what})",
+            folder.display(),
+            options.first
+        )));
+    }
+    Ok(selected)
+}
+
+/// Refuses to import into a folder that holds a dataset entry.
+fn check_out(out: &Path) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        return Err(Error::Invalid(format!(
+            "{} is not a folder; import writes a dataset folder",
+            out.display()
+        )));
+    }
+    for name in DATASET_ENTRIES {
+        let path = out.join(name);
+        if path.exists() {
+            return Err(Error::Invalid(format!(
+                "{} already exists; import writes into a folder without a dataset (remove it first)",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Runs the writing part of an import; on error removes what it wrote (the folder held no
+/// dataset entry before, see [`check_out`]).
+fn write_or_roll_back(out: &Path, write: impl FnOnce() -> Result<()>) -> Result<()> {
+    let created = !out.exists();
+    let result = std::fs::create_dir_all(out.join(SCANS_DIR))
+        .map_err(|e| Error::io(out.join(SCANS_DIR), e))
+        .and_then(|()| write());
+    if result.is_err() {
+        let _ = clear_dataset(out);
+        if created {
+            let _ = std::fs::remove_dir(out);
+        }
+    }
+    result
+}
+
+fn scan_name(index: usize, ext: &str) -> String {
+    format!("{index:06}.{ext}")
+}
+
+/// Keeps the points with `UOS_MIN_RANGE_M ≤ |p| ≤ UOS_MAX_RANGE_M`; returns them with the
+/// counts dropped as far and as near.
+fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
+    let (mut far, mut near) = (0, 0);
+    let kept = points
+        .into_iter()
+        .filter(|p| {
+            let r = p.norm();
+            if r > UOS_MAX_RANGE_M {
+                far += 1;
+                false
+            } else if r < UOS_MIN_RANGE_M {
+                near += 1;
+                false
+            } else {
+                true
+            }
+        })
+        .collect();
+    (kept, far, near)
+}
+
+/// Imports a 3DTK folder into the dataset folder `out` (see the module documentation for the
+/// frames and the files written): `scans/NNNNNN.ply`, `odometry.txt` (+ `.tum`),
+/// `attitude.csv`, and `poses_slam6d.txt` (+ `.tum`) when `.frames` files are found.
+///
+/// Everything but the point clouds is read and checked before anything is written; an error
+/// while writing removes what was written.
+///
+/// # Errors
+/// `source` missing or without `scanNNN.3d`; a `.pose` (or, with a frames folder, a `.frames`)
+/// missing for a selected scan; a malformed `.pose`, `.frames` or `.3d` (naming the file and
+/// line); a scan left without points by the range filter; `out` holding a dataset entry
+/// ([`DATASET_ENTRIES`]).
+pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result<ImportSummary> {
+    check_source(source)?;
+    let scans = select(
+        numbered_files(source, "scan", "3d")?,
+        options,
+        source,
+        "3DTK scanNNN.3d files",
+    )?;
+    let mut odometry = Vec::with_capacity(scans.len());
+    for (_, scan) in &scans {
+        let pose_path = scan.with_extension("pose");
+        if !pose_path.is_file() {
+            return Err(Error::Invalid(format!(
+                "{} is missing; 3DTK needs a .pose (x y z in cm, then θx θy θz in degrees) beside \
+                 each scan, here for {}",
+                pose_path.display(),
+                scan.display()
+            )));
+        }
+        odometry.push(read_uos_pose(&pose_path)?);
+    }
+    let frames_dir = match &options.frames_dir {
+        Some(dir) if dir.is_dir() => Some(dir.clone()),
+        Some(dir) => {
+            return Err(Error::Invalid(format!(
+                "the frames folder {} does not exist",
+                dir.display()
+            )))
+        }
+        None if source.join(DEFAULT_FRAMES_DIR).is_dir() => Some(source.join(DEFAULT_FRAMES_DIR)),
+        None if !numbered_files(source, "scan", "frames")?.is_empty() => Some(source.to_path_buf()),
+        None => None,
+    };
+    let slam6d = match &frames_dir {
+        Some(dir) => {
+            let mut poses = Vec::with_capacity(scans.len());
+            for (_, scan) in &scans {
+                let name = scan.with_extension("frames");
+                let path = dir.join(name.file_name().unwrap_or_default());
+                if !path.is_file() {
+                    return Err(Error::Invalid(format!(
+                        "{} is missing; the frames folder {} needs one .frames per imported scan, \
+                         here for {}",
+                        path.display(),
+                        dir.display(),
+                        scan.display()
+                    )));
+                }
+                poses.push(read_uos_frames_last(&path)?);
+            }
+            Some(poses)
+        }
+        None => None,
+    };
+    check_out(out)?;
+
+    let attitudes: Vec<Attitude> = odometry.iter().map(attitude_of).collect();
+    let mut summary = ImportSummary::empty(ImportFormat::Uos3dtk, source, out, &scans);
+    write_or_roll_back(out, || {
+        for (index, (_, scan)) in scans.iter().enumerate() {
+            let (points, far, near) = filter_uos_points(read_points(scan)?);
+            if points.is_empty() {
+                return Err(Error::parse(
+                    scan,
+                    None,
+                    format!(
+                        "no point lies between {UOS_MIN_RANGE_M} m and {UOS_MAX_RANGE_M} m of the \
+                         sensor; nothing is left to import"
+                    ),
+                ));
+            }
+            write_points_ply(&out.join(SCANS_DIR).join(scan_name(index, "ply")), &points)?;
+            summary.points_per_scan.push(points.len());
+            summary.dropped_far += far;
+            summary.dropped_near += near;
+        }
+        summary
+            .written
+            .push(format!("{SCANS_DIR}/ ({} .ply)", scans.len()));
+        write_poses(&out.join(ODOMETRY_FILE), &odometry)?;
+        summary.written.push(ODOMETRY_FILE.into());
+        write_attitude_csv(&out.join(ATTITUDE_FILE), &attitudes)?;
+        summary.written.push(ATTITUDE_FILE.into());
+        write_sensor_toml(&out.join(SENSOR_FILE), &uos_sensor())?;
+        summary.written.push(SENSOR_FILE.into());
+        if let Some(slam6d) = &slam6d {
+            write_poses(&out.join(SLAM6D_FILE), slam6d)?;
+            summary.written.push(SLAM6D_FILE.into());
+        }
+        Ok(())
+    })?;
+    Ok(summary)
+}
+
+/// Imports a KITTI odometry sequence folder into the dataset folder `out` (see the module
+/// documentation): `scans/NNNNNN.bin` copied unchanged and, when `poses.txt` is present,
+/// `poses_truth.txt` (+ `.tum`) with the Velodyne poses re-based on the first imported scan. No
+/// `attitude.csv` is written.
+///
+/// Poses and calibration are read and checked before anything is written; an error while
+/// writing removes what was written.
+///
+/// # Errors
+/// `source` missing or without `velodyne/NNNNNN.bin`; `poses.txt` present but `calib.txt`
+/// missing; a malformed `poses.txt` or `calib.txt` (naming the file and line); fewer poses than
+/// a selected scan's number needs; a malformed `.bin`; `out` holding a dataset entry.
+pub fn import_kitti(source: &Path, out: &Path, options: &ImportOptions) -> Result<ImportSummary> {
+    check_source(source)?;
+    let velodyne = source.join("velodyne");
+    if !velodyne.is_dir() {
+        return Err(Error::Invalid(format!(
+            "{} has no velodyne/ folder; a KITTI sequence holds velodyne/NNNNNN.bin",
+            source.display()
+        )));
+    }
+    let scans = select(
+        numbered_files(&velodyne, "", "bin")?,
+        options,
+        &velodyne,
+        "KITTI NNNNNN.bin files",
+    )?;
+    let poses_path = source.join("poses.txt");
+    let truth = if poses_path.is_file() {
+        let calib_path = source.join("calib.txt");
+        if !calib_path.is_file() {
+            return Err(Error::Invalid(format!(
+                "{} is missing; it holds Tr, which turns the camera poses of {} into Velodyne poses",
+                calib_path.display(),
+                poses_path.display()
+            )));
+        }
+        let tr = read_kitti_calib_tr(&calib_path)?;
+        let camera_poses = read_kitti_poses(&poses_path)?;
+        let mut selected = Vec::with_capacity(scans.len());
+        for (number, scan) in &scans {
+            let pose = camera_poses.get(*number).ok_or_else(|| {
+                Error::Invalid(format!(
+                    "{} has {} poses but {} needs pose {} (line {})",
+                    poses_path.display(),
+                    camera_poses.len(),
+                    scan.display(),
+                    number,
+                    number + 1
+                ))
+            })?;
+            selected.push(*pose);
+        }
+        Some(kitti_velodyne_poses(&selected, &tr))
+    } else {
+        None
+    };
+    check_out(out)?;
+    if truth.is_none() {
+        check_no_stale_file(out, TRUTH_FILE, "truth")?;
+    }
+
+    let mut summary = ImportSummary::empty(ImportFormat::Kitti, source, out, &scans);
+    write_or_roll_back(out, || {
+        for (index, (_, scan)) in scans.iter().enumerate() {
+            let points = read_points(scan)?.len();
+            let bytes = read_bytes(scan)?;
+            let target = out.join(SCANS_DIR).join(scan_name(index, "bin"));
+            write_atomic(&target, |w| w.write_all(&bytes))?;
+            summary.points_per_scan.push(points);
+        }
+        summary
+            .written
+            .push(format!("{SCANS_DIR}/ ({} .bin)", scans.len()));
+        if let Some(truth) = &truth {
+            write_poses(&out.join(TRUTH_FILE), truth)?;
+            summary.written.push(TRUTH_FILE.into());
+        }
+        Ok(())
+    })?;
+    Ok(summary)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::Dataset;
+    use sdem::geometry::pose_error;
+
+    fn write(dir: &Path, name: &str, content: &str) -> PathBuf {
+        let path = dir.join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).unwrap();
+        }
+        std::fs::write(&path, content).unwrap();
+        path
+    }
+
+    /// The 3DTK → sdem point map, as the `.3d` reader applies it.
+    fn sdem_point(uos_cm: [f64; 3]) -> Vec3 {
+        Vec3::new(uos_cm[2], -uos_cm[0], uos_cm[1]) / 100.0
+    }
+
+    /// The pose conversion agrees with converting points: for a 3DTK transform M and a point p,
+    /// `convert(M) · convert(p) = convert(M · p)`.
+    #[test]
+    fn pose_conversion_commutes_with_point_conversion() {
+        let t = [-3.1, -7.5, 156.9];
+        let angles = [1.36, -30.0, -0.56];
+        let pose = uos_pose_to_world_from_sensor(t, angles);
+        let [ax, ay, az] = angles.map(f64::to_radians);
+        let r = Rotation3::from_axis_angle(&Vector3::x_axis(), ax)
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), ay)
+            * Rotation3::from_axis_angle(&Vector3::z_axis(), az);
+        for p in [[100.0, 0.0, 0.0], [0.0, 50.0, 0.0], [10.0, -20.0, 300.0]] {
+            let p_uos = Vector3::from(p);
+            let world_uos = r * p_uos + Vector3::from(t);
+            let expected = sdem_point([world_uos.x, world_uos.y, world_uos.z]);
+            let got = pose * nalgebra::Point3::from(sdem_point(p));
+            assert!(
+                (got.coords - expected).norm() < 1e-12,
+                "{got:?} {expected:?}"
+            );
+        }
+    }
+
+    /// A rotation about 3DTK's up axis (y) is a yaw in sdem with the sign flipped: a 3DTK point
+    /// to the right (x > 0) ends up at negative y.
+    #[test]
+    fn yaw_sign_about_the_uos_up_axis() {
+        let pose = uos_pose_to_world_from_sensor([0.0, 0.0, 0.0], [0.0, 30.0, 0.0]);
+        let a = attitude_of(&pose);
+        assert!((a.yaw.to_degrees() + 30.0).abs() < 1e-9, "{a:?}");
+        assert!(a.roll.abs() < 1e-12 && a.pitch.abs() < 1e-12);
+        // The sensor's forward axis, turned towards 3DTK's right (+x), points to sdem's −y.
+        let forward = pose.rotation * Vec3::x();
+        assert!(forward.y < 0.0 && forward.x > 0.0, "{forward:?}");
+        // A point 1 m forward of a sensor turned 90° the 3DTK way (+θy) lies at 3DTK x = +100 cm
+        // (right), i.e. sdem y = −1 m.
+        let pose = uos_pose_to_world_from_sensor([0.0, 0.0, 0.0], [0.0, 90.0, 0.0]);
+        let p = pose * nalgebra::Point3::new(1.0, 0.0, 0.0);
+        assert!(
+            (p.coords - Vec3::new(0.0, -1.0, 0.0)).norm() < 1e-12,
+            "{p:?}"
+        );
+        // Translation: 3DTK (x right, y up, z forward) cm → (z, −x, y) m.
+        let pose = uos_pose_to_world_from_sensor([20.0, -5.0, 150.0], [0.0; 3]);
+        let t = pose.translation.vector;
+        assert!((t - Vec3::new(1.5, -0.2, -0.05)).norm() < 1e-12, "{t:?}");
+    }
+
+    /// Rotations about 3DTK's x (right) and z (forward) axes: pitch and roll, signs flipped too.
+    #[test]
+    fn roll_and_pitch_signs() {
+        // θx about 3DTK's right axis: a pitch about sdem's −y... C·Rx(θ)·Cᵀ = R(−y, −θ) = Ry(θ).
+        let pose = uos_pose_to_world_from_sensor([0.0; 3], [10.0, 0.0, 0.0]);
+        let a = attitude_of(&pose);
+        assert!((a.pitch.to_degrees() - 10.0).abs() < 1e-9, "{a:?}");
+        // Positive θx tilts 3DTK's forward (z) down (−y): sdem's forward gets z < 0, which is a
+        // positive pitch in sdem (Ry(+) turns x towards −z).
+        let forward = pose.rotation * Vec3::x();
+        assert!(forward.z < 0.0, "{forward:?}");
+        // θz about 3DTK's forward axis: C·Rz(θ)·Cᵀ = R(x, −θ), a roll of −θ.
+        let pose = uos_pose_to_world_from_sensor([0.0; 3], [0.0, 0.0, 10.0]);
+        let a = attitude_of(&pose);
+        assert!((a.roll.to_degrees() + 10.0).abs() < 1e-9, "{a:?}");
+    }
+
+    #[test]
+    fn read_pose_and_its_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(dir.path(), "a.pose", "10 20 300\n0 45 0\n\n");
+        let pose = read_uos_pose(&p).unwrap();
+        assert!((pose.translation.vector - Vec3::new(3.0, -0.1, 0.2)).norm() < 1e-12);
+        assert!((attitude_of(&pose).yaw.to_degrees() + 45.0).abs() < 1e-9);
+        let cases = [
+            ("b.pose", "1 2\n0 0 0\n", "b.pose:1"),
+            ("c.pose", "1 2 3\n0 x 0\n", "c.pose:2"),
+            ("d.pose", "1 2 3\n0 0 nan\n", "d.pose:2"),
+            ("e.pose", "1 2 3\n", "e.pose: 1 line"),
+            ("f.pose", "1 2 3\n0 0 0\n1 1 1\n", "f.pose:3"),
+            ("g.pose", "", "g.pose: 0 line"),
+        ];
+        for (name, text, want) in cases {
+            let err = read_uos_pose(&write(dir.path(), name, text))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(want), "{name}: {err}");
+        }
+    }
+
+    fn frames_line(m: &Matrix4<f64>, flag: u32) -> String {
+        let mut v: Vec<String> = m.as_slice().iter().map(|x| format!("{x}")).collect();
+        v.push(flag.to_string());
+        v.join(" ")
+    }
+
+    #[test]
+    fn frames_last_line_column_major() {
+        let dir = tempfile::tempdir().unwrap();
+        // Last line: a 90° 3DTK yaw and a translation of 100 cm right, 300 cm forward.
+        let mut m =
+            Rotation3::from_axis_angle(&Vector3::y_axis(), 90f64.to_radians()).to_homogeneous();
+        m[(0, 3)] = 100.0;
+        m[(2, 3)] = 300.0;
+        let text = format!(
+            "{}\n{}\n",
+            frames_line(&Matrix4::identity(), 2),
+            frames_line(&m, 1)
+        );
+        // The translation is at elements 12..14 of the line (column-major).
+        let values: Vec<&str> = text.lines().nth(1).unwrap().split(' ').collect();
+        assert_eq!((values[12], values[14]), ("100", "300"));
+        let pose = read_uos_frames_last(&write(dir.path(), "s.frames", &text)).unwrap();
+        assert!((pose.translation.vector - Vec3::new(3.0, -1.0, 0.0)).norm() < 1e-12);
+        assert!((attitude_of(&pose).yaw.to_degrees() + 90.0).abs() < 1e-9);
+
+        let bad = [
+            ("a.frames", "1 0 0\n", "a.frames:1"),
+            (
+                "b.frames",
+                "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1 2\n2 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1 2\n",
+                "b.frames:2",
+            ),
+            (
+                "c.frames",
+                "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 x\n",
+                "c.frames:1",
+            ),
+            (
+                "d.frames",
+                "1 0 0 5 0 1 0 0 0 0 1 0 0 0 0 1 2\n",
+                "d.frames:1",
+            ),
+            ("e.frames", "\n", "e.frames"),
+        ];
+        for (name, text, want) in bad {
+            let err = read_uos_frames_last(&write(dir.path(), name, text))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(want) && err.contains(name), "{name}: {err}");
+        }
+    }
+
+    #[test]
+    fn kitti_calib_and_velodyne_poses() {
+        let dir = tempfile::tempdir().unwrap();
+        // Tr: velodyne (x fwd, y left, z up) → camera (x right, y down, z fwd), plus an offset.
+        let calib = "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n\
+                     Tr: 0 -1 0 0.1 0 0 -1 -0.05 1 0 0 -0.3\n";
+        let path = write(dir.path(), "calib.txt", calib);
+        let tr = read_kitti_calib_tr(&path).unwrap();
+        assert!((tr * nalgebra::Point3::new(1.0, 0.0, 0.0)).coords.z > 0.0);
+        // The camera moves 1 m forward per frame and turns 10° left (about its −y, i.e. up).
+        let step = Pose::from_parts(
+            Translation3::new(0.0, 0.0, 1.0),
+            UnitQuaternion::from_axis_angle(&-Vector3::y_axis(), 10f64.to_radians()),
+        );
+        let cams: Vec<Pose> = (0..4)
+            .scan(Pose::identity(), |p, _| {
+                let now = *p;
+                *p *= step;
+                Some(now)
+            })
+            .collect();
+        let velo = kitti_velodyne_poses(&cams[1..], &tr);
+        assert_eq!(velo.len(), 3);
+        let (dt, dr) = pose_error(&Pose::identity(), &velo[0]);
+        assert!(dt < 1e-12 && dr < 1e-12);
+        // In the Velodyne frame each step turns +10° (yaw, left) and goes forward.
+        let rel = velo[0].inverse() * velo[1];
+        assert!((attitude_of(&rel).yaw.to_degrees() - 10.0).abs() < 1e-9);
+        assert!(rel.translation.vector.x > 0.9);
+
+        for (name, text, want) in [
+            ("c1.txt", "P0: 1 0 0\n", "c1.txt: no 'Tr:'"),
+            ("c2.txt", "P0: 1\nTr: 1 0 0 0 0 1 0 0 0 0 1\n", "c2.txt:2"),
+            ("c3.txt", "Tr: 1 0 0 0 0 1 0 0 0 0 1 z\n", "c3.txt:1"),
+            ("c4.txt", "Tr: 2 0 0 0 0 1 0 0 0 0 1 0\n", "c4.txt:1"),
+        ] {
+            let err = read_kitti_calib_tr(&write(dir.path(), name, text))
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(want), "{name}: {err}");
+        }
+    }
+
+    /// A tiny 3DTK folder: `n` scans, each with points in cm (one far sentinel, one near).
+    fn uos_folder(dir: &Path, n: usize) -> PathBuf {
+        let source = dir.join("uos");
+        for i in 0..n {
+            write(
+                &source,
+                &format!("scan{i:03}.3d"),
+                "100 0 200\n-50 20 300\n0 0 3276\n1 1 5\n0 -30 150\n",
+            );
+            write(
+                &source,
+                &format!("scan{i:03}.pose"),
+                &format!("0 0 {}\n0 {} 0\n", 150 * i, 5 * i),
+            );
+        }
+        source
+    }
+
+    #[test]
+    fn import_3dtk_writes_a_dataset() {
+        let dir = tempfile::tempdir().unwrap();
+        let source = uos_folder(dir.path(), 3);
+        let frames = dir.path().join("frames");
+        for i in 0..3 {
+            let mut m = Matrix4::identity();
+            m[(2, 3)] = 150.0 * i as f64 + 1.0;
+            write(
+                &frames,
+                &format!("scan{i:03}.frames"),
+                &format!(
+                    "{}\n{}\n",
+                    frames_line(&Matrix4::identity(), 0),
+                    frames_line(&m, 1)
+                ),
+            );
+        }
+        let out = dir.path().join("ds");
+        let options = ImportOptions {
+            first: 1,
+            count: Some(2),
+            frames_dir: Some(frames),
+        };
+        let summary = import_dataset(&source, &out, None, &options).unwrap();
+        assert_eq!(summary.format, ImportFormat::Uos3dtk);
+        assert_eq!(summary.scans, 2);
+        assert_eq!(summary.points_per_scan, vec![3, 3]);
+        assert_eq!((summary.dropped_far, summary.dropped_near), (2, 2));
+        assert!(summary.source_scans[0].ends_with("scan001.3d"));
+        let dataset = Dataset::open(&out).unwrap();
+        assert_eq!(dataset.len(), 2);
+        assert_eq!(dataset.load_scan(0).unwrap()[0], Vec3::new(2.0, -1.0, 0.0));
+        let odometry = dataset.odometry.unwrap();
+        assert!((odometry[1].translation.vector - Vec3::new(3.0, 0.0, 0.0)).norm() < 1e-12);
+        let attitudes = dataset.attitudes.unwrap();
+        assert!((attitudes[1].yaw.to_degrees() + 10.0).abs() < 1e-9);
+        assert!(dataset.truth.is_none());
+        let slam6d = read_kitti_poses(&out.join(SLAM6D_FILE)).unwrap();
+        assert!((slam6d[1].translation.vector.x - 3.01).abs() < 1e-12);
+        assert!(out.join("poses_slam6d.tum").is_file() && out.join("odometry.tum").is_file());
+
+        // Again into the same folder: refused, nothing changed.
+        let err = import_3dtk(&source, &out, &ImportOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("already exists"), "{err}");
+        assert_eq!(Dataset::open(&out).unwrap().len(), 2);
+    }
+
+    #[test]
+    fn import_3dtk_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("ds");
+        let opts = ImportOptions::default();
+        let err = import_3dtk(&dir.path().join("none"), &out, &opts)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("none") && err.contains("does not exist"),
+            "{err}"
+        );
+        let empty = dir.path().join("empty");
+        std::fs::create_dir(&empty).unwrap();
+        let err = import_3dtk(&empty, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("no scans"), "{err}");
+        let err = ImportFormat::detect(&empty).unwrap_err().to_string();
+        assert!(err.contains("neither"), "{err}");
+
+        let source = uos_folder(dir.path(), 2);
+        std::fs::remove_file(source.join("scan001.pose")).unwrap();
+        let err = import_3dtk(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("scan001.pose is missing"), "{err}");
+        write(&source, "scan001.pose", "0 0 0\n0 0\n");
+        let err = import_3dtk(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("scan001.pose:2"), "{err}");
+        write(&source, "scan001.pose", "0 0 0\n0 0 0\n");
+
+        // A frames folder missing one scan's file.
+        let frames = dir.path().join("frames");
+        write(
+            &frames,
+            "scan000.frames",
+            "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1 0\n",
+        );
+        let with_frames = ImportOptions {
+            frames_dir: Some(frames.clone()),
+            ..Default::default()
+        };
+        let err = import_3dtk(&source, &out, &with_frames)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("scan001.frames is missing"), "{err}");
+        write(
+            &frames,
+            "scan001.frames",
+            "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1 0\n1 2\n",
+        );
+        let err = import_3dtk(&source, &out, &with_frames)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("scan001.frames:2"), "{err}");
+
+        // Selection errors.
+        let err = import_3dtk(
+            &source,
+            &out,
+            &ImportOptions {
+                first: 5,
+                ..Default::default()
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("no scan numbered 5"), "{err}");
+        let err = import_3dtk(
+            &source,
+            &out,
+            &ImportOptions {
+                count: Some(3),
+                ..Default::default()
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("3 scans asked"), "{err}");
+
+        // A malformed .3d is found while writing: what was written is removed.
+        write(&source, "scan001.3d", "1 2 3\n1 2\n");
+        let err = import_3dtk(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("scan001.3d:2"), "{err}");
+        assert!(!out.exists(), "a failed import left {}", out.display());
+        // A scan with only filtered points.
+        write(&source, "scan001.3d", "1 2 3\n0 0 5000\n");
+        let err = import_3dtk(&source, &out, &opts).unwrap_err().to_string();
+        assert!(
+            err.contains("scan001.3d") && err.contains("no point"),
+            "{err}"
+        );
+        assert!(!out.exists());
+        assert!(nothing_left(dir.path()));
+    }
+
+    /// No temporary file is left anywhere under `dir`.
+    fn nothing_left(dir: &Path) -> bool {
+        std::fs::read_dir(dir).unwrap().all(|e| {
+            let e = e.unwrap();
+            let name = e.file_name().into_string().unwrap();
+            !name.contains(".tmp-") && (!e.path().is_dir() || nothing_left(&e.path()))
+        })
+    }
+
+    fn kitti_folder(dir: &Path, n: usize) -> PathBuf {
+        let source = dir.join("kitti");
+        std::fs::create_dir_all(source.join("velodyne")).unwrap();
+        for i in 0..n {
+            let bytes: Vec<u8> = [[1.0f32 + i as f32, 2.0, 3.0, 0.5], [4.0, 5.0, 6.0, 0.1]]
+                .iter()
+                .flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes()))
+                .collect();
+            std::fs::write(source.join(format!("velodyne/{i:06}.bin")), bytes).unwrap();
+        }
+        // Camera 0 moves 0.8 m forward (its z) per frame.
+        let poses: String = (0..n)
+            .map(|i| format!("1 0 0 0 0 1 0 0 0 0 1 {}\n", 0.8 * i as f64))
+            .collect();
+        write(&source, "poses.txt", &poses);
+        write(
+            &source,
+            "calib.txt",
+            "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 0 -1 0 0 0 0 -1 0 1 0 0 -0.27\n",
+        );
+        source
+    }
+
+    #[test]
+    fn import_kitti_writes_a_dataset() {
+        let dir = tempfile::tempdir().unwrap();
+        let source = kitti_folder(dir.path(), 5);
+        let out = dir.path().join("ds");
+        let options = ImportOptions {
+            first: 2,
+            count: Some(2),
+            frames_dir: None,
+        };
+        let summary = import_dataset(&source, &out, None, &options).unwrap();
+        assert_eq!(summary.format, ImportFormat::Kitti);
+        assert_eq!(summary.points_per_scan, vec![2, 2]);
+        let dataset = Dataset::open(&out).unwrap();
+        assert!(dataset.attitudes.is_none() && dataset.odometry.is_none());
+        assert_eq!(dataset.scan_paths[0], out.join("scans/000000.bin"));
+        assert_eq!(
+            std::fs::read(&dataset.scan_paths[1]).unwrap(),
+            std::fs::read(source.join("velodyne/000003.bin")).unwrap()
+        );
+        let truth = dataset.truth.unwrap();
+        let (dt, dr) = pose_error(&Pose::identity(), &truth[0]);
+        assert!(dt < 1e-12 && dr < 1e-12);
+        assert!((truth[1].translation.vector - Vec3::new(0.8, 0.0, 0.0)).norm() < 1e-9);
+
+        // Without poses.txt: no truth.
+        let out2 = dir.path().join("ds2");
+        std::fs::remove_file(source.join("poses.txt")).unwrap();
+        import_kitti(&source, &out2, &ImportOptions::default()).unwrap();
+        let dataset = Dataset::open(&out2).unwrap();
+        assert_eq!(dataset.len(), 5);
+        assert!(dataset.truth.is_none());
+    }
+
+    #[test]
+    fn import_kitti_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let source = kitti_folder(dir.path(), 3);
+        let out = dir.path().join("ds");
+        let opts = ImportOptions::default();
+        let err = import_dataset(
+            &source,
+            &out,
+            None,
+            &ImportOptions {
+                frames_dir: Some(dir.path().into()),
+                ..Default::default()
+            },
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.contains("3DTK imports only"), "{err}");
+        write(&source, "poses.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0\n");
+        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("poses.txt:2"), "{err}");
+        write(&source, "poses.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n");
+        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
+        assert!(
+            err.contains("1 poses") && err.contains("000001.bin"),
+            "{err}"
+        );
+        write(&source, "poses.txt", &"1 0 0 0 0 1 0 0 0 0 1 0\n".repeat(3));
+        write(&source, "calib.txt", "Tr: 1 0 0\n");
+        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("calib.txt:1"), "{err}");
+        std::fs::remove_file(source.join("calib.txt")).unwrap();
+        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("calib.txt is missing"), "{err}");
+        write(&source, "calib.txt", "Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n");
+        std::fs::write(source.join("velodyne/000002.bin"), [0u8; 7]).unwrap();
+        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("000002.bin"), "{err}");
+        assert!(!out.exists());
+        for i in 0..3 {
+            std::fs::remove_file(source.join(format!("velodyne/{i:06}.bin"))).unwrap();
+        }
+        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
+        assert!(err.contains("no scans"), "{err}");
+    }
+}

@@ -1,0 +1,635 @@
+//! Files: point clouds, attitude and pose files, the sensor model, raw sweeps, voxel maps and
+//! dataset folders.
+//!
+//! This is the only library module that touches the file system (DESIGN.md, "Architecture
+//! sketch"). Every reader returns [`Error::Parse`] naming the file and, for text, the 1-based line
+//! when the content is malformed, and [`Error::Io`] when the operating system fails; no input makes
+//! a reader panic or return a silently wrong value (non-finite coordinates and angles are errors,
+//! counts declared in headers are checked against the file's size before anything is allocated).
+//! Every writer goes through [`write_atomic`], so a crash never leaves a half-written file.
+//!
+//! Units: metres and radians in memory, degrees in files.
+//!
+//! # Point clouds ([`read_points`], [`write_points_ply`])
+//!
+//! | extension | format |
+//! |---|---|
+//! | `.ply` | PLY, `ascii`, `binary_little_endian` or `binary_big_endian`; element `vertex` with properties `x`, `y`, `z` stored as `float` or `double`; other properties and elements are ignored; vertices with a NaN coordinate are skipped (no return) |
+//! | `.pcd` | PCL PCD, `DATA ascii` or `DATA binary` (little-endian); fields `x`, `y`, `z` of `TYPE F`, `SIZE 4` or `8`, `COUNT 1`; other fields ignored; points with a NaN coordinate are skipped. `DATA binary_compressed` is not supported. `VIEWPOINT` is ignored |
+//! | `.xyz`, `.txt` | text, one point per line: `x y z` separated by spaces, tabs or commas; further columns ignored; blank lines and everything after `#` (or a line starting with `//`) ignored |
+//! | `.bin` | KITTI Velodyne: little-endian `f32` records `x y z intensity`, 16 bytes per point, no header |
+//! | `.3d` | 3DTK "uos": text `x y z` in **centimetres**, left-handed with x right, y up, z forward; converted to metres with x forward, y left, z up: `(z, −x, y) / 100`. An optional first line like `360 x 225` is skipped; further columns ignored |
+//! | `.sweep` | a raw tilting-LRF sweep (below), turned into points with [`Sweep::points_in_sensor`] |
+//!
+//! A cloud with no points is an error on reading and on writing: sdem cannot use an empty scan.
+//! Infinite coordinates are always an error. NaN is skipped only in the binary-capable formats
+//! (PLY, PCD, KITTI `.bin`), where sensors write it for "no return"; in the plain text formats
+//! (`.xyz`, `.txt`, `.3d`) any coordinate that is not a finite number is an error naming the line.
+//! Scans are metres in the sensor frame: a coordinate beyond the range of `f32` (in which sdem
+//! keeps points) is an error, and so is a scan of which half the points lie farther than
+//! [`MAX_MEDIAN_RANGE_M`] (1 km) from the sensor — millimetres, or world coordinates.
+//!
+//! # `attitude.csv` ([`read_attitude_csv`], [`write_attitude_csv`])
+//!
+//! ```text
+//! index,roll_deg,pitch_deg,yaw_deg
+//! 0,0.5,-1.25,90
+//! 1,0.25,-1,92.5
+//! ```
+//! The header exactly as shown, then one row per scan with `index` counting 0, 1, 2, … in order.
+//! Angles in degrees, `R = Rz(yaw) · Ry(pitch) · Rx(roll)`. Blank lines are ignored. A roll or
+//! pitch beyond ±[`MAX_TILT_READING_DEG`] (360°) is not a reading in degrees and is an error;
+//! yaw is not bounded (a gyro heading may be unwrapped).
+//!
+//! # Pose files ([`read_kitti_poses`], [`read_tum_poses`], [`write_poses`])
+//!
+//! KITTI: one pose per line, 12 numbers, the row-major 3×4 matrix `[R | t]` of
+//! `world_from_sensor`. On reading, `R` must be a rotation to within 1e-3 (determinant and `RᵀR`)
+//! and is re-orthonormalized. TUM: one pose per line, `timestamp x y z qx qy qz qw`; sdem writes
+//! the scan index as the timestamp. [`write_poses`] writes a KITTI file and, beside it, the same
+//! poses as TUM with the extension `.tum`, so `evo_ape` / `evo_rpe` read either.
+//!
+//! # `sensor.toml` ([`read_sensor_toml`], [`write_sensor_toml`])
+//!
+//! The fields of [`SensorConfig`] (unknown keys are errors, missing keys take the defaults), then
+//! [`SensorConfig::validate`]. An empty file is an error (a truncated one: remove the file to use
+//! the defaults).
+//!
+//! # Raw sweeps: the `.sweep` format, version 1 ([`read_sweep`], [`write_sweep`])
+//!
+//! What a tilting 2D laser range finder produces at one stop, before it becomes points: for each
+//! scan line the tilt of the scan plane, the gyro/compass attitude while the line was taken, and
+//! the ranges over pan. UTF-8 text; lines end with `\n` (`\r\n` is accepted); values are separated
+//! by spaces or tabs. Blank lines and lines whose first non-blank character is `#` are ignored
+//! anywhere. The other lines are, in this order:
+//!
+//! 1. `sdem-sweep 1` — the magic word and the format version (only version 1 exists).
+//! 2. `pan_deg PAN_MIN PAN_STEP PAN_COUNT` — every scan line holds `PAN_COUNT` (≥ 1) beams;
+//!    beam `k` (0-based) is at pan angle `PAN_MIN + k · PAN_STEP` degrees, counter-clockwise
+//!    from forward inside the scan plane. `PAN_STEP` > 0, and every beam's pan angle lies within
+//!    ±360°.
+//! 3. `lift_slide_m U` — the lift's slide `u` during the sweep, metres (see
+//!    [`sdem::sensor::LiftConfig`]).
+//! 4. `lines N` — the number of scan lines that follow (≥ 1).
+//! 5. `N` data lines, in the order they were taken, each with `4 + PAN_COUNT` values:
+//!    `TILT_DEG ROLL_DEG PITCH_DEG YAW_DEG R_0 R_1 … R_(PAN_COUNT−1)`.
+//!    `TILT_DEG` is the tilt of the scan plane, degrees, positive up (beam direction
+//!    `(cos θ cos φ, sin φ, sin θ cos φ)` in the sensor frame, see [`sdem::sensor`]).
+//!    `ROLL_DEG PITCH_DEG YAW_DEG` is the gyro/compass reading, degrees.
+//!    `R_k` is the range of beam `k` in metres, or `nan` where the beam had no return.
+//!
+//! Nothing but blank and comment lines may follow the last data line, and the last line ends with
+//! its line break (a file without one is truncated). All angles and `U` must be finite, roll and
+//! pitch within ±[`MAX_TILT_READING_DEG`]; a range must be `nan` or a finite number ≥ 0, and half
+//! of the returns must lie within [`MAX_MEDIAN_RANGE_M`] (else the ranges are not in metres).
+//! Ranges are 32-bit floats; the writer prints the shortest decimal that reads back to the same
+//! `f32`, so a sweep round-trips exactly.
+//! Example (the paper's sensor: pan −90°…90° in 1° steps, 86 tilt lines; ranges shortened):
+//!
+//! ```text
+//! sdem-sweep 1
+//! pan_deg -90 1 181
+//! lift_slide_m 0.55
+//! lines 86
+//! # tilt_deg roll_deg pitch_deg yaw_deg then 181 ranges in metres (nan = no return)
+//! -45 0.01 -0.02 0.1 1.2345 nan 1.25 …
+//! -44 0.01 -0.02 0.1 1.2411 1.2398 nan …
+//! ```
+//!
+//! # Voxel maps: the `.sdemvox` format, version 1 ([`read_voxel_map`], [`write_voxel_map`])
+//!
+//! A [`sdem::voxel::VoxelMap`]: the occupancy log-odds of every known voxel, with the
+//! configuration that made them. Binary, little-endian, no padding:
+//!
+//! | offset | type | content |
+//! |---|---|---|
+//! | 0 | 8 bytes | the magic `sdem-vox` (ASCII) |
+//! | 8 | `u32` | the format version, 1 |
+//! | 12 | 6 × `f64` | the [`sdem::voxel::VoxelConfig`]: `voxel_m`, `hit_log_odds`, `miss_log_odds`, `min_log_odds`, `max_log_odds`, `max_range_m` |
+//! | 60 | `u64` | `N`, the number of voxel records |
+//! | 68 | `N` × 16 bytes | records `i32 i, i32 j, i32 k, f32 log_odds`, sorted by `(i, j, k)`, no key twice |
+//! | 68 + 16 `N` | `u32` | CRC-32 (IEEE, as zlib, PNG and gzip compute it) of every byte before it |
+//!
+//! Voxel `[i, j, k]` is the cube `[i·s, (i+1)·s) × [j·s, (j+1)·s) × [k·s, (k+1)·s)` in the world
+//! frame, `s = voxel_m` metres; a log-odds above 0 is occupied, at or below 0 free; voxels not
+//! listed are unknown. A reader checks, in this order: the magic, the version (a newer one is
+//! reported as such), that the file is exactly `72 + 16 N` bytes, the checksum, the
+//! configuration, then that each record's log-odds is finite and within
+//! `[min_log_odds, max_log_odds]`, its key within ±10⁹ and after the previous record's key (an
+//! error names the record and its byte offset).
+//! The checksum is CRC-32 rather than a hash: it catches every burst error up to 32 bits and
+//! every 1- to 3-bit error in files far larger than a map, any zlib can check it, and a map file
+//! needs protection from damage, not from forgery.
+//!
+//! # Dataset folders ([`Dataset`], [`write_dataset`], [`clear_dataset`])
+//!
+//! ```text
+//! DATASET/
+//!   scans/000000.ply     one point cloud per stop, sensor frame, metres (any format above)
+//!   sweeps/000000.sweep  optional: the raw sweep of each stop (the simulator writes them)
+//!   attitude.csv         optional: the gyro/compass reading, one row per scan
+//!   odometry.txt         optional: dead-reckoned world_from_sensor poses, KITTI (+ odometry.tum)
+//!   poses_truth.txt      optional: true world_from_sensor poses, KITTI (+ poses_truth.tum)
+//!   poses_slam6d.txt     optional: slam6D's registration of an imported 3DTK folder, KITTI
+//!   sensor.toml          optional: the sensor model
+//! ```
+//!
+//! Every optional per-scan file, when present, has exactly one row (pose) per scan, in the order
+//! of the scan files' names; a different count is an error naming the file and both counts.
+//!
+//! - **`attitude.csv` absent**: the robot had no gyro/compass (KITTI), so there is no attitude
+//!   measurement. `sdem localize` then takes the level attitude (roll = pitch = yaw = 0) for both
+//!   scans; the SLAM loop takes the previous scan's estimated attitude as the prior of the next
+//!   one and searches heading wider, since no compass bounds it.
+//! - **`odometry.txt`**: the robot's dead-reckoned `world_from_sensor` of each scan, in the KITTI
+//!   pose format above ([`read_kitti_poses`]). Dead reckoning drifts without bound, so only the
+//!   relative motion between consecutive scans, `odometry[i-1]⁻¹ · odometry[i]`, is used (as the
+//!   prior of a search window), never the absolute poses. `sdem simulate` writes it with noise
+//!   proportional to each step ([`sdem_sim::odometry`]); `sdem import` writes 3DTK's `.pose` files
+//!   there.
+//! - **`poses_truth.txt`**: ground truth, used only to report errors. An imported reference that
+//!   is not ground truth (slam6D's ICP result) goes to `poses_slam6d.txt` instead.
+//!
+//! # Importing other datasets ([`import_dataset`], [`import_3dtk`], [`import_kitti`])
+//!
+//! `sdem import` turns another dataset into the layout above:
+//!
+//! - **3DTK** (`scanNNN.3d` + `scanNNN.pose`, optionally slam6D's `scanNNN.frames`): scans
+//!   converted to sdem's frame as for `.3d` above and written as `scans/NNNNNN.ply`, without the
+//!   points farther than 30 m (3DTK's no-return sentinel, ~32.76 m) or nearer than 0.2 m (the
+//!   robot itself). 3DTK's frame is left-handed, so a pose `M` becomes `C · M · C⁻¹` with the
+//!   axis map `C · (x, y, z) = (z, −x, y)` (a reflection) and the translation in metres; a turn
+//!   by θ about 3DTK's up axis is a yaw of −θ. The `.pose` files (the robot's initial estimate)
+//!   become `odometry.txt` and, through their roll/pitch/yaw, `attitude.csv`; the last line of
+//!   each `.frames` becomes `poses_slam6d.txt` — a reference, not ground truth.
+//! - **KITTI odometry** (`velodyne/NNNNNN.bin`, `poses.txt`, `calib.txt`): the `.bin` scans are
+//!   copied unchanged (the Velodyne frame is sdem's), the camera poses become Velodyne poses
+//!   `Tr⁻¹ · P_i · Tr` re-based on the first imported scan in `poses_truth.txt`, and no
+//!   `attitude.csv` is written (no gyro/compass).
+//!
+//! Scans are renumbered from `000000` in the order of their source numbers.
+
+use sdem::error::{Error, Result};
+use sdem::geometry::Vec3;
+use sdem::sensor::{SensorConfig, Sweep};
+use std::ffi::OsString;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+mod attitude;
+mod dataset;
+mod import;
+mod mapfile;
+mod pcd;
+mod ply;
+mod points;
+mod poses;
+mod sweep;
+mod voxels;
+
+pub use attitude::{read_attitude_csv, write_attitude_csv, ATTITUDE_HEADER, MAX_TILT_READING_DEG};
+pub use dataset::{
+    clear_dataset, write_dataset, Dataset, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE,
+    SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
+};
+pub use import::{
+    import_3dtk, import_dataset, import_kitti, kitti_velodyne_poses, parse_kitti_calib_tr,
+    read_kitti_calib_tr, read_uos_frames_last, read_uos_pose, uos_matrix_to_world_from_sensor,
+    uos_pose_to_world_from_sensor, ImportFormat, ImportOptions, ImportSummary, UOS_MAX_RANGE_M,
+    UOS_MIN_RANGE_M,
+};
+pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
+pub use ply::write_points_ply;
+pub use points::{read_points, PointFormat, MAX_MEDIAN_RANGE_M, POINT_EXTENSIONS};
+pub use poses::{
+    read_kitti_poses, read_tum_poses, write_kitti_poses, write_poses, write_tum_poses,
+};
+pub use sweep::{read_sweep, write_sweep, SWEEP_MAGIC, SWEEP_VERSION};
+pub use voxels::{read_voxel_map, write_voxel_map, VOXEL_EXTENSION, VOXEL_MAGIC, VOXEL_VERSION};
+
+/// What [`write_atomic`]'s temporary files carry between the target's name and the process id.
+const TEMPORARY_MARK: &str = ".tmp-";
+
+/// Writes a file atomically: `write` fills a temporary file in the same folder (named
+/// `.NAME.tmp-PID-N`), which is flushed, synced to disk and then renamed over `path`. A crash or
+/// an error leaves either the old file or the new one, never a half-written one; on error the
+/// temporary file is removed.
+///
+/// # Arguments
+/// * `path` — the file to create or replace; its folder must exist.
+/// * `write` — writes the content; it gets a buffered writer.
+///
+/// # Example
+/// ```
+/// let dir = std::env::temp_dir().join(format!("sdem-doc-atomic-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir).unwrap();
+/// let path = dir.join("hello.txt");
+/// sdem_io::write_atomic(&path, |w| w.write_all(b"hello\n")).unwrap();
+/// assert_eq!(std::fs::read_to_string(&path).unwrap(), "hello\n");
+/// std::fs::remove_dir_all(&dir).unwrap();
+/// ```
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<()> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let file_name = path.file_name().ok_or_else(|| {
+        Error::Invalid(format!(
+            "cannot write to {}: the path does not name a file",
+            path.display()
+        ))
+    })?;
+    let folder = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut tmp_name = OsString::from(".");
+    tmp_name.push(file_name);
+    tmp_name.push(format!(
+        "{TEMPORARY_MARK}{}-{}",
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let tmp_path = folder.join(tmp_name);
+
+    let result = (|| -> std::io::Result<()> {
+        let file = std::fs::File::create(&tmp_path)?;
+        let mut out = std::io::BufWriter::new(file);
+        write(&mut out)?;
+        out.flush()?;
+        let file = out.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        drop(file);
+        std::fs::rename(&tmp_path, path)
+    })();
+    if let Err(e) = result {
+        let _ = std::fs::remove_file(&tmp_path);
+        return Err(Error::io(path, e));
+    }
+    // Make the rename itself durable where the platform allows syncing a folder.
+    #[cfg(unix)]
+    if let Ok(dir) = std::fs::File::open(&folder) {
+        let _ = dir.sync_all();
+    }
+    Ok(())
+}
+
+/// Removes the temporary files (`.NAME.tmp-PID-N`, as [`write_atomic`] names them) that a
+/// process killed mid-save left in `folder`: those of other processes that are no longer running (on Linux; on
+/// other systems, those of every other process). Best effort: a file that cannot be removed is
+/// left, as it does no harm but take room.
+pub(crate) fn remove_stale_temporaries(folder: &Path) {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return;
+    };
+    let own = std::process::id();
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let Some(pid) = name
+            .strip_prefix('.')
+            .and_then(|n| n.rsplit_once(TEMPORARY_MARK))
+            .and_then(|(_, tail)| tail.split_once('-'))
+            .and_then(|(pid, _)| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = pid == own
+            || (cfg!(target_os = "linux") && Path::new("/proc").join(pid.to_string()).exists());
+        if !alive {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+/// Reads a whole file, mapping OS errors to [`Error::Io`].
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| Error::io(path, e))
+}
+
+/// Reads a whole file as UTF-8 text (a leading byte-order mark is dropped). Invalid UTF-8 is a
+/// parse error naming the line where it starts.
+fn read_text(path: &Path) -> Result<String> {
+    let bytes = read_bytes(path)?;
+    text_from_bytes(path, bytes, 0)
+}
+
+/// Turns `bytes` into text; `first_line` is the number of lines before `bytes` in the file.
+fn text_from_bytes(path: &Path, mut bytes: Vec<u8>, first_line: usize) -> Result<String> {
+    if bytes.starts_with(&[0xEF, 0xBB, 0xBF]) {
+        bytes.drain(..3);
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        let valid = e.utf8_error().valid_up_to();
+        let bad = e.as_bytes();
+        let line = first_line + 1 + bad.get(..valid).map_or(0, count_newlines);
+        Error::parse(
+            path,
+            Some(line),
+            "not UTF-8 text; the file is binary or in another encoding",
+        )
+    })
+}
+
+fn count_newlines(bytes: &[u8]) -> usize {
+    bytes.iter().filter(|&&b| b == b'\n').count()
+}
+
+/// Numbered lines of a text: `(1-based line number, line without its line ending)`.
+fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.lines().enumerate().map(|(i, l)| (i + 1, l))
+}
+
+/// Parses a finite `f64`; `what` names the value in the error message.
+fn parse_finite(path: &Path, line: usize, token: &str, what: &str) -> Result<f64> {
+    match token.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(v) => Err(Error::parse(
+            path,
+            Some(line),
+            format!("{what} is {v}; it must be a finite number"),
+        )),
+        Err(_) => Err(Error::parse(
+            path,
+            Some(line),
+            format!("{what} '{token}' is not a number"),
+        )),
+    }
+}
+
+/// Parses a non-negative integer count; `what` names the value in the error message.
+fn parse_count(path: &Path, line: usize, token: &str, what: &str) -> Result<usize> {
+    token.parse::<usize>().map_err(|_| {
+        Error::parse(
+            path,
+            Some(line),
+            format!("{what} '{token}' is not a non-negative whole number"),
+        )
+    })
+}
+
+/// Formats an `f64` so that it reads back bit-for-bit, in plain notation for ordinary magnitudes
+/// and in scientific notation for tiny or huge ones (Rust's `{}` never uses an exponent).
+fn fmt_f64(value: f64) -> String {
+    let magnitude = value.abs();
+    if value == 0.0 || (1e-5..1e16).contains(&magnitude) || !value.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
+}
+
+/// Checks that every point is finite and representable as `f32` before writing.
+fn check_points_writable(path: &Path, points: &[Vec3]) -> Result<()> {
+    if points.is_empty() {
+        return Err(Error::Invalid(format!(
+            "refusing to write {}: the point cloud is empty (sdem cannot use an empty scan)",
+            path.display()
+        )));
+    }
+    for (i, p) in points.iter().enumerate() {
+        if !(p.iter().all(|v| v.is_finite() && (*v as f32).is_finite())) {
+            return Err(Error::Invalid(format!(
+                "refusing to write {}: point {i} is ({}, {}, {}); coordinates must be finite and fit in f32",
+                path.display(),
+                p.x,
+                p.y,
+                p.z
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Turns a sweep file into points in the sensor frame (used by [`read_points`]).
+fn sweep_points(path: &Path) -> Result<Vec<Vec3>> {
+    let sweep: Sweep = read_sweep(path)?;
+    let points = sweep.points_in_sensor();
+    if points.is_empty() {
+        return Err(Error::parse(
+            path,
+            None,
+            "the sweep has no returns (every range is nan or 0), so it gives no points",
+        ));
+    }
+    Ok(points)
+}
+
+/// Writes `sensor.toml`: the configuration is validated first, so sdem never writes a file it
+/// would refuse to read.
+///
+/// # Example
+/// ```
+/// # let dir = std::env::temp_dir().join(format!("sdem-doc-toml-{}", std::process::id()));
+/// # std::fs::create_dir_all(&dir).unwrap();
+/// let path = dir.join("sensor.toml");
+/// let config = sdem::sensor::SensorConfig::default();
+/// sdem_io::write_sensor_toml(&path, &config).unwrap();
+/// assert_eq!(sdem_io::read_sensor_toml(&path).unwrap(), config);
+/// # std::fs::remove_dir_all(&dir).unwrap();
+/// ```
+pub fn write_sensor_toml(path: &Path, config: &SensorConfig) -> Result<()> {
+    config.validate()?;
+    let body = toml::to_string_pretty(config).map_err(|e| {
+        Error::Invalid(format!(
+            "cannot write {}: the sensor model does not serialize as TOML: {e}",
+            path.display()
+        ))
+    })?;
+    write_atomic(path, |w| {
+        w.write_all(
+            b"# sdem sensor model: angles in degrees, lengths in metres. Missing keys take the defaults.\n",
+        )?;
+        w.write_all(body.as_bytes())
+    })
+}
+
+/// Reads `sensor.toml` into a validated [`SensorConfig`]. Unknown keys, wrong types and invalid
+/// values are parse errors naming the file and the line (for an invalid value, the line of the
+/// key the message names, where the file sets it). An empty file is an error too: it is a
+/// truncated one (sdem writes every key); remove the file to use the defaults.
+pub fn read_sensor_toml(path: &Path) -> Result<SensorConfig> {
+    let text = read_text(path)?;
+    if text.trim().is_empty() {
+        return Err(Error::parse(
+            path,
+            None,
+            "the file is empty (truncated?); write the sensor model's keys, or remove the file to \
+             use the default sensor model",
+        ));
+    }
+    let config: SensorConfig = parse_toml(
+        path,
+        &text,
+        "the keys are those of sdem's SensorConfig; angles in degrees, lengths in metres",
+    )?;
+    at_named_key(path, &text, config.validate())?;
+    Ok(config)
+}
+
+/// Reads the configuration file of `sdem slam --config FILE`: the fields of
+/// [`sdem::slam::SlamConfig`] as `sdem slam` writes them into `config.toml` (unknown keys are
+/// errors, missing keys take the defaults), then [`sdem::slam::SlamConfig::validate`]. Errors
+/// name the file and the line (for an invalid value, the line of the key the message names,
+/// where the file sets it), on one line.
+pub fn read_slam_config(path: &Path) -> Result<sdem::slam::SlamConfig> {
+    let text = read_text(path)?;
+    let config: sdem::slam::SlamConfig = parse_toml(
+        path,
+        &text,
+        "the keys are those of the config.toml that sdem slam writes",
+    )?;
+    at_named_key(path, &text, config.validate())?;
+    Ok(config)
+}
+
+/// A configuration's validation error as a parse error of `path` at the line of `text` that
+/// sets the key the message names (the whole file where none does).
+fn at_named_key(path: &Path, text: &str, validated: Result<()>) -> Result<()> {
+    validated.map_err(|e| {
+        let message = e.to_string();
+        Error::parse(path, line_of_named_key(text, &message), message)
+    })
+}
+
+/// Parses TOML `text` read from `path`; an error names the file and line on one line (TOML's own
+/// message shows the line over several), with `keys` saying what the keys are.
+fn parse_toml<T: serde::de::DeserializeOwned>(path: &Path, text: &str, keys: &str) -> Result<T> {
+    toml::from_str(text).map_err(|e| {
+        let line = e.span().map(|span| {
+            1 + text
+                .get(..span.start)
+                .map_or(0, |t| count_newlines(t.as_bytes()))
+        });
+        let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+        Error::parse(path, line, format!("{message} ({keys})"))
+    })
+}
+
+/// The 1-based line of the first `KEY = value` line of a TOML text whose `KEY` the message
+/// names (as a whole word).
+fn line_of_named_key(text: &str, message: &str) -> Option<usize> {
+    let names = |key: &str| {
+        message.match_indices(key).any(|(at, _)| {
+            let word = |c: char| c.is_alphanumeric() || c == '_';
+            let before = message.get(..at).and_then(|m| m.chars().next_back());
+            let after = message.get(at + key.len()..).and_then(|m| m.chars().next());
+            !before.is_some_and(word) && !after.is_some_and(word)
+        })
+    };
+    numbered_lines(text).find_map(|(line_no, line)| {
+        let (key, _) = line.split_once('=')?;
+        let key = key.trim();
+        (!key.is_empty() && !key.starts_with('#') && names(key)).then_some(line_no)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn write_atomic_replaces_and_cleans_up() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.txt");
+        write_atomic(&path, |w| w.write_all(b"one")).unwrap();
+        write_atomic(&path, |w| w.write_all(b"two")).unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "two");
+        // A failing writer leaves the old file and no temporary file.
+        let err = write_atomic(&path, |w| {
+            w.write_all(b"half")?;
+            Err(std::io::Error::other("disk on fire"))
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("a.txt"), "{err}");
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "two");
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, vec![OsString::from("a.txt")]);
+        // A missing folder is an I/O error naming the target.
+        let err = write_atomic(&dir.path().join("nope/b.txt"), |w| w.write_all(b"x")).unwrap_err();
+        assert!(matches!(err, Error::Io { .. }) && err.to_string().contains("b.txt"));
+    }
+
+    #[test]
+    fn fmt_f64_round_trips() {
+        for v in [
+            0.0,
+            -0.0,
+            1.0,
+            -2.5,
+            0.1,
+            1e-17,
+            5.551115e-17,
+            1e300,
+            123456.789,
+            -1e-5,
+        ] {
+            let s = fmt_f64(v);
+            assert_eq!(s.parse::<f64>().unwrap().to_bits(), v.to_bits(), "{s}");
+        }
+        assert_eq!(fmt_f64(0.5), "0.5");
+        assert_eq!(fmt_f64(1e-17), "1e-17");
+    }
+
+    #[test]
+    fn invalid_utf8_names_the_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.xyz");
+        std::fs::write(&path, b"1 2 3\n4 5 \xff\n").unwrap();
+        let err = read_text(&path).unwrap_err();
+        assert!(err.to_string().contains("bad.xyz:2:"), "{err}");
+    }
+
+    #[test]
+    fn sensor_toml_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sensor.toml");
+        let config = SensorConfig {
+            trusted_range_m: Some(3.0),
+            max_range_m: 7.5,
+            ..Default::default()
+        };
+        write_sensor_toml(&path, &config).unwrap();
+        assert_eq!(read_sensor_toml(&path).unwrap(), config);
+        // Defaults fill missing keys.
+        std::fs::write(&path, "max_range_m = 6.0\n").unwrap();
+        let partial = read_sensor_toml(&path).unwrap();
+        assert_eq!(partial.max_range_m, 6.0);
+        assert_eq!(partial.pan_step_deg, SensorConfig::default().pan_step_deg);
+    }
+
+    #[test]
+    fn sensor_toml_errors_name_file_and_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sensor.toml");
+        let cases: &[(&str, Option<&str>)] = &[
+            ("tilt_min_deg = -45.0\nmax_rnage_m = 8.0\n", Some(":2:")),
+            ("max_range_m = \"far\"\n", Some(":1:")),
+            ("max_range_m = 8.0\n[lift\n", Some(":2:")),
+            ("pan_step_deg = 0.0\n", None),
+            ("min_range_m = nan\n", None),
+            ("[lift]\nlink_length_m = -1.0\n", None),
+        ];
+        for (text, line) in cases {
+            std::fs::write(&path, text).unwrap();
+            let err = read_sensor_toml(&path).unwrap_err();
+            let msg = err.to_string();
+            assert!(matches!(err, Error::Parse { .. }), "{msg}");
+            assert!(msg.contains("sensor.toml"), "{msg}");
+            if let Some(line) = line {
+                assert!(msg.contains(line), "{text:?} -> {msg}");
+            }
+        }
+        let invalid = SensorConfig {
+            pan_step_deg: -1.0,
+            ..Default::default()
+        };
+        assert!(write_sensor_toml(&path, &invalid).is_err());
+        let err = read_sensor_toml(&dir.path().join("missing.toml")).unwrap_err();
+        assert!(matches!(err, Error::Io { .. }));
+    }
+}

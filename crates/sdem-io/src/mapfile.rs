@@ -1,0 +1,694 @@
+//! Saved maps: a folder that `sdem slam` writes after every scan and that `sdem slam --resume` and
+//! `sdem localize --map` read back.
+//!
+//! ```text
+//! MAP/
+//!   map.json            the manifest: format, version, the configuration, every node's pose,
+//!                       attitude reading and points file with its CRC-32, the pose-graph
+//!                       edges, the accepted loop closures, and a CRC-32 of all that
+//!   nodes/000000.pts    one node's S-DEM boundary points, sensor frame (immutable)
+//! ```
+//! `NNNNNN.pts`: the 8 bytes `SDEMPTS1`, a little-endian `u32` format version (1), a `u64` point
+//! count, that many `f32` triples `x y z` (metres, sensor frame), and a `u32` CRC-32 of every
+//! byte before it.
+//!
+//! Saving writes the new node files first and the manifest last, each through
+//! [`super::write_atomic`] (temporary file, sync, rename), so a process killed at any moment
+//! leaves the previous manifest — and every node file it names — intact; a node file written
+//! before the kill but not yet named is simply written again, and the next save removes the
+//! temporary files the killed process left. Loading checks the format name, the
+//! version (a newer one says so), the manifest's checksum, each node file's size, magic, version
+//! and checksum against the manifest, and every number for finiteness.
+
+use super::poses::to_rotation;
+use super::voxels::crc32;
+use super::{remove_stale_temporaries, write_atomic};
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
+use sdem::error::{Error, Result};
+use sdem::geometry::{Attitude, Pose};
+use sdem::map::{LoopClosure, Map, Node};
+use sdem::posegraph::{Edge, EdgeKind};
+use sdem::slam::SlamConfig;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The manifest's file name.
+pub const MAP_MANIFEST: &str = "map.json";
+/// The manifest's `format` value.
+pub const MAP_FORMAT: &str = "sdem-map";
+/// The newest map version this build reads and the one it writes.
+pub const MAP_VERSION: u32 = 1;
+const POINTS_MAGIC: &[u8; 8] = b"SDEMPTS1";
+const POINTS_VERSION: u32 = 1;
+
+/// The node files a map folder holds, as far as this process knows: the CRC-32 of node `i`'s
+/// file at index `i` (written by [`save_map`], or checked by [`load_map`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct NodeFiles {
+    crc32: Vec<u32>,
+}
+
+/// A saved map, as loaded.
+#[derive(Debug, Clone)]
+pub struct SavedMap {
+    /// The configuration the map was made with.
+    pub config: SlamConfig,
+    /// The nodes.
+    pub map: Map,
+    /// The pose-graph edges.
+    pub edges: Vec<Edge>,
+    /// The accepted loop closures.
+    pub loop_closures: Vec<LoopClosure>,
+    /// The dataset the map was made from, as given to `sdem slam`.
+    pub dataset: Option<PathBuf>,
+    /// The node files checked on loading; pass them to [`save_map`] to go on with this map.
+    pub node_files: NodeFiles,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Manifest {
+    format: String,
+    version: u32,
+    /// CRC-32 of the body's canonical JSON text.
+    checksum: u32,
+    body: serde_json::Value,
+}
+
+/// The manifest's body alone, read from the manifest's text (the other fields are checked
+/// through [`Manifest`]).
+#[derive(Deserialize)]
+struct BodyOnly {
+    body: Body,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Body {
+    dataset: Option<PathBuf>,
+    config: SlamConfig,
+    nodes: Vec<NodeRecord>,
+    edges: Vec<EdgeRecord>,
+    loop_closures: Vec<ClosureRecord>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NodeRecord {
+    node_id: usize,
+    scan_index: usize,
+    /// Row-major 3×4 `world_from_sensor`.
+    world_from_sensor: [f64; 12],
+    /// Roll, pitch, yaw in degrees.
+    attitude_reading_deg: Option<[f64; 3]>,
+    points_file: String,
+    points: usize,
+    points_crc32: u32,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EdgeRecord {
+    from: usize,
+    to: usize,
+    from_from_to: [f64; 12],
+    information: [[f64; 6]; 6],
+    kind: EdgeKind,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ClosureRecord {
+    from: usize,
+    to: usize,
+    descriptor_distance: Option<f64>,
+    cost: Option<f64>,
+    inlier_fraction: Option<f64>,
+    correction_m: Option<f64>,
+    from_from_to: [f64; 12],
+}
+
+fn pose_to_row_major(pose: &Pose) -> [f64; 12] {
+    let m = pose.to_homogeneous();
+    std::array::from_fn(|k| m[(k / 4, k % 4)])
+}
+
+fn pose_from_row_major(v: &[f64; 12]) -> Option<Pose> {
+    if !v.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let r = Matrix3::from_fn(|i, j| v[i * 4 + j]);
+    if ((r.transpose() * r) - Matrix3::identity()).abs().max() > 1e-6 || r.determinant() < 0.0 {
+        return None;
+    }
+    // The nearest rotation: a quaternion taken from a matrix that is a rotation only to within
+    // 1e-6 is not of unit length, and would scale every point it turns.
+    let rotation = UnitQuaternion::from_rotation_matrix(&to_rotation(&r).ok()?);
+    Some(Isometry3::from_parts(
+        Translation3::from(Vector3::new(v[3], v[7], v[11])),
+        rotation,
+    ))
+}
+
+fn points_file_name(node_id: usize) -> String {
+    format!("nodes/{node_id:06}.pts")
+}
+
+fn encode_points(points: &[[f32; 3]]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(24 + points.len() * 12);
+    out.extend_from_slice(POINTS_MAGIC);
+    out.extend_from_slice(&POINTS_VERSION.to_le_bytes());
+    out.extend_from_slice(&(points.len() as u64).to_le_bytes());
+    for p in points {
+        for v in p {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    let crc = crc32(&out);
+    out.extend_from_slice(&crc.to_le_bytes());
+    out
+}
+
+fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f32; 3]>> {
+    let bad = |why: String| Error::parse(path, None, why);
+    if bytes.len() < 24 && POINTS_MAGIC.starts_with(&bytes[..bytes.len().min(8)]) {
+        return Err(bad(format!(
+            "truncated: {} bytes, too short for a node file (24 bytes at least); the map is \
+             damaged: re-run sdem slam",
+            bytes.len()
+        )));
+    }
+    if bytes.len() < 24 || &bytes[..8] != POINTS_MAGIC {
+        return Err(bad(format!(
+            "not an sdem node file (it must start with {:?}); the map is damaged: re-run sdem slam",
+            std::str::from_utf8(POINTS_MAGIC).unwrap_or("")
+        )));
+    }
+    let version = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes"));
+    if version != POINTS_VERSION {
+        return Err(bad(format!(
+            "node file version {version}; this build reads version {POINTS_VERSION}"
+        )));
+    }
+    let count = u64::from_le_bytes(bytes[12..20].try_into().expect("8 bytes"));
+    let expected_len = count
+        .checked_mul(12)
+        .and_then(|b| b.checked_add(24))
+        .filter(|&len| len == bytes.len() as u64);
+    if expected_len.is_none() {
+        return Err(bad(format!(
+            "declares {count} points but holds {} bytes (truncated or damaged)",
+            bytes.len()
+        )));
+    }
+    let body = &bytes[..bytes.len() - 4];
+    let stored = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().expect("4 bytes"));
+    let computed = crc32(body);
+    if stored != computed || computed != expected_crc {
+        return Err(bad(format!(
+            "checksum mismatch (file says {stored:08x}, content gives {computed:08x}, the map \
+             expects {expected_crc:08x}): the file is damaged or from another map"
+        )));
+    }
+    let mut points = Vec::with_capacity(count as usize);
+    for (index, chunk) in body[20..].chunks_exact(12).enumerate() {
+        let v = |k: usize| f32::from_le_bytes(chunk[k..k + 4].try_into().expect("4 bytes"));
+        let p = [v(0), v(4), v(8)];
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(bad(format!(
+                "point {index} (byte offset {}) is ({}, {}, {}); coordinates must be finite",
+                20 + 12 * index,
+                p[0],
+                p[1],
+                p[2]
+            )));
+        }
+        points.push(p);
+    }
+    Ok(points)
+}
+
+/// Saves the map into `folder` (created when missing): node files that `node_files` does not
+/// list yet, then the manifest, each atomically (see the module documentation). `node_files`
+/// is updated; start with [`NodeFiles::default`] for a new folder, or take
+/// [`SavedMap::node_files`] from [`load_map`] to go on with a saved one.
+///
+/// # Errors
+/// The file system's errors, naming the file.
+pub fn save_map(
+    folder: &Path,
+    node_files: &mut NodeFiles,
+    config: &SlamConfig,
+    map: &Map,
+    edges: &[Edge],
+    loop_closures: &[LoopClosure],
+    dataset: Option<&Path>,
+) -> Result<()> {
+    let nodes_dir = folder.join("nodes");
+    std::fs::create_dir_all(&nodes_dir).map_err(|e| Error::io(&nodes_dir, e))?;
+    remove_stale_temporaries(folder);
+    remove_stale_temporaries(&nodes_dir);
+    let mut records = Vec::with_capacity(map.nodes.len());
+    for node in &map.nodes {
+        let name = points_file_name(node.node_id);
+        // A node's points never change: only the nodes this folder does not hold yet are
+        // encoded and written (a save used to re-read every node file to compare).
+        let crc = match node_files.crc32.get(node.node_id) {
+            Some(&crc) => crc,
+            None => {
+                let bytes = encode_points(&node.points_in_sensor);
+                let crc = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().expect("4 bytes"));
+                write_atomic(&folder.join(&name), |w| w.write_all(&bytes))?;
+                node_files.crc32.push(crc);
+                crc
+            }
+        };
+        records.push(NodeRecord {
+            node_id: node.node_id,
+            scan_index: node.scan_index,
+            world_from_sensor: pose_to_row_major(&node.world_from_sensor),
+            attitude_reading_deg: node.attitude_reading.map(|a| a.to_degrees()),
+            points_file: name,
+            points: node.points_in_sensor.len(),
+            points_crc32: crc,
+        });
+    }
+    let body = Body {
+        dataset: dataset.map(Path::to_path_buf),
+        config: config.clone(),
+        nodes: records,
+        edges: edges
+            .iter()
+            .map(|e| EdgeRecord {
+                from: e.from,
+                to: e.to,
+                from_from_to: pose_to_row_major(&e.from_from_to),
+                information: e.information,
+                kind: e.kind,
+            })
+            .collect(),
+        loop_closures: loop_closures
+            .iter()
+            .filter_map(|c| {
+                Some(ClosureRecord {
+                    from: c.from,
+                    to: c.to,
+                    descriptor_distance: c.descriptor_distance,
+                    cost: c.cost,
+                    inlier_fraction: c.inlier_fraction,
+                    correction_m: c.correction_m,
+                    from_from_to: pose_to_row_major(c.from_from_to.as_ref()?),
+                })
+            })
+            .collect(),
+    };
+    let body = serde_json::to_value(&body)
+        .map_err(|e| Error::Invalid(format!("cannot encode the map: {e}")))?;
+    let canonical = serde_json::to_vec(&body)
+        .map_err(|e| Error::Invalid(format!("cannot encode the map: {e}")))?;
+    let manifest = Manifest {
+        format: MAP_FORMAT.into(),
+        version: MAP_VERSION,
+        checksum: crc32(&canonical),
+        body,
+    };
+    let text = serde_json::to_vec_pretty(&manifest)
+        .map_err(|e| Error::Invalid(format!("cannot encode the map: {e}")))?;
+    write_atomic(&folder.join(MAP_MANIFEST), |w| w.write_all(&text))
+}
+
+/// Loads a map saved by [`save_map`], checking everything (see the module documentation).
+///
+/// # Errors
+/// A missing or damaged manifest or node file, a newer version, a checksum mismatch, a
+/// non-finite or non-rotation pose, edges naming missing nodes — each naming the file.
+pub fn load_map(folder: &Path) -> Result<SavedMap> {
+    let manifest_path = folder.join(MAP_MANIFEST);
+    if !manifest_path.is_file() {
+        return Err(Error::Invalid(format!(
+            "{} is not a saved map: {} is missing (sdem slam writes it into DIR/map)",
+            folder.display(),
+            manifest_path.display()
+        )));
+    }
+    let bytes = std::fs::read(&manifest_path).map_err(|e| Error::io(&manifest_path, e))?;
+    let bad = |why: String| Error::parse(&manifest_path, None, why);
+    let manifest: Manifest = serde_json::from_slice(&bytes).map_err(|e| {
+        Error::parse(
+            &manifest_path,
+            Some(e.line()),
+            format!("not a map manifest: {e}"),
+        )
+    })?;
+    if manifest.format != MAP_FORMAT {
+        return Err(bad(format!(
+            "format is {:?}, not {MAP_FORMAT:?}",
+            manifest.format
+        )));
+    }
+    if manifest.version > MAP_VERSION {
+        return Err(bad(format!(
+            "map version {} is newer than this build reads ({MAP_VERSION}); update sdem",
+            manifest.version
+        )));
+    }
+    if manifest.version != MAP_VERSION {
+        return Err(bad(format!(
+            "map version {} does not exist; this build reads version {MAP_VERSION}",
+            manifest.version
+        )));
+    }
+    let canonical = serde_json::to_vec(&manifest.body)
+        .map_err(|e| bad(format!("cannot re-encode the body: {e}")))?;
+    let computed = crc32(&canonical);
+    if computed != manifest.checksum {
+        return Err(bad(format!(
+            "checksum mismatch (manifest says {:08x}, content gives {computed:08x}): the file was \
+             edited or damaged",
+            manifest.checksum
+        )));
+    }
+    // Parsed again from the text, so that a malformed body is reported with its line.
+    let body: Body = serde_json::from_slice::<BodyOnly>(&bytes)
+        .map_err(|e| {
+            Error::parse(
+                &manifest_path,
+                Some(e.line()),
+                format!("malformed map body: {e}"),
+            )
+        })?
+        .body;
+    let mut nodes = Vec::with_capacity(body.nodes.len());
+    for (i, record) in body.nodes.iter().enumerate() {
+        if record.node_id != i {
+            return Err(bad(format!(
+                "node {i} is recorded with id {}",
+                record.node_id
+            )));
+        }
+        if record.points_file != points_file_name(i) {
+            return Err(bad(format!(
+                "node {i} names points file {:?}, expected {:?}",
+                record.points_file,
+                points_file_name(i)
+            )));
+        }
+        let world_from_sensor =
+            pose_from_row_major(&record.world_from_sensor).ok_or_else(|| {
+                bad(format!(
+                    "node {i}: the pose is not a finite rigid transform"
+                ))
+            })?;
+        let attitude_reading = match record.attitude_reading_deg {
+            Some(a) if a.iter().all(|v| v.is_finite()) => {
+                Some(Attitude::from_degrees(a[0], a[1], a[2]))
+            }
+            Some(_) => return Err(bad(format!("node {i}: non-finite attitude reading"))),
+            None => None,
+        };
+        let path = folder.join(&record.points_file);
+        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+        let points_in_sensor = decode_points(&path, &bytes, record.points_crc32)?;
+        if points_in_sensor.len() != record.points {
+            return Err(Error::parse(
+                &path,
+                None,
+                format!(
+                    "holds {} points, the map says {}",
+                    points_in_sensor.len(),
+                    record.points
+                ),
+            ));
+        }
+        nodes.push(Node {
+            node_id: i,
+            scan_index: record.scan_index,
+            world_from_sensor,
+            attitude_reading,
+            points_in_sensor,
+        });
+    }
+    let n = nodes.len();
+    let mut edges = Vec::with_capacity(body.edges.len());
+    for (k, e) in body.edges.iter().enumerate() {
+        if e.from >= n || e.to >= n {
+            return Err(bad(format!(
+                "edge {k} joins nodes {} and {}, but there are {n}",
+                e.from, e.to
+            )));
+        }
+        let from_from_to = pose_from_row_major(&e.from_from_to)
+            .ok_or_else(|| bad(format!("edge {k}: not a finite rigid transform")))?;
+        if !e.information.iter().flatten().all(|v| v.is_finite()) {
+            return Err(bad(format!("edge {k}: non-finite information")));
+        }
+        edges.push(Edge {
+            from: e.from,
+            to: e.to,
+            from_from_to,
+            information: e.information,
+            kind: e.kind,
+        });
+    }
+    let mut loop_closures = Vec::with_capacity(body.loop_closures.len());
+    for (k, c) in body.loop_closures.iter().enumerate() {
+        if c.from >= n || c.to >= n {
+            return Err(bad(format!("loop closure {k} joins missing nodes")));
+        }
+        let from_from_to = pose_from_row_major(&c.from_from_to)
+            .ok_or_else(|| bad(format!("loop closure {k}: not a finite rigid transform")))?;
+        loop_closures.push(LoopClosure {
+            from: c.from,
+            to: c.to,
+            descriptor_distance: c.descriptor_distance,
+            accepted: true,
+            reason: String::new(),
+            cost: c.cost,
+            inlier_fraction: c.inlier_fraction,
+            correction_m: c.correction_m,
+            from_from_to: Some(from_from_to),
+            covariance: None,
+        });
+    }
+    body.config
+        .validate()
+        .map_err(|e| bad(format!("invalid configuration: {e}")))?;
+    let node_files = NodeFiles {
+        crc32: body.nodes.iter().map(|r| r.points_crc32).collect(),
+    };
+    Ok(SavedMap {
+        node_files,
+        config: body.config,
+        map: Map { nodes },
+        edges,
+        loop_closures,
+        dataset: body.dataset,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sdem::geometry::{pose_from_parts, Vec3};
+    use sdem::posegraph::diagonal_information;
+
+    fn small_map() -> (SlamConfig, Map, Vec<Edge>, Vec<LoopClosure>) {
+        let nodes: Vec<Node> = (0..3)
+            .map(|i| Node {
+                node_id: i,
+                scan_index: 10 + i,
+                world_from_sensor: pose_from_parts(
+                    Vec3::new(0.35 * i as f64, 0.01, -0.02),
+                    Attitude::from_degrees(0.5, -1.0, 10.0 * i as f64),
+                ),
+                attitude_reading: (i != 1).then(|| Attitude::from_degrees(0.5, -1.0, 9.0)),
+                points_in_sensor: (0..50 + i)
+                    .map(|k| [k as f32 * 0.1, 1.0 - k as f32 * 0.01, 0.3])
+                    .collect(),
+            })
+            .collect();
+        let edges = vec![Edge {
+            from: 0,
+            to: 2,
+            from_from_to: nodes[0].world_from_sensor.inverse() * nodes[2].world_from_sensor,
+            information: diagonal_information(0.01, 0.002),
+            kind: EdgeKind::LoopClosure,
+        }];
+        let closures = vec![LoopClosure {
+            from: 0,
+            to: 2,
+            descriptor_distance: Some(0.01),
+            accepted: true,
+            reason: String::new(),
+            cost: Some(1e-3),
+            inlier_fraction: Some(0.9),
+            correction_m: Some(0.004),
+            from_from_to: Some(edges[0].from_from_to),
+            covariance: None,
+        }];
+        (SlamConfig::default(), Map { nodes }, edges, closures)
+    }
+
+    #[test]
+    fn a_saved_map_loads_back_as_it_was() {
+        let dir = tempfile::tempdir().unwrap();
+        let (config, map, edges, closures) = small_map();
+        let mut files = NodeFiles::default();
+        save_map(
+            dir.path(),
+            &mut files,
+            &config,
+            &map,
+            &edges,
+            &closures,
+            Some(Path::new("data/x")),
+        )
+        .unwrap();
+        let saved = load_map(dir.path()).unwrap();
+        assert_eq!(saved.config, config);
+        assert_eq!(saved.dataset.as_deref(), Some(Path::new("data/x")));
+        assert_eq!(saved.map.nodes.len(), 3);
+        for (a, b) in saved.map.nodes.iter().zip(&map.nodes) {
+            assert_eq!(a.points_in_sensor, b.points_in_sensor);
+            assert_eq!(a.scan_index, b.scan_index);
+            assert!(
+                (a.world_from_sensor.translation.vector - b.world_from_sensor.translation.vector)
+                    .norm()
+                    < 1e-12
+            );
+            assert!(
+                a.world_from_sensor
+                    .rotation
+                    .angle_to(&b.world_from_sensor.rotation)
+                    < 1e-9
+            );
+            assert_eq!(a.attitude_reading.is_some(), b.attitude_reading.is_some());
+        }
+        assert_eq!(saved.edges.len(), 1);
+        assert_eq!(saved.edges[0].information, edges[0].information);
+        assert_eq!(saved.loop_closures.len(), 1);
+        assert_eq!(saved.node_files, files);
+        // Saving again rewrites nothing but the manifest, and the result is the same.
+        save_map(
+            dir.path(),
+            &mut files,
+            &config,
+            &map,
+            &edges,
+            &closures,
+            Some(Path::new("data/x")),
+        )
+        .unwrap();
+        assert_eq!(load_map(dir.path()).unwrap().map.nodes.len(), 3);
+    }
+
+    #[test]
+    fn a_damaged_or_foreign_map_is_refused_with_the_file_named() {
+        let (config, map, edges, closures) = small_map();
+        let fresh = || {
+            let dir = tempfile::tempdir().unwrap();
+            save_map(
+                dir.path(),
+                &mut NodeFiles::default(),
+                &config,
+                &map,
+                &edges,
+                &closures,
+                None,
+            )
+            .unwrap();
+            dir
+        };
+        let err = |dir: &Path| load_map(dir).unwrap_err().to_string();
+
+        // A flipped byte in a node file.
+        let dir = fresh();
+        let node = dir.path().join("nodes/000001.pts");
+        let mut bytes = std::fs::read(&node).unwrap();
+        bytes[40] ^= 0x10;
+        std::fs::write(&node, &bytes).unwrap();
+        let e = err(dir.path());
+        assert!(e.contains("000001.pts") && e.contains("checksum"), "{e}");
+
+        // A truncated node file.
+        let dir = fresh();
+        let node = dir.path().join("nodes/000002.pts");
+        let bytes = std::fs::read(&node).unwrap();
+        std::fs::write(&node, &bytes[..bytes.len() - 7]).unwrap();
+        let e = err(dir.path());
+        assert!(e.contains("000002.pts") && e.contains("truncated"), "{e}");
+
+        // A missing node file.
+        let dir = fresh();
+        std::fs::remove_file(dir.path().join("nodes/000000.pts")).unwrap();
+        assert!(err(dir.path()).contains("000000.pts"));
+
+        // An edited manifest (a pose moved by hand).
+        let dir = fresh();
+        let manifest = dir.path().join(MAP_MANIFEST);
+        let text = std::fs::read_to_string(&manifest).unwrap();
+        let edited = text.replacen("0.35", "0.36", 1);
+        assert_ne!(edited, text);
+        std::fs::write(&manifest, edited).unwrap();
+        let e = err(dir.path());
+        assert!(e.contains("map.json") && e.contains("checksum"), "{e}");
+
+        // A newer version, a foreign JSON file, a truncated manifest, no manifest at all.
+        let dir = fresh();
+        let text = std::fs::read_to_string(manifest_of(dir.path())).unwrap();
+        std::fs::write(
+            manifest_of(dir.path()),
+            text.replacen("\"version\": 1", "\"version\": 9", 1),
+        )
+        .unwrap();
+        assert!(err(dir.path()).contains("newer"));
+        std::fs::write(manifest_of(dir.path()), "{\"hello\": 1}").unwrap();
+        assert!(err(dir.path()).contains("map.json"));
+        std::fs::write(manifest_of(dir.path()), &text[..text.len() / 2]).unwrap();
+        assert!(err(dir.path()).contains("map.json"));
+        std::fs::remove_file(manifest_of(dir.path())).unwrap();
+        assert!(err(dir.path()).contains("not a saved map"));
+    }
+
+    fn manifest_of(dir: &Path) -> PathBuf {
+        dir.join(MAP_MANIFEST)
+    }
+
+    #[test]
+    fn a_save_killed_before_the_manifest_leaves_the_previous_map() {
+        // Saving writes node files, then the manifest: a process killed in between leaves new
+        // node files that the old manifest does not name, and a stray temporary file.
+        let dir = tempfile::tempdir().unwrap();
+        let (config, mut map, edges, closures) = small_map();
+        let two = Map {
+            nodes: map.nodes[..2].to_vec(),
+        };
+        let mut files = NodeFiles::default();
+        save_map(dir.path(), &mut files, &config, &two, &[], &[], None).unwrap();
+        std::fs::write(
+            dir.path().join("nodes/000002.pts"),
+            encode_points(&map.nodes[2].points_in_sensor),
+        )
+        .unwrap();
+        std::fs::write(
+            dir.path().join(".map.json.tmp-1-0"),
+            b"{\"format\": \"sdem-m",
+        )
+        .unwrap();
+        let saved = load_map(dir.path()).unwrap();
+        assert_eq!(saved.map.nodes.len(), 2);
+        // And the next save completes the map.
+        map.nodes[2].scan_index = 12;
+        save_map(
+            dir.path(),
+            &mut files,
+            &config,
+            &map,
+            &edges,
+            &closures,
+            None,
+        )
+        .unwrap();
+        assert_eq!(load_map(dir.path()).unwrap().map.nodes.len(), 3);
+    }
+}

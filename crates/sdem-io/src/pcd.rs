@@ -1,0 +1,689 @@
+//! PCL `.pcd` point clouds, `DATA ascii` and `DATA binary`.
+//!
+//! The header is a sequence of `KEY values` lines ending with `DATA`; see
+//! <https://pointclouds.org/documentation/tutorials/pcd_file_format.html>. sdem needs fields `x`,
+//! `y`, `z` of type `F` (size 4 or 8) with count 1; other fields are skipped using their `SIZE`
+//! and `COUNT`. Binary data is little-endian, one point after another. `VERSION` and
+//! `VIEWPOINT` are ignored, as are unknown keys.
+
+use super::{count_newlines, parse_count, read_bytes};
+use sdem::error::{Error, Result};
+use sdem::geometry::Vec3;
+use std::path::Path;
+
+/// One field of a PCD point.
+#[derive(Debug, Clone)]
+struct Field {
+    name: String,
+    size: usize,
+    kind: char,
+    count: usize,
+}
+
+/// Where x, y, z sit inside a point: `(byte offset in a binary point, token index in an ASCII
+/// line, size in bytes)`.
+type AxisLayout = [(usize, usize, usize); 3];
+
+#[derive(Debug, Default)]
+struct PcdHeader {
+    fields: Option<Vec<String>>,
+    sizes: Option<Vec<usize>>,
+    types: Option<Vec<char>>,
+    counts: Option<Vec<usize>>,
+    width: Option<usize>,
+    height: Option<usize>,
+    points: Option<usize>,
+    data: Option<String>,
+    /// The 1-based lines of `WIDTH`, `POINTS` and `DATA`, to name in errors.
+    width_line: Option<usize>,
+    points_line: Option<usize>,
+    data_line: Option<usize>,
+}
+
+/// What [`check_header`] returns: the fields, the point count with the line that declares it
+/// (`POINTS`, else `WIDTH`), and the data mode with its line.
+struct Layout {
+    fields: Vec<Field>,
+    point_count: usize,
+    count_line: Option<usize>,
+    data: String,
+    data_line: Option<usize>,
+}
+
+/// Reads the x, y, z of every point of a PCD file (see the module documentation).
+pub(super) fn read_pcd(path: &Path) -> Result<Vec<Vec3>> {
+    let bytes = read_bytes(path)?;
+    if bytes.is_empty() {
+        return Err(Error::parse(
+            path,
+            None,
+            "the file is empty; expected a PCD header (FIELDS, SIZE, TYPE, ..., DATA)",
+        ));
+    }
+    let (header, body_start, header_lines) = parse_header(path, &bytes)?;
+    let header = check_header(path, header)?;
+    let axes = axis_layout(path, &header.fields)?;
+    let body = Body {
+        bytes: bytes.get(body_start..).unwrap_or_default(),
+        start: body_start,
+        first_line: header_lines + 1,
+    };
+    match header.data.as_str() {
+        "ascii" => read_ascii(path, &body, &header, axes),
+        "binary" => read_binary(path, &body, &header, axes),
+        "binary_compressed" => Err(Error::parse(
+            path,
+            header.data_line,
+            "DATA binary_compressed is not supported; convert the file to binary or ascii, e.g. \
+             `pcl_convert_pcd_ascii_binary IN.pcd OUT.pcd 1`",
+        )),
+        other => Err(Error::parse(
+            path,
+            header.data_line,
+            format!("unknown DATA '{other}'; expected ascii, binary or binary_compressed"),
+        )),
+    }
+}
+
+/// The data after the `DATA` line: its bytes, its byte offset in the file and its first line.
+struct Body<'a> {
+    bytes: &'a [u8],
+    start: usize,
+    first_line: usize,
+}
+
+/// Reads header lines up to and including `DATA`. Returns the header, the byte offset where the
+/// data starts and the number of header lines.
+fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usize, usize)> {
+    let mut header = PcdHeader::default();
+    let mut start = 0usize;
+    let mut line_no = 0usize;
+    while start < bytes.len() {
+        let rest = bytes.get(start..).unwrap_or_default();
+        let end = start
+            + rest
+                .iter()
+                .position(|&b| b == b'\n')
+                .map_or(rest.len(), |i| i + 1);
+        let raw = bytes.get(start..end).unwrap_or_default();
+        line_no += 1;
+        start = end;
+        let line = std::str::from_utf8(raw).map_err(|_| {
+            Error::parse(
+                path,
+                Some(line_no),
+                "the PCD header is not text; the file is damaged or not a PCD file",
+            )
+        })?;
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        let mut tokens = line.split_whitespace();
+        let key = tokens.next().unwrap_or_default();
+        let values: Vec<&str> = tokens.collect();
+        let bad = |message: String| Error::parse(path, Some(line_no), message);
+        let duplicate = || bad(format!("{key} appears twice in the header"));
+        let single = |what: &str| -> Result<usize> {
+            match values.as_slice() {
+                [v] => parse_count(path, line_no, v, what),
+                _ => Err(bad(format!("{key} needs exactly one value"))),
+            }
+        };
+        match key {
+            "FIELDS" => {
+                if header.fields.is_some() {
+                    return Err(duplicate());
+                }
+                header.fields = Some(values.iter().map(|s| s.to_string()).collect());
+            }
+            "SIZE" => {
+                if header.sizes.is_some() {
+                    return Err(duplicate());
+                }
+                let mut sizes = Vec::new();
+                for v in &values {
+                    match *v {
+                        "1" | "2" | "4" | "8" => sizes.push(parse_count(path, line_no, v, "SIZE")?),
+                        _ => return Err(bad(format!("SIZE '{v}' must be 1, 2, 4 or 8"))),
+                    }
+                }
+                header.sizes = Some(sizes);
+            }
+            "TYPE" => {
+                if header.types.is_some() {
+                    return Err(duplicate());
+                }
+                let mut types = Vec::new();
+                for v in &values {
+                    match *v {
+                        "F" => types.push('F'),
+                        "I" => types.push('I'),
+                        "U" => types.push('U'),
+                        _ => return Err(bad(format!("TYPE '{v}' must be F, I or U"))),
+                    }
+                }
+                header.types = Some(types);
+            }
+            "COUNT" => {
+                if header.counts.is_some() {
+                    return Err(duplicate());
+                }
+                let mut counts = Vec::new();
+                for v in &values {
+                    let c = parse_count(path, line_no, v, "COUNT")?;
+                    if c == 0 || c > 1 << 20 {
+                        return Err(bad(format!("COUNT {c} must lie in 1..=1048576")));
+                    }
+                    counts.push(c);
+                }
+                header.counts = Some(counts);
+            }
+            "WIDTH" => {
+                if header.width.is_some() {
+                    return Err(duplicate());
+                }
+                header.width = Some(single("WIDTH")?);
+                header.width_line = Some(line_no);
+            }
+            "HEIGHT" => {
+                if header.height.is_some() {
+                    return Err(duplicate());
+                }
+                header.height = Some(single("HEIGHT")?);
+            }
+            "POINTS" => {
+                if header.points.is_some() {
+                    return Err(duplicate());
+                }
+                header.points = Some(single("POINTS")?);
+                header.points_line = Some(line_no);
+            }
+            "DATA" => {
+                let [mode] = values.as_slice() else {
+                    return Err(bad(
+                        "DATA needs exactly one value: ascii, binary or binary_compressed".into(),
+                    ));
+                };
+                header.data = Some(mode.to_string());
+                header.data_line = Some(line_no);
+                return Ok((header, start, line_no));
+            }
+            // VERSION, VIEWPOINT and keys of later PCD versions do not change x, y, z.
+            _ => {}
+        }
+    }
+    Err(Error::parse(
+        path,
+        Some(line_no.max(1)),
+        "the file ends here, inside the PCD header, which has no DATA line; the file is truncated \
+         or not a PCD file",
+    ))
+}
+
+/// Checks the header's consistency; returns the fields, the point count and the data mode.
+fn check_header(path: &Path, header: PcdHeader) -> Result<Layout> {
+    let bad = |message: String| Error::parse(path, None, message);
+    let names = header
+        .fields
+        .ok_or_else(|| bad("the PCD header has no FIELDS line".into()))?;
+    if names.is_empty() {
+        return Err(bad("FIELDS lists no fields".into()));
+    }
+    let sizes = header
+        .sizes
+        .ok_or_else(|| bad("the PCD header has no SIZE line".into()))?;
+    let types = header
+        .types
+        .ok_or_else(|| bad("the PCD header has no TYPE line".into()))?;
+    let counts = header.counts.unwrap_or_else(|| vec![1; names.len()]);
+    if sizes.len() != names.len() || types.len() != names.len() || counts.len() != names.len() {
+        return Err(bad(format!(
+            "FIELDS has {} entries but SIZE has {}, TYPE {} and COUNT {}; they must match",
+            names.len(),
+            sizes.len(),
+            types.len(),
+            counts.len()
+        )));
+    }
+    let mut fields = Vec::with_capacity(names.len());
+    for (((name, size), kind), count) in names.into_iter().zip(sizes).zip(types).zip(counts) {
+        if kind == 'F' && size != 4 && size != 8 {
+            return Err(bad(format!(
+                "field '{name}' is TYPE F with SIZE {size}; floating-point fields have SIZE 4 or 8"
+            )));
+        }
+        fields.push(Field {
+            name,
+            size,
+            kind,
+            count,
+        });
+    }
+    let from_size = match (header.width, header.height) {
+        (Some(w), Some(h)) => Some(w.checked_mul(h).ok_or_else(|| {
+            Error::parse(
+                path,
+                header.width_line,
+                format!("WIDTH {w} × HEIGHT {h} overflows"),
+            )
+        })?),
+        (Some(w), None) => Some(w),
+        (None, _) => None,
+    };
+    let count_line = header.points_line.or(header.width_line);
+    let points =
+        match (header.points, from_size) {
+            (Some(p), Some(s)) if p != s => {
+                return Err(Error::parse(
+                    path,
+                    count_line,
+                    format!("POINTS {p} disagrees with WIDTH × HEIGHT = {s}; fix the header"),
+                ))
+            }
+            (Some(p), _) => p,
+            (None, Some(s)) => s,
+            (None, None) => return Err(bad(
+                "the PCD header has neither POINTS nor WIDTH; sdem cannot tell how many points \
+                 follow"
+                    .into(),
+            )),
+        };
+    Ok(Layout {
+        fields,
+        point_count: points,
+        count_line,
+        data: header.data.unwrap_or_default(),
+        data_line: header.data_line,
+    })
+}
+
+/// Finds x, y, z among the fields.
+fn axis_layout(path: &Path, fields: &[Field]) -> Result<AxisLayout> {
+    let mut layout = [(0usize, 0usize, 0usize); 3];
+    for (axis, slot) in ["x", "y", "z"].iter().zip(layout.iter_mut()) {
+        let mut offset = 0usize;
+        let mut token = 0usize;
+        let mut found = false;
+        for f in fields {
+            if f.name == *axis {
+                if f.kind != 'F' || f.count != 1 {
+                    return Err(Error::parse(
+                        path,
+                        None,
+                        format!(
+                            "field '{axis}' is TYPE {} COUNT {}; sdem reads x, y, z as TYPE F \
+                             (SIZE 4 or 8) with COUNT 1",
+                            f.kind, f.count
+                        ),
+                    ));
+                }
+                *slot = (offset, token, f.size);
+                found = true;
+                break;
+            }
+            offset = offset.saturating_add(f.size.saturating_mul(f.count));
+            token = token.saturating_add(f.count);
+        }
+        if !found {
+            return Err(Error::parse(
+                path,
+                None,
+                format!("the PCD file has no field '{axis}'; sdem needs x, y and z"),
+            ));
+        }
+    }
+    Ok(layout)
+}
+
+fn check_point(
+    path: &Path,
+    line: Option<usize>,
+    index: usize,
+    xyz: [f64; 3],
+) -> Result<Option<Vec3>> {
+    if xyz.iter().any(|v| v.is_nan()) {
+        return Ok(None);
+    }
+    if xyz.iter().any(|v| v.is_infinite()) {
+        return Err(Error::parse(
+            path,
+            line,
+            format!(
+                "point {index} is ({}, {}, {}); coordinates must be finite (or nan for no return)",
+                xyz[0], xyz[1], xyz[2]
+            ),
+        ));
+    }
+    Ok(Some(Vec3::new(xyz[0], xyz[1], xyz[2])))
+}
+
+fn read_binary(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) -> Result<Vec<Vec3>> {
+    let point_count = header.point_count;
+    // Field sizes are at most 8 and counts at most 2^20, so this sum cannot overflow in practice;
+    // checked anyway.
+    let point_bytes = header
+        .fields
+        .iter()
+        .try_fold(0usize, |acc, f| {
+            acc.checked_add(f.size.checked_mul(f.count)?)
+        })
+        .unwrap_or(usize::MAX);
+    let needed = point_count.checked_mul(point_bytes);
+    let body_start = body.start;
+    let body = body.bytes;
+    if needed.is_none_or(|n| n > body.len()) {
+        // The first point that does not fit, and where it starts.
+        let cut = body.len() / point_bytes.max(1);
+        return Err(Error::parse(
+            path,
+            header.count_line,
+            format!(
+                "the header declares {point_count} points of {point_bytes} bytes, but the file ends \
+                 at byte offset {}: point {cut} (byte offset {}) is cut off; the file is truncated \
+                 or the header is wrong",
+                body_start + body.len(),
+                body_start + cut * point_bytes
+            ),
+        ));
+    }
+    let mut points = Vec::with_capacity(point_count);
+    for (index, record) in body
+        .chunks_exact(point_bytes.max(1))
+        .take(point_count)
+        .enumerate()
+    {
+        let mut xyz = [0f64; 3];
+        for (value, &(offset, _, size)) in xyz.iter_mut().zip(&layout) {
+            let raw = offset
+                .checked_add(size)
+                .and_then(|end| record.get(offset..end))
+                .unwrap_or_default();
+            *value = match size {
+                4 => f64::from(f32::from_le_bytes(raw.try_into().unwrap_or([0; 4]))),
+                _ => f64::from_le_bytes(raw.try_into().unwrap_or([0; 8])),
+            };
+        }
+        if let Some(p) = check_point(path, None, index, xyz)? {
+            points.push(p);
+        }
+    }
+    Ok(points)
+}
+
+fn read_ascii(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) -> Result<Vec<Vec3>> {
+    let point_count = header.point_count;
+    let header_lines = body.first_line - 1;
+    let body = body.bytes;
+    let tokens_per_point: usize = header.fields.iter().map(|f| f.count).sum();
+    // Every point takes at least a line break; short lines are reported with their line number.
+    if point_count > body.len() {
+        return Err(Error::parse(
+            path,
+            header.count_line,
+            format!(
+                "the header declares {point_count} points, more than the {} bytes after the DATA \
+                 line can hold; the file is truncated or the header is wrong",
+                body.len()
+            ),
+        ));
+    }
+    let text = std::str::from_utf8(body).map_err(|e| {
+        let line =
+            header_lines + 1 + count_newlines(body.get(..e.valid_up_to()).unwrap_or_default());
+        Error::parse(path, Some(line), "the ASCII data is not text")
+    })?;
+    // Every value takes at least one character and one separator: the declared count is not
+    // trusted for the allocation.
+    let mut points =
+        Vec::with_capacity(point_count.min(body.len() / (2 * tokens_per_point).max(1)));
+    let mut index = 0usize;
+    let mut last_line = header_lines;
+    for (i, line) in text.lines().enumerate() {
+        let line_no = header_lines + 1 + i;
+        last_line = line_no;
+        let line = line.trim();
+        if line.is_empty() || line.starts_with('#') {
+            continue;
+        }
+        if index == point_count {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!("more data lines than the {point_count} points the header declares"),
+            ));
+        }
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        if tokens.len() != tokens_per_point {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!(
+                    "{} values on this line, but the fields declare {tokens_per_point} per point",
+                    tokens.len()
+                ),
+            ));
+        }
+        let mut xyz = [0f64; 3];
+        for ((value, &(_, token_index, size)), axis) in
+            xyz.iter_mut().zip(&layout).zip(["x", "y", "z"])
+        {
+            let token = tokens.get(token_index).copied().unwrap_or_default();
+            let parsed = if size == 4 {
+                token.parse::<f32>().map(f64::from).ok()
+            } else {
+                token.parse::<f64>().ok()
+            };
+            *value = parsed.ok_or_else(|| {
+                Error::parse(
+                    path,
+                    Some(line_no),
+                    format!("{axis} '{token}' is not a number"),
+                )
+            })?;
+        }
+        if let Some(p) = check_point(path, Some(line_no), index, xyz)? {
+            points.push(p);
+        }
+        index += 1;
+    }
+    if index != point_count {
+        return Err(Error::parse(
+            path,
+            Some(last_line),
+            format!(
+                "the file ends here, after {index} of the {point_count} points the header declares; \
+                 it is truncated or the header is wrong"
+            ),
+        ));
+    }
+    Ok(points)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::read_points;
+    use std::path::PathBuf;
+
+    fn write(dir: &Path, name: &str, content: &[u8]) -> PathBuf {
+        let path = dir.join(name);
+        std::fs::write(&path, content).unwrap();
+        path
+    }
+
+    fn expect_err(content: &[u8], line: Option<usize>) -> String {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "bad.pcd", content);
+        let err = read_points(&path).expect_err("malformed PCD must be an error");
+        let msg = err.to_string();
+        assert!(matches!(err, Error::Parse { .. }), "{msg}");
+        assert!(msg.contains("bad.pcd"), "{msg}");
+        if let Some(line) = line {
+            assert!(msg.contains(&format!("bad.pcd:{line}:")), "{msg}");
+        }
+        msg
+    }
+
+    const ASCII: &str = "# .PCD v0.7 - Point Cloud Data file format\n\
+        VERSION 0.7\n\
+        FIELDS x y z rgb normal\n\
+        SIZE 4 4 4 4 4\n\
+        TYPE F F F U F\n\
+        COUNT 1 1 1 1 3\n\
+        WIDTH 3\n\
+        HEIGHT 1\n\
+        VIEWPOINT 0 0 0 1 0 0 0\n\
+        POINTS 3\n\
+        DATA ascii\n\
+        0.5 -1.25 2 4278190080 0 0 1\n\
+        nan nan nan 0 0 0 0\n\
+        1e1 2.5e-1 -3 16711680 1 0 0\n";
+
+    #[test]
+    fn ascii_pcd() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "a.pcd", ASCII.as_bytes());
+        assert_eq!(
+            read_points(&path).unwrap(),
+            vec![Vec3::new(0.5, -1.25, 2.0), Vec3::new(10.0, 0.25, -3.0)]
+        );
+    }
+
+    fn binary_pcd() -> Vec<u8> {
+        // x and z as F4, y as F8, with an intensity field and PCL's '_' padding between.
+        let mut bytes = b"VERSION .7\nFIELDS x _ y intensity z\nSIZE 4 1 8 2 4\nTYPE F U F U F\n\
+                          COUNT 1 4 1 1 1\nWIDTH 2\nHEIGHT 2\nPOINTS 4\nDATA binary\n"
+            .to_vec();
+        for (x, y, z) in [
+            (1.5f32, 2.25f64, -3.0f32),
+            (f32::NAN, 0.0, 0.0),
+            (0.1, 0.2, 0.3),
+            (-7.0, 1e-9, 100.0),
+        ] {
+            bytes.extend(x.to_le_bytes());
+            bytes.extend([0xAA; 4]);
+            bytes.extend(y.to_le_bytes());
+            bytes.extend(7u16.to_le_bytes());
+            bytes.extend(z.to_le_bytes());
+        }
+        bytes
+    }
+
+    #[test]
+    fn binary_pcd_with_mixed_sizes_and_padding() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "b.pcd", &binary_pcd());
+        assert_eq!(
+            read_points(&path).unwrap(),
+            vec![
+                Vec3::new(1.5, 2.25, -3.0),
+                Vec3::new(f64::from(0.1f32), 0.2, f64::from(0.3f32)),
+                Vec3::new(-7.0, 1e-9, 100.0),
+            ]
+        );
+    }
+
+    #[test]
+    fn malformed_pcd() {
+        expect_err(b"", None);
+        let msg = expect_err(
+            b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA binary_compressed\n",
+            None,
+        );
+        assert!(msg.contains("binary_compressed"), "{msg}");
+        expect_err(
+            b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\n",
+            None,
+        );
+        expect_err(
+            b"FIELDS x y z\nSIZE 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3\n",
+            None,
+        );
+        expect_err(
+            b"FIELDS x y\nSIZE 4 4\nTYPE F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2\n",
+            None,
+        );
+        expect_err(
+            b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F I\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3\n",
+            None,
+        );
+        expect_err(
+            b"FIELDS x y z\nSIZE 4 4 3\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3\n",
+            Some(2),
+        );
+        expect_err(b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 2\nHEIGHT 1\nPOINTS 1\nDATA ascii\n1 2 3\n", None);
+        expect_err(
+            b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nWIDTH 1\nDATA ascii\n1 2 3\n",
+            Some(5),
+        );
+        expect_err(
+            b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nDATA ascii\n1 2 3\n",
+            None,
+        );
+        expect_err(
+            b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH -1\nDATA ascii\n1 2 3\n",
+            Some(4),
+        );
+        expect_err(b"\xff\xfe\n", Some(1));
+    }
+
+    #[test]
+    fn absurd_point_counts() {
+        for data in ["ascii", "binary"] {
+            let text = format!(
+                "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 99999999999\nHEIGHT 1\n\
+                 POINTS 99999999999\nDATA {data}\n1 2 3\n"
+            );
+            let msg = expect_err(text.as_bytes(), None);
+            assert!(msg.contains("99999999999"), "{msg}");
+        }
+        let text = format!(
+            "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH {m}\nHEIGHT {m}\nDATA binary\n",
+            m = u64::MAX
+        );
+        expect_err(text.as_bytes(), None);
+        let text = format!(
+            "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS {}\nDATA binary\n",
+            u64::MAX
+        );
+        expect_err(text.as_bytes(), None);
+    }
+
+    #[test]
+    fn truncated_binary_body() {
+        let mut bytes = binary_pcd();
+        bytes.truncate(bytes.len() - 1);
+        let msg = expect_err(&bytes, None);
+        assert!(msg.contains("truncated"), "{msg}");
+    }
+
+    #[test]
+    fn malformed_ascii_data_names_the_line() {
+        let head = "FIELDS x y z\nSIZE 4 4 8\nTYPE F F F\nWIDTH 2\nPOINTS 2\nDATA ascii\n";
+        let with = |body: &str| format!("{head}{body}").into_bytes();
+        expect_err(&with("1 2 3\n4 5\n"), Some(8));
+        expect_err(&with("1 2 3\n4 5 6 7\n"), Some(8));
+        expect_err(&with("1 2 3\n4 five 6\n"), Some(8));
+        expect_err(&with("1 2 3\n4 5 inf\n"), Some(8));
+        expect_err(&with("1 2 3\n4 5 6\n7 8 9\n"), Some(9));
+        expect_err(&with("1 2 3\n"), None);
+    }
+
+    #[test]
+    fn no_input_prefix_panics() {
+        let dir = tempfile::tempdir().unwrap();
+        for file in [ASCII.as_bytes().to_vec(), binary_pcd()] {
+            for len in 0..file.len() {
+                let p = write(dir.path(), "cut.pcd", &file[..len]);
+                let _ = read_points(&p);
+            }
+            for i in 0..file.len() {
+                let mut corrupt = file.clone();
+                corrupt[i] = corrupt[i].wrapping_add(0x55);
+                let p = write(dir.path(), "flip.pcd", &corrupt);
+                let _ = read_points(&p);
+            }
+        }
+    }
+}

@@ -1,0 +1,505 @@
+use proptest::prelude::*;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use sdem::cost::{Correlator, CostModel};
+use sdem::error::Error;
+use sdem::geometry::pose_from_parts;
+use sdem::geometry::{Attitude, Pose, Vec3};
+use sdem::localize::*;
+use sdem::sdem::Sdem;
+use sdem::sdem::SdemConfig;
+use sdem::sensor::SensorConfig;
+use sdem_sim::sim;
+
+/// A scan of `scene` from `world_from_sensor`, as an S-DEM with its attitude reading.
+fn sdem_at(
+    scene: &sim::Scene,
+    world_from_sensor: &Pose,
+    sensor: &SensorConfig,
+    grid: &SdemConfig,
+    seed: u64,
+) -> (Sdem, Attitude) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let sweep = sim::scan(scene, sensor, world_from_sensor, 0.0, &mut rng);
+    let attitude = sweep.mean_attitude();
+    let s = Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), grid).unwrap();
+    (s, attitude)
+}
+
+/// The paper room scanned at the origin (seed `seeds.0`) and at `truth` (seed `seeds.1`), the
+/// second scan's compass reading `compass_off_deg` off (steel nearby): reference, its reading,
+/// query, its reading.
+fn pair_with_compass_off(
+    truth: &Pose,
+    compass_off_deg: f64,
+    seeds: (u64, u64),
+) -> (Sdem, Attitude, Sdem, Attitude) {
+    let scene = sim::paper_room();
+    let grid = SdemConfig::default();
+    let sensor = SensorConfig::default();
+    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seeds.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(seeds.1);
+    let sweep = sim::scan(&scene, &sensor, truth, 0.0, &mut rng);
+    let mut qa = sweep.mean_attitude();
+    qa.yaw += compass_off_deg.to_radians();
+    let query = Sdem::from_points(&sweep.points_in_sensor(), &qa.rotation(), &grid).unwrap();
+    (reference, ra, query, qa)
+}
+
+/// The localization's pose lies within 5 mm and 0.1° of the truth.
+fn assert_within_5mm_and_a_tenth_degree(truth: &Pose, found: &Localization) {
+    let (dt, dr) = sdem::geometry::pose_error(truth, &found.reference_from_query);
+    assert!(
+        dt < 0.005 && dr.to_degrees() < 0.1,
+        "error {dt} m, {} deg",
+        dr.to_degrees()
+    );
+}
+
+fn noise_free(step_deg: f64) -> SensorConfig {
+    SensorConfig {
+        range_noise_m: 0.0,
+        tilt_sensor_noise_deg: 0.0,
+        compass_noise_deg: 0.0,
+        tilt_step_deg: step_deg,
+        pan_step_deg: step_deg,
+        ..Default::default()
+    }
+}
+
+fn virtual_cost() -> CostConfig {
+    CostConfig {
+        model: CostModel::VirtualSdem,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn correlator_equals_the_virtual_sdem_correlation() {
+    let scene = sim::paper_room();
+    let grid = SdemConfig::default();
+    let sensor = SensorConfig::default();
+    let (reference, _) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 1);
+    let moved = pose_from_parts(Vec3::new(0.1, 0.05, 0.02), Attitude::default());
+    let (local, _) = sdem_at(&scene, &moved, &sensor, &grid, 2);
+    let cost = virtual_cost();
+    let mut correlator = Correlator::new(&reference, &local, &cost).unwrap();
+    for o in [
+        Vec3::zeros(),
+        Vec3::new(0.1, 0.05, 0.02),
+        Vec3::new(-0.3, 0.2, -0.05),
+    ] {
+        let fast = correlator.evaluate(&o, 0.0);
+        let slow = correlate(&reference.virtual_at(&o), &local, &cost);
+        assert_eq!(fast, slow, "at {o:?}");
+    }
+    // For both costs the truth scores better than a candidate 5 cm or 2° away.
+    for cost in [virtual_cost(), CostConfig::default()] {
+        let mut c = Correlator::new(&reference, &local, &cost).unwrap();
+        let truth = c.evaluate(&Vec3::new(0.1, 0.05, 0.02), 0.0).unwrap();
+        let shifted = c.evaluate(&Vec3::new(0.15, 0.05, 0.02), 0.0).unwrap();
+        let turned = c
+            .evaluate(&Vec3::new(0.1, 0.05, 0.02), 2f64.to_radians())
+            .unwrap();
+        assert!(
+            truth.cost < shifted.cost && truth.cost < turned.cost,
+            "{cost:?}"
+        );
+    }
+}
+
+#[test]
+fn exhaustive_finds_on_grid_truth_without_noise() {
+    let scene = sim::paper_room();
+    let grid = SdemConfig::default();
+    let sensor = noise_free(1.0);
+    let truth = Vec3::new(0.06, -0.04, 0.02);
+    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 3);
+    let (query, qa) = sdem_at(
+        &scene,
+        &pose_from_parts(truth, Attitude::default()),
+        &sensor,
+        &grid,
+        4,
+    );
+    for cost in [virtual_cost(), CostConfig::default()] {
+        let config = LocalizeConfig {
+            window: SearchWindow {
+                min: [-0.1, -0.1, -0.1],
+                max: [0.1, 0.1, 0.1],
+            },
+            step_m: 0.02,
+            heading: HeadingWindow::none(),
+            mode: SearchMode::Exhaustive,
+            cost,
+            refine: false,
+            ..Default::default()
+        };
+        let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+        assert_eq!(found.candidates_evaluated, 11 * 11 * 11);
+        assert!(
+            (found.grid_offset - truth).norm() < 1e-9,
+            "{:?}: found {:?}, truth {truth:?}",
+            config.cost.model,
+            found.grid_offset
+        );
+        assert!(!found.on_window_edge);
+    }
+}
+
+#[test]
+fn tilted_query_is_localized() {
+    // The paper's second case: the body stands on a rock, tilted 8°; default search (exact
+    // branch-and-bound with ±10° heading, then the 6-DoF refinement).
+    let scene = sim::paper_room();
+    let grid = SdemConfig::default();
+    let sensor = SensorConfig::default();
+    let truth = pose_from_parts(
+        Vec3::new(0.22, 0.36, 0.05),
+        Attitude::from_degrees(3.0, 8.0, 0.0),
+    );
+    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 5);
+    let (query, qa) = sdem_at(&scene, &truth, &sensor, &grid, 6);
+    // A window of ±8 cm around the truth keeps the test quick; the benchmarks run the paper's.
+    let config = LocalizeConfig {
+        window: SearchWindow::around(&truth.translation.vector, [0.08, 0.08, 0.05]),
+        heading: HeadingWindow {
+            half_range_deg: 3.0,
+            step_deg: None,
+        },
+        ..Default::default()
+    };
+    let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+    assert_within_5mm_and_a_tenth_degree(&truth, &found);
+    assert_eq!(found.refined, RefineOutcome::SixDof);
+}
+
+#[test]
+fn compass_error_is_found_by_the_heading_search() {
+    let truth = pose_from_parts(
+        Vec3::new(0.3, -0.1, 0.0),
+        Attitude::from_degrees(0.0, 0.0, 25.0),
+    );
+    // The compass reads 8° off (steel nearby).
+    let (reference, ra, query, qa) = pair_with_compass_off(&truth, 8.0, (9, 10));
+    // The default ±10° heading window; a translation window of ±5 cm around the truth keeps
+    // the test quick (the benchmarks run the paper's window).
+    let config = LocalizeConfig {
+        window: SearchWindow::around(&truth.translation.vector, [0.05, 0.05, 0.03]),
+        ..Default::default()
+    };
+    let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+    assert_within_5mm_and_a_tenth_degree(&truth, &found);
+    assert!((found.heading_correction.to_degrees() + 8.0).abs() < 0.2);
+    // Trusting the compass, the same pair localizes badly or not at all.
+    let trusting = LocalizeConfig {
+        heading: HeadingWindow::none(),
+        refine: false,
+        ..config
+    };
+    if let Ok(f) = localize(&reference, &ra, &query, &qa, &trusting) {
+        let (dt, _) = sdem::geometry::pose_error(&truth, &f.reference_from_query);
+        assert!(dt > 0.01, "a wrong compass should hurt: {dt}");
+    }
+}
+
+/// With the compass no use at all (150° off), a full turn of heading finds the pose, which the
+/// default ±10° cannot.
+#[test]
+fn a_full_turn_of_heading_finds_a_compass_half_a_turn_off() {
+    let truth = pose_from_parts(
+        Vec3::new(0.2, 0.1, 0.0),
+        Attitude::from_degrees(0.0, 0.0, -40.0),
+    );
+    let (reference, ra, query, qa) = pair_with_compass_off(&truth, 150.0, (11, 12));
+    let config = LocalizeConfig {
+        window: SearchWindow::around(&truth.translation.vector, [0.05, 0.05, 0.03]),
+        heading: HeadingWindow {
+            half_range_deg: 180.0,
+            step_deg: None,
+        },
+        ..Default::default()
+    };
+    let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+    assert_within_5mm_and_a_tenth_degree(&truth, &found);
+    assert!(
+        (found.heading_correction.to_degrees() + 150.0).abs() < 0.2,
+        "heading correction {}°",
+        found.heading_correction.to_degrees()
+    );
+    assert!(!found.diagnostics.ambiguous, "{:?}", found.diagnostics);
+    // The ±10° default cannot reach it: the best it finds is far off, or nothing matches.
+    let narrow = LocalizeConfig {
+        heading: HeadingWindow::default(),
+        refine: false,
+        ..config
+    };
+    if let Ok(f) = localize(&reference, &ra, &query, &qa, &narrow) {
+        let (dt, dr) = sdem::geometry::pose_error(&truth, &f.reference_from_query);
+        assert!(
+            dt > 0.02 || dr.to_degrees() > 10.0,
+            "±10° should not reach a compass 150° off: {dt} m, {}°",
+            dr.to_degrees()
+        );
+    }
+}
+
+#[test]
+fn a_corridor_is_ambiguous_along_its_axis_and_a_room_is_not() {
+    let grid = SdemConfig::default();
+    let sensor = SensorConfig::default();
+    let truth = Vec3::new(0.2, 0.05, 0.0);
+    let config = LocalizeConfig {
+        window: SearchWindow::around(&truth, [0.15, 0.06, 0.03]),
+        heading: HeadingWindow::none(),
+        ..Default::default()
+    };
+    let localize_in = |scene: &sim::Scene, seed: u64| {
+        let (r, ra) = sdem_at(scene, &Pose::identity(), &sensor, &grid, seed);
+        let moved = pose_from_parts(truth, Attitude::default());
+        let (q, qa) = sdem_at(scene, &moved, &sensor, &grid, seed + 1);
+        localize(&r, &ra, &q, &qa, &config).unwrap()
+    };
+    let found = localize_in(&sim::corridor(30.0).unwrap(), 21);
+    let d = &found.diagnostics;
+    println!("corridor: cost {:.3e}, {d:?}", found.cost);
+    assert!(d.ambiguous, "{d:?}");
+    let axis = d.weakest_direction.unwrap();
+    assert!(
+        axis[0].abs() > 0.95,
+        "weakest direction {axis:?} is not the corridor's axis"
+    );
+    // Across the corridor the pose is still well fixed.
+    assert!(d.strongest_sigma_m.unwrap() < 0.001, "{d:?}");
+    // The grid's flat cost and the refinement's weakest direction agree: the pose is free
+    // along the axis.
+    let flat = d
+        .flat_direction
+        .expect("a corridor's pose is free along its axis");
+    assert!(flat[0].abs() > 0.95, "flat direction {flat:?}");
+
+    let found = localize_in(&sim::paper_room(), 23);
+    let d = &found.diagnostics;
+    println!("room: cost {:.3e}, {d:?}", found.cost);
+    assert!(!d.ambiguous, "{d:?}");
+    assert_eq!(d.flat_direction, None);
+    assert!(d.runner_up_cost_at_least.unwrap() > found.cost, "{d:?}");
+    assert!(d.overlap_fraction > 0.5 && d.inlier_fraction > 0.5, "{d:?}");
+    let cov = d.covariance.unwrap();
+    for (i, row) in cov.iter().enumerate() {
+        assert!(row[i] > 0.0, "covariance diagonal {i}: {}", row[i]);
+    }
+}
+
+#[test]
+fn a_thin_match_and_an_unconfirmed_grid_pose_are_flagged() {
+    let grid = SdemConfig::default();
+    let sensor = SensorConfig::default();
+    let truth = Vec3::new(0.2, 0.05, 0.0);
+    let scene = sim::paper_room();
+    let (r, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 31);
+    let (q, qa) = sdem_at(
+        &scene,
+        &pose_from_parts(truth, Attitude::default()),
+        &sensor,
+        &grid,
+        32,
+    );
+    let base = LocalizeConfig {
+        window: SearchWindow::around(&truth, [0.05, 0.05, 0.03]),
+        heading: HeadingWindow::none(),
+        runner_up: false,
+        ..Default::default()
+    };
+    let reasons = |config: &LocalizeConfig| {
+        let d = localize(&r, &ra, &q, &qa, config).unwrap().diagnostics;
+        assert_eq!(d.ambiguous, !d.ambiguity.is_empty());
+        d.ambiguity
+    };
+    let has = |reasons: &[String], start: &str| reasons.iter().any(|r| r.contains(start));
+    let clean = reasons(&base);
+    assert!(
+        !has(&clean, "only") && !has(&clean, "refinement failed"),
+        "{clean:?}"
+    );
+    // The same match is thin when almost every point must match.
+    let strict = LocalizeConfig {
+        min_trusted_inlier_fraction: 0.99,
+        ..base.clone()
+    };
+    assert!(has(&reasons(&strict), "only"));
+    // A refinement allowed to move 10 µm fails on 5 mm noise: the grid pose is flagged.
+    let mut stuck = base.clone();
+    stuck.refinement.max_translation_m = 1e-5;
+    let stuck = reasons(&stuck);
+    assert!(has(&stuck, "refinement failed"), "{stuck:?}");
+}
+
+#[test]
+fn bad_windows_and_steps_are_errors() {
+    let scene = sim::paper_room();
+    let grid = SdemConfig::default();
+    let (s, a) = sdem_at(
+        &scene,
+        &Pose::identity(),
+        &SensorConfig::default(),
+        &grid,
+        7,
+    );
+    let inverted = LocalizeConfig {
+        window: SearchWindow {
+            min: [0.1, 0.0, 0.0],
+            max: [-0.1, 0.0, 0.0],
+        },
+        ..Default::default()
+    };
+    let message = localize(&s, &a, &s, &a, &inverted).unwrap_err().to_string();
+    assert!(message.contains("inverted"), "{message}");
+    for step in [0.0, -0.01, f64::NAN] {
+        let config = LocalizeConfig {
+            step_m: step,
+            ..Default::default()
+        };
+        assert!(localize(&s, &a, &s, &a, &config).is_err());
+    }
+    let nan = LocalizeConfig {
+        window: SearchWindow {
+            min: [f64::NAN, 0.0, 0.0],
+            max: [0.1, 0.0, 0.0],
+        },
+        ..Default::default()
+    };
+    assert!(localize(&s, &a, &s, &a, &nan).is_err());
+    let bad_heading = LocalizeConfig {
+        heading: HeadingWindow {
+            half_range_deg: 200.0,
+            step_deg: None,
+        },
+        ..Default::default()
+    };
+    assert!(localize(&s, &a, &s, &a, &bad_heading).is_err());
+    let bnb_on_virtual = LocalizeConfig {
+        cost: virtual_cost(),
+        ..Default::default()
+    };
+    assert!(localize(&s, &a, &s, &a, &bnb_on_virtual).is_err());
+}
+
+#[test]
+fn no_overlap_is_an_error_not_a_pose() {
+    let scene = sim::paper_room();
+    let grid = SdemConfig::default();
+    let (s, a) = sdem_at(
+        &scene,
+        &Pose::identity(),
+        &SensorConfig::default(),
+        &grid,
+        8,
+    );
+    // Candidates 50 m away see nothing of the reference.
+    for mode in [SearchMode::BranchAndBound, SearchMode::Exhaustive] {
+        let far = LocalizeConfig {
+            window: SearchWindow {
+                min: [50.0, 50.0, 0.0],
+                max: [50.1, 50.1, 0.0],
+            },
+            mode,
+            ..Default::default()
+        };
+        let error = localize(&s, &a, &s, &a, &far).unwrap_err();
+        assert!(matches!(error, Error::Localize(_)), "{error}");
+    }
+}
+
+/// A small seeded problem: coarse 2° scans, a query displaced and turned.
+fn small_problem(seed: u64, x: f64, y: f64, z: f64, yaw: f64) -> (Sdem, Attitude, Sdem, Attitude) {
+    let scene = sim::paper_room();
+    let grid = SdemConfig {
+        resolution_deg: 2.0,
+        ..Default::default()
+    };
+    let sensor = SensorConfig {
+        tilt_step_deg: 2.0,
+        pan_step_deg: 2.0,
+        ..Default::default()
+    };
+    let truth = pose_from_parts(Vec3::new(x, y, z), Attitude::from_degrees(0.0, 0.0, yaw));
+    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seed);
+    let (query, qa) = sdem_at(&scene, &truth, &sensor, &grid, seed + 1);
+    (reference, ra, query, qa)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
+
+    /// The exact search lands on the exhaustive oracle's minimum, heading included, wherever
+    /// the truth lies relative to the window (inside, near an edge, or outside it), with or
+    /// without a prediction (weak or strong enough to decide, inside the window or out).
+    #[test]
+    fn branch_and_bound_finds_the_exhaustive_minimum(
+        seed in 0u64..1_000_000,
+        x in -0.3f64..0.3, y in -0.2f64..0.4, z in -0.05f64..0.05,
+        yaw in -30.0f64..30.0,
+        compass_error in -3.0f64..3.0,
+        window_shift in -0.1f64..0.1,
+        prior in proptest::option::of((-0.15f64..0.15, -0.15f64..0.15, -7.0f64..-1.6)),
+    ) {
+        let (reference, ra, query, mut qa) = small_problem(seed, x, y, z, yaw);
+        qa.yaw += compass_error.to_radians();
+        let centre = Vec3::new(x + window_shift, y - window_shift, z);
+        let base = LocalizeConfig {
+            window: SearchWindow::around(&centre, [0.08, 0.08, 0.04]),
+            step_m: 0.02,
+            heading: HeadingWindow { half_range_deg: 3.0, step_deg: Some(1.0) },
+            refine: false,
+            cost: CostConfig {
+                // σ from 1 mm (the prediction decides) to 20 cm (the scans do).
+                prior: prior.map(|(dx, dy, log_sigma)| OffsetPrior {
+                    offset: [centre.x + dx, centre.y + dy, centre.z],
+                    sigma_m: log_sigma.exp(),
+                }),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let oracle = localize(&reference, &ra, &query, &qa,
+            &LocalizeConfig { mode: SearchMode::Exhaustive, ..base.clone() });
+        let fast = localize(&reference, &ra, &query, &qa, &base);
+        match (oracle, fast) {
+            (Ok(oracle), Ok(fast)) => {
+                prop_assert_eq!(fast.grid_index, oracle.grid_index);
+                prop_assert_eq!(fast.cost, oracle.cost);
+                prop_assert!(fast.candidates_evaluated < oracle.candidates_evaluated);
+            }
+            (Err(_), Err(_)) => {}
+            (o, f) => prop_assert!(false, "oracle {:?} vs fast {:?}", o.map(|l| l.cost), f.map(|l| l.cost)),
+        }
+    }
+
+    /// The coarse-to-fine heuristic lands on the oracle's minimum of the paper's cost on these
+    /// small problems (it can miss in general: it is not exact).
+    #[test]
+    fn coarse_to_fine_finds_the_exhaustive_minimum(
+        seed in 0u64..1_000_000,
+        x in -0.3f64..0.3, y in -0.2f64..0.4, z in -0.05f64..0.05,
+        yaw in -30.0f64..30.0,
+    ) {
+        let (reference, ra, query, qa) = small_problem(seed, x, y, z, yaw);
+        let window = SearchWindow::around(&Vec3::new(x, y, z), [0.12, 0.12, 0.06]);
+        let base = LocalizeConfig {
+            window,
+            step_m: 0.02,
+            heading: HeadingWindow::none(),
+            mode: SearchMode::CoarseToFine,
+            cost: virtual_cost(),
+            refine: false,
+            ..Default::default()
+        };
+        let oracle = localize(&reference, &ra, &query, &qa,
+            &LocalizeConfig { mode: SearchMode::Exhaustive, ..base.clone() }).unwrap();
+        let fast = localize(&reference, &ra, &query, &qa, &base).unwrap();
+        prop_assert_eq!(fast.grid_index, oracle.grid_index);
+        prop_assert_eq!(fast.cost, oracle.cost);
+        prop_assert!(fast.candidates_evaluated < oracle.candidates_evaluated);
+    }
+}
