@@ -1,14 +1,28 @@
-//! Files: point clouds, attitude and pose files, the sensor model, raw sweeps, voxel maps and
-//! dataset folders.
+//! # sdem-io — files for sdem
 //!
-//! This is the only library module that touches the file system (DESIGN.md, "Architecture
-//! sketch"). Every reader returns [`Error::Parse`] naming the file and, for text, the 1-based line
+//! Point clouds, attitude and pose files, the sensor model, raw sweeps, voxel maps, saved maps
+//! and dataset folders.
+//!
+//! Of sdem's libraries this is the one that touches the file system (the algorithms in `sdem`
+//! take and return plain values). Every reader returns [`Error::Parse`] naming the file and, for text, the 1-based line
 //! when the content is malformed, and [`Error::Io`] when the operating system fails; no input makes
 //! a reader panic or return a silently wrong value (non-finite coordinates and angles are errors,
 //! counts declared in headers are checked against the file's size before anything is allocated).
 //! Every writer goes through [`write_atomic`], so a crash never leaves a half-written file.
 //!
 //! Units: metres and radians in memory, degrees in files.
+//!
+//! # Example
+//! A scan written as PLY and read back, as `sdem` reads every scan of a dataset.
+//! ```
+//! use sdem::geometry::Vec3;
+//! let dir = tempfile::tempdir()?;
+//! let path = dir.path().join("scan.ply");
+//! let points = vec![Vec3::new(1.0, 0.0, 0.5), Vec3::new(0.0, 2.0, -0.25)];
+//! sdem_io::write_points_ply(&path, &points)?;
+//! assert_eq!(sdem_io::read_points(&path)?, points);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 //!
 //! # Point clouds ([`read_points`], [`write_points_ply`])
 //!

@@ -1,5 +1,7 @@
-//! Pictures for people (Nagatani et al. 2003, Sec. V: "a viewing method of detected environment
-//! information for a human").
+//! # sdem-viz — pictures for people
+//!
+//! The viewing method Nagatani et al. (2003) leave to future work (Sec. VI: "a viewing method of
+//! detected environment information for a human").
 //!
 //! Every function here is pure: it takes plain values and returns an image or a string; the
 //! caller writes them (see [`encode_png`]). Each picture has axes, a scale and a legend, drawn

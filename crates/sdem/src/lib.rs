@@ -12,6 +12,23 @@
 //! Every module here holds algorithms over plain values: nothing reads or writes a file or prints.
 //! File formats live in `sdem-io`, the simulator in `sdem-sim`, pictures in `sdem-viz` and the
 //! `sdem` command in `sdem-cli`.
+//!
+//! # Example
+//! The paper's preparatory experiment (Sec. V): a scan at the origin of a room and one after
+//! moving (22, 36, 5) cm, both levelled by their gyro/compass readings (here simulated by
+//! `sdem-sim`), localized by the exact search with the compass trusted.
+//! ```
+//! use sdem::localize::{localize, LocalizeConfig};
+//! use sdem::search::HeadingWindow;
+//! use sdem_sim::benchmark::{paper_pair, PAPER_MOVE_M};
+//! let (reference, reference_attitude, query, query_attitude) = paper_pair()?;
+//! let config = LocalizeConfig { heading: HeadingWindow::none(), ..Default::default() };
+//! let found = localize(&reference, &reference_attitude, &query, &query_attitude, &config)?;
+//! let moved = nalgebra::Vector3::from(PAPER_MOVE_M);
+//! assert!((found.reference_from_query.translation.vector - moved).norm() < 0.005);
+//! assert!(!found.diagnostics.ambiguous);
+//! # Ok::<(), sdem::Error>(())
+//! ```
 #![deny(missing_docs)]
 
 pub mod bnb;

@@ -1,4 +1,4 @@
-//! The global map (Nagatani et al. 2003, Sec. III-A: "a set of S-DEMs with their relative
+//! The global map (Nagatani et al. 2003, Sec. III: "a set of S-DEMs with their relative
 //! locations"): nodes, reference selection, the merged virtual S-DEM, place descriptors and the
 //! verification of loop closures.
 //!
