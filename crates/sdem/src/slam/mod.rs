@@ -1,0 +1,735 @@
+//! The stop-and-go loop (Nagatani et al. 2003, Sec. III, Fig. 2): move, sense, build the local
+//! S-DEM, compare it with the global map, localize, add it to the map, repeat — with what the
+//! paper left open: merging (the merged virtual S-DEM, [`crate::map`], and the occupancy voxel
+//! map, [`crate::voxel`]), and loop closure over a robust pose graph ([`crate::posegraph`]).
+//!
+//! [`Slam::add_scan`] takes one scan at a time as plain values (points, attitude reading,
+//! odometry), so the same loop runs on a dataset folder, a saved map being resumed, or a robot.
+//!
+//! Per scan:
+//! 1. **Predict** the pose: the last node's pose times the odometry's relative motion when there
+//!    is odometry, else times the last motion (constant velocity); roll and pitch from the gyro
+//!    reading when there is one; heading from the odometry, else the compass, else the last
+//!    motion — and the search window widens with the weaker prior.
+//! 2. **Pick reference nodes** among the recent ones (the local map) by position and overlap:
+//!    how many of the new scan's cells each node's points land on.
+//! 3. **Localize** with the exact search against their merged virtual S-DEM (seen from the
+//!    origin of the node that overlaps most), then the 6-DoF refinement; the match's covariance
+//!    weighs the new pose-graph edges.
+//! 4. **Loop closure**: older nodes near the new one whose place descriptor is similar are
+//!    verified with the exact search; an accepted closure becomes an edge and the pose graph is
+//!    optimized (robust Cauchy kernel), and the fused map is rebuilt on the new poses.
+
+//!
+//! The module's files: this one holds the configuration and the loop, `relocalize` finding a scan
+//! in a saved map, `trajectory` the errors of an estimated trajectory against a reference one.
+
+mod relocalize;
+mod trajectory;
+
+pub use relocalize::{relocalize, Near, Relocalization};
+pub use trajectory::{trajectory_errors, TrajectoryErrors};
+
+use crate::error::{Error, Result};
+use crate::geometry::{attitude_of, pose_from_parts, Attitude, Pose, Vec3};
+use crate::localize::{localize, CostConfig, LocalizeConfig, OffsetPrior, SearchWindow};
+use crate::map::{
+    verify_loop_closure, world_from_query, Descriptor, LoopClosure, LoopClosureConfig, Map, Node,
+};
+use crate::posegraph::{optimize, Edge, EdgeKind, OptimizeConfig, PoseGraph};
+use crate::sdem::{Sdem, SdemConfig};
+use crate::search::HeadingWindow;
+use crate::voxel::{VoxelConfig, VoxelMap};
+use nalgebra::{Matrix3, Matrix6};
+use relocalize::take_prediction_along;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Everything the loop needs; written beside the results as `config.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SlamConfig {
+    /// The S-DEM grid.
+    pub sdem: SdemConfig,
+    /// The search and refinement (the window and heading are set per scan from the fields below).
+    pub localize: LocalizeConfig,
+    /// Half-size of the window around an odometry prediction, metres.
+    pub window_half_m: [f64; 3],
+    /// Half-size of the window when there is no odometry (the robot may have moved anywhere
+    /// nearby), metres.
+    pub window_half_no_odometry_m: [f64; 3],
+    /// Standard deviation of an odometry prediction, metres, weighed into the match as
+    /// [`crate::cost::OffsetPrior`] (it decides only what the scans leave open, such as the
+    /// position along a featureless ditch).
+    pub prior_sigma_m: f64,
+    /// Standard deviation of the prediction without odometry (the last motion repeated), metres.
+    pub prior_sigma_no_odometry_m: f64,
+    /// Heading searched around an odometry prediction, ± degrees.
+    pub heading_half_deg: f64,
+    /// Heading searched around a compass reading when there is no odometry, ± degrees.
+    pub heading_half_compass_deg: f64,
+    /// Heading searched around the last node's heading with neither, ± degrees.
+    pub heading_half_no_prior_deg: f64,
+    /// Reference nodes lie within this of the predicted position, metres.
+    pub reference_radius_m: f64,
+    /// At most this many reference nodes are merged.
+    pub max_reference_nodes: usize,
+    /// A node is a reference only when at least this many of the new scan's cells see it.
+    pub min_reference_overlap_cells: usize,
+    /// Floor on the standard deviation of an edge's translation, metres: the matcher's
+    /// covariance assumes independent residuals and is optimistic.
+    pub edge_sigma_floor_m: f64,
+    /// Floor on the standard deviation of an edge's rotation, degrees.
+    pub edge_sigma_floor_deg: f64,
+    /// Loop closure.
+    pub loop_closure: LoopClosureConfig,
+    /// The pose-graph optimizer.
+    pub optimize: OptimizeConfig,
+    /// The fused occupancy map.
+    pub voxel: VoxelConfig,
+}
+
+impl Default for SlamConfig {
+    fn default() -> Self {
+        Self {
+            sdem: SdemConfig::default(),
+            // A 2 cm grid finds the basin and the 6-DoF refinement the bottom (sub-millimetre on
+            // the seeded pairs of `sdem bench`), at an eighth of the 1 cm grid's candidates.
+            localize: LocalizeConfig {
+                step_m: 0.02,
+                runner_up: false,
+                ..Default::default()
+            },
+            window_half_m: [0.15, 0.15, 0.08],
+            window_half_no_odometry_m: [0.5, 0.5, 0.15],
+            prior_sigma_m: 0.05,
+            prior_sigma_no_odometry_m: 0.2,
+            heading_half_deg: 3.0,
+            heading_half_compass_deg: 8.0,
+            heading_half_no_prior_deg: 15.0,
+            reference_radius_m: 4.0,
+            max_reference_nodes: 3,
+            min_reference_overlap_cells: 300,
+            edge_sigma_floor_m: 0.005,
+            edge_sigma_floor_deg: 0.1,
+            loop_closure: LoopClosureConfig::default(),
+            optimize: OptimizeConfig::default(),
+            voxel: VoxelConfig::default(),
+        }
+    }
+}
+
+impl SlamConfig {
+    /// Checks the values the loop itself uses (the search, S-DEM and voxel settings check
+    /// themselves when used).
+    pub fn validate(&self) -> Result<()> {
+        self.sdem.validate()?;
+        self.voxel.validate()?;
+        let halves = self
+            .window_half_m
+            .iter()
+            .chain(&self.window_half_no_odometry_m)
+            .chain(&self.loop_closure.window_half_m);
+        for &h in halves {
+            if !(h.is_finite() && h >= 0.0) {
+                return Err(Error::Invalid(format!(
+                    "window half-size {h} m must be a finite number >= 0"
+                )));
+            }
+        }
+        for (name, v) in [
+            ("prior_sigma_m", self.prior_sigma_m),
+            ("prior_sigma_no_odometry_m", self.prior_sigma_no_odometry_m),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "{name} = {v} m must be a positive number"
+                )));
+            }
+        }
+        for (name, v) in [
+            ("heading_half_deg", self.heading_half_deg),
+            ("heading_half_compass_deg", self.heading_half_compass_deg),
+            ("heading_half_no_prior_deg", self.heading_half_no_prior_deg),
+        ] {
+            if !(v.is_finite() && (0.0..=180.0).contains(&v)) {
+                return Err(Error::Invalid(format!(
+                    "{name} = {v} must lie in 0..=180 degrees"
+                )));
+            }
+        }
+        if !(self.reference_radius_m.is_finite() && self.reference_radius_m > 0.0) {
+            return Err(Error::Invalid(format!(
+                "reference_radius_m = {} must be a positive distance",
+                self.reference_radius_m
+            )));
+        }
+        if self.max_reference_nodes == 0 {
+            return Err(Error::Invalid(
+                "max_reference_nodes must be at least 1".into(),
+            ));
+        }
+        if !(self.edge_sigma_floor_m.is_finite()
+            && self.edge_sigma_floor_m > 0.0
+            && self.edge_sigma_floor_deg.is_finite()
+            && self.edge_sigma_floor_deg > 0.0)
+        {
+            return Err(Error::Invalid(
+                "edge_sigma_floor_m and edge_sigma_floor_deg must be positive".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One scan as the loop receives it.
+#[derive(Debug, Clone)]
+pub struct ScanInput<'a> {
+    /// Index of the scan in its dataset.
+    pub scan_index: usize,
+    /// The scan, sensor frame, metres.
+    pub points_in_sensor: &'a [Vec3],
+    /// The gyro/compass reading, when there is one.
+    pub attitude: Option<Attitude>,
+    /// The odometry's `world_from_sensor` at this scan and at the previous one (only their
+    /// relative motion is used), when there is odometry.
+    pub odometry: Option<(Pose, Pose)>,
+}
+
+/// Where the heading prior came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadingPrior {
+    /// The first scan: its compass reading (or 0) defines the world's heading.
+    First,
+    /// The odometry's relative motion from the last node.
+    Odometry,
+    /// The compass reading.
+    Compass,
+    /// The last node's heading turned by the last motion (no odometry, no compass).
+    ConstantVelocity,
+    /// The last node's heading.
+    LastNode,
+}
+
+/// What happened to one scan.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepReport {
+    /// Index of the scan in its dataset.
+    pub scan_index: usize,
+    /// The node it became.
+    pub node_id: usize,
+    /// Wall time of the whole step (localization, loop closure, optimization, map update), ms.
+    pub time_ms: f64,
+    /// Wall time of the localization alone, ms.
+    pub localize_ms: f64,
+    /// The estimated `world_from_sensor` when the step ended, as `{x, y, z, roll_deg, …}`.
+    pub pose: crate::geometry::PoseRecord,
+    /// The prediction the search started from.
+    pub predicted: crate::geometry::PoseRecord,
+    /// Where the heading prior came from.
+    pub heading_prior: HeadingPrior,
+    /// Reference nodes merged, with the query cells each one saw.
+    pub reference_nodes: Vec<(usize, usize)>,
+    /// Eq. (1) at the best grid candidate, m² (`None` for the first scan).
+    pub cost: Option<f64>,
+    /// Overlap fraction of the match.
+    pub overlap_fraction: Option<f64>,
+    /// Inlier fraction of the match.
+    pub inlier_fraction: Option<f64>,
+    /// Covariance of `[x, y, z, roll, pitch, yaw]` from the match (world axes), as its edges
+    /// carry it: along a direction the scans leave free, widened by the prediction's variance.
+    pub covariance: Option<[[f64; 6]; 6]>,
+    /// The match's ambiguity warnings, if any.
+    pub ambiguity: Vec<String>,
+    /// How the match's refinement went (`None` for the first scan).
+    pub refinement: Option<crate::localize::RefinementSummary>,
+    /// Loop closures checked at this scan, accepted or not.
+    pub loop_closures: Vec<LoopClosure>,
+    /// Pose-graph optimization run at this scan: iterations and time, ms.
+    pub optimization: Option<OptimizationSummary>,
+}
+
+/// One pose-graph optimization, summarized.
+#[derive(Debug, Clone, Serialize)]
+pub struct OptimizationSummary {
+    /// Iterations run.
+    pub iterations: usize,
+    /// Robust cost before and after.
+    pub initial_cost: f64,
+    /// Robust cost after.
+    pub final_cost: f64,
+    /// Wall time, ms.
+    pub time_ms: f64,
+    /// The largest move of a node, metres.
+    pub max_node_shift_m: f64,
+}
+
+/// The loop's state: the map, the pose graph's edges and the fused voxel map.
+#[derive(Debug, Clone)]
+pub struct Slam {
+    config: SlamConfig,
+    /// The nodes.
+    pub map: Map,
+    /// The pose graph's edges (matches to reference nodes and loop closures).
+    pub edges: Vec<Edge>,
+    /// Accepted loop closures.
+    pub loop_closures: Vec<LoopClosure>,
+    /// The fused occupancy map on the current poses.
+    pub voxels: VoxelMap,
+}
+
+impl Slam {
+    /// An empty map.
+    ///
+    /// # Errors
+    /// An invalid configuration.
+    pub fn new(config: SlamConfig) -> Result<Self> {
+        config.validate()?;
+        let voxels = VoxelMap::new(config.voxel)?;
+        Ok(Self {
+            config,
+            map: Map::default(),
+            edges: Vec::new(),
+            loop_closures: Vec::new(),
+            voxels,
+        })
+    }
+
+    /// Restores a loop from saved nodes and edges (a resumed run); the voxel map is rebuilt.
+    ///
+    /// # Errors
+    /// An invalid configuration, or edges naming nodes that are not there.
+    pub fn restore(
+        config: SlamConfig,
+        map: Map,
+        edges: Vec<Edge>,
+        loop_closures: Vec<LoopClosure>,
+    ) -> Result<Self> {
+        let n = map.nodes.len();
+        if let Some(e) = edges.iter().find(|e| e.from >= n || e.to >= n) {
+            return Err(Error::Invalid(format!(
+                "a saved edge joins nodes {} and {} but the map has {n} nodes",
+                e.from, e.to
+            )));
+        }
+        let mut slam = Self::new(config)?;
+        slam.map = map;
+        slam.edges = edges;
+        slam.loop_closures = loop_closures;
+        slam.rebuild_voxels();
+        Ok(slam)
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SlamConfig {
+        &self.config
+    }
+
+    /// The estimated `world_from_sensor` of every node, in order.
+    pub fn poses(&self) -> Vec<Pose> {
+        self.map.nodes.iter().map(|n| n.world_from_sensor).collect()
+    }
+
+    /// Rebuilds the fused voxel map from every node on the current poses.
+    pub fn rebuild_voxels(&mut self) {
+        let mut voxels = VoxelMap::new(self.config.voxel)
+            .expect("the voxel configuration was validated in Slam::new");
+        for node in &self.map.nodes {
+            voxels.insert_scan(&node.world_from_sensor, &node.sensor_points());
+        }
+        self.voxels = voxels;
+    }
+
+    /// The merged point cloud: every node's points in the world, kept where the fused map is
+    /// occupied now (moved rubble, seen through later, drops out), one per voxel.
+    pub fn merged_cloud(&self) -> Vec<Vec3> {
+        let all: Vec<Vec3> = self
+            .map
+            .nodes
+            .iter()
+            .flat_map(|n| n.points_in_world())
+            .collect();
+        self.voxels.filter_occupied(&all)
+    }
+
+    /// Runs one step of the loop on `scan`.
+    ///
+    /// # Errors
+    /// An empty scan; a scan index that does not follow the last one; no reference node that
+    /// sees the scan; a localization that fails (nothing matches within the window) — the map is
+    /// unchanged by these. An invalid loop-closure or optimizer setting fails after the node was
+    /// added (the node stays, localized).
+    pub fn add_scan(&mut self, scan: &ScanInput) -> Result<StepReport> {
+        let start = Instant::now();
+        let node_id = self.map.nodes.len();
+        let Some(last) = self.map.nodes.last() else {
+            // The first scan defines the world: origin at its sensor, axes level, heading from
+            // its compass (DESIGN.md, "Units and frames").
+            let attitude = scan.attitude.unwrap_or_default();
+            let world_from_sensor = pose_from_parts(Vec3::zeros(), attitude);
+            let node = Node::from_scan(
+                node_id,
+                scan.scan_index,
+                world_from_sensor,
+                scan.attitude,
+                scan.points_in_sensor,
+                &self.config.sdem,
+            )?;
+            self.voxels
+                .insert_scan(&node.world_from_sensor, &node.sensor_points());
+            self.map.nodes.push(node);
+            let pose = world_from_sensor;
+            return Ok(StepReport {
+                scan_index: scan.scan_index,
+                node_id,
+                time_ms: ms(start),
+                localize_ms: 0.0,
+                pose: (&pose).into(),
+                predicted: (&pose).into(),
+                heading_prior: HeadingPrior::First,
+                reference_nodes: Vec::new(),
+                cost: None,
+                overlap_fraction: None,
+                inlier_fraction: None,
+                covariance: None,
+                ambiguity: Vec::new(),
+                refinement: None,
+                loop_closures: Vec::new(),
+                optimization: None,
+            });
+        };
+        if scan.scan_index <= last.scan_index {
+            return Err(Error::Invalid(format!(
+                "scan {} comes after scan {} in the map; scans must be added in order",
+                scan.scan_index, last.scan_index
+            )));
+        }
+
+        // 1. Predict.
+        let last_pose = last.world_from_sensor;
+        let last_attitude = attitude_of(&last_pose);
+        // Without odometry the robot is assumed to repeat its last motion (a constant-velocity
+        // model, as KISS-ICP does), or to stand still after the first scan.
+        let before_last = node_id
+            .checked_sub(2)
+            .map(|i| self.map.nodes[i].world_from_sensor);
+        let (motion, motion_prior) = match (&scan.odometry, before_last) {
+            (Some((odom_now, odom_last)), _) => {
+                (Some(odom_last.inverse() * odom_now), HeadingPrior::Odometry)
+            }
+            (None, Some(before)) => (
+                Some(before.inverse() * last_pose),
+                HeadingPrior::ConstantVelocity,
+            ),
+            (None, None) => (None, HeadingPrior::LastNode),
+        };
+        let predicted_motion = motion.map(|m| last_pose * m);
+        let position =
+            predicted_motion.map_or(last_pose.translation.vector, |p| p.translation.vector);
+        let (yaw, heading_prior, heading_half) = match (scan.odometry.is_some(), scan.attitude) {
+            (true, _) => (
+                predicted_motion.map_or(last_attitude.yaw, |p| attitude_of(&p).yaw),
+                HeadingPrior::Odometry,
+                self.config.heading_half_deg,
+            ),
+            (false, Some(a)) => (
+                a.yaw,
+                HeadingPrior::Compass,
+                self.config.heading_half_compass_deg,
+            ),
+            (false, None) => (
+                predicted_motion.map_or(last_attitude.yaw, |p| attitude_of(&p).yaw),
+                motion_prior,
+                self.config.heading_half_no_prior_deg,
+            ),
+        };
+        let (roll, pitch) = match scan.attitude {
+            Some(a) => (a.roll, a.pitch),
+            None => (last_attitude.roll, last_attitude.pitch),
+        };
+        let attitude = Attitude::new(roll, pitch, yaw);
+        let predicted = pose_from_parts(position, attitude);
+        let (window_half, prior_sigma_m) = if scan.odometry.is_some() {
+            (self.config.window_half_m, self.config.prior_sigma_m)
+        } else {
+            (
+                self.config.window_half_no_odometry_m,
+                self.config.prior_sigma_no_odometry_m,
+            )
+        };
+
+        // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
+        let query = Sdem::from_points(
+            scan.points_in_sensor,
+            &attitude.rotation(),
+            &self.config.sdem,
+        )?;
+        if query.known_cells() == 0 {
+            return Err(Error::Invalid(format!(
+                "scan {} has no usable point (all closer than {} m or not finite)",
+                scan.scan_index, self.config.sdem.min_range_m
+            )));
+        }
+        let recent_from = node_id.saturating_sub(self.config.loop_closure.min_node_separation);
+        let mut references: Vec<(usize, usize)> = self
+            .map
+            .overlaps(&query, &position, self.config.reference_radius_m, 0.2)
+            .into_iter()
+            .filter(|&(id, cells)| {
+                id >= recent_from && cells >= self.config.min_reference_overlap_cells
+            })
+            .take(self.config.max_reference_nodes)
+            .collect();
+        if references.is_empty() {
+            // The last node always takes part: with no overlap the search says why.
+            references.push((node_id - 1, 0));
+        }
+        let reference_ids: Vec<usize> = references.iter().map(|r| r.0).collect();
+
+        // 3. Localize against the merged virtual S-DEM, seen from the origin of the node that
+        // overlaps most: its own points keep their full density there, and the other nodes fill
+        // in what it did not see. (Seen from the predicted origin instead, a node's points spread
+        // apart and leave holes: on the 3DTK scans, 1.6 m apart, a quarter of the query's cells
+        // found a reference cell instead of all of them.)
+        let origin = self.map.nodes[reference_ids[0]].position();
+        let reference = self
+            .map
+            .merged_reference(&reference_ids, &origin, &self.config.sdem)?;
+        let localize_config = LocalizeConfig {
+            window: SearchWindow::around(&(position - origin), window_half),
+            heading: HeadingWindow {
+                half_range_deg: heading_half,
+                step_deg: None,
+            },
+            cost: CostConfig {
+                prior: Some(OffsetPrior {
+                    offset: (position - origin).into(),
+                    sigma_m: prior_sigma_m,
+                }),
+                ..self.config.localize.cost.clone()
+            },
+            ..self.config.localize.clone()
+        };
+        let localize_start = Instant::now();
+        let found = localize(
+            &reference,
+            &Attitude::default(),
+            &query,
+            &attitude,
+            &localize_config,
+        )
+        .map_err(|e| match e {
+            Error::Localize(why) => Error::Localize(format!(
+                "scan {} against nodes {reference_ids:?}: {why}",
+                scan.scan_index
+            )),
+            other => other,
+        })?;
+        let localize_ms = ms(localize_start);
+        let mut world_from_sensor = world_from_query(&origin, &found);
+        let refinement =
+            crate::localize::RefinementSummary::new(found.refined, found.refinement.as_ref());
+        let mut diagnostics = found.diagnostics;
+        // Along a direction the scans leave free (a ditch's or a corridor's axis), the match's
+        // position is the scans' sampling pattern, not the scene: it pulls towards the
+        // reference's own origin (a forward-looking scan in a straight corridor came out 20 %
+        // short at every step). There the prediction decides, and the edge carries the
+        // prediction's uncertainty.
+        if motion.is_some() {
+            take_prediction_along(
+                &mut world_from_sensor,
+                &mut diagnostics,
+                &position,
+                prior_sigma_m,
+            );
+        }
+        let covariance = diagnostics
+            .covariance
+            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+        let node = Node::from_scan(
+            node_id,
+            scan.scan_index,
+            world_from_sensor,
+            scan.attitude,
+            scan.points_in_sensor,
+            &self.config.sdem,
+        )?;
+        // One edge per reference node; together they carry the match's information once.
+        let share = 1.0 / reference_ids.len() as f64;
+        for &r in &reference_ids {
+            let world_from_r = self.map.nodes[r].world_from_sensor;
+            self.edges.push(Edge {
+                from: r,
+                to: node_id,
+                from_from_to: world_from_r.inverse() * world_from_sensor,
+                information: self.edge_information(covariance.as_ref(), &world_from_sensor, share),
+                kind: EdgeKind::Odometry,
+            });
+        }
+        self.voxels
+            .insert_scan(&node.world_from_sensor, &node.sensor_points());
+        self.map.nodes.push(node);
+
+        // 4. Loop closure.
+        let mut closures = Vec::new();
+        let mut optimization = None;
+        if self.config.loop_closure.enabled {
+            closures = self.close_loops(node_id)?;
+            if closures.iter().any(|c| c.accepted) {
+                optimization = Some(self.optimize_graph()?);
+            }
+        }
+        let pose = self.map.nodes[node_id].world_from_sensor;
+        Ok(StepReport {
+            scan_index: scan.scan_index,
+            node_id,
+            time_ms: ms(start),
+            localize_ms,
+            pose: (&pose).into(),
+            predicted: (&predicted).into(),
+            heading_prior,
+            reference_nodes: references,
+            cost: Some(found.cost),
+            overlap_fraction: Some(diagnostics.overlap_fraction),
+            inlier_fraction: Some(diagnostics.inlier_fraction),
+            covariance: diagnostics.covariance,
+            ambiguity: diagnostics.ambiguity,
+            refinement: Some(refinement),
+            loop_closures: closures,
+            optimization,
+        })
+    }
+
+    /// Proposes revisits of older places for node `to` and verifies them; accepted ones become
+    /// pose-graph edges.
+    fn close_loops(&mut self, to: usize) -> Result<Vec<LoopClosure>> {
+        let config = &self.config.loop_closure;
+        let to_node = &self.map.nodes[to];
+        let to_descriptor = Descriptor::from_levelled(&to_node.points_levelled());
+        let mut candidates: Vec<(usize, f64)> = self
+            .map
+            .nodes
+            .iter()
+            .filter(|n| n.node_id + config.min_node_separation <= to)
+            .filter(|n| (n.position() - to_node.position()).norm() <= config.search_radius_m)
+            .filter_map(|n| {
+                let d =
+                    Descriptor::from_levelled(&n.points_levelled()).distance(&to_descriptor, 1)?;
+                (d <= config.max_descriptor_distance).then_some((n.node_id, d))
+            })
+            .collect();
+        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+        candidates.truncate(config.max_candidates);
+        let mut checked = Vec::new();
+        for (from, distance) in candidates {
+            let prior = self.map.nodes[to].world_from_sensor;
+            let mut closure = verify_loop_closure(
+                &self.map,
+                from,
+                to,
+                &prior,
+                &self.config.sdem,
+                &self.config.localize,
+                &self.config.loop_closure,
+            )?;
+            closure.descriptor_distance = Some(distance);
+            if closure.accepted {
+                self.add_loop_closure_edge(&closure);
+            }
+            checked.push(closure);
+        }
+        Ok(checked)
+    }
+
+    /// Adds an accepted loop closure as a pose-graph edge.
+    pub fn add_loop_closure_edge(&mut self, closure: &LoopClosure) {
+        let (Some(from_from_to), true) = (closure.from_from_to, closure.accepted) else {
+            return;
+        };
+        let world_from_to = self.map.nodes[closure.from].world_from_sensor * from_from_to;
+        self.edges.push(Edge {
+            from: closure.from,
+            to: closure.to,
+            from_from_to,
+            information: self.edge_information(closure.covariance.as_ref(), &world_from_to, 1.0),
+            kind: EdgeKind::LoopClosure,
+        });
+        self.loop_closures.push(closure.clone());
+    }
+
+    /// Optimizes the pose graph (node 0 held), moves the nodes and rebuilds the fused map.
+    ///
+    /// # Errors
+    /// The optimizer's errors (invalid edges).
+    pub fn optimize_graph(&mut self) -> Result<OptimizationSummary> {
+        let start = Instant::now();
+        let graph = PoseGraph {
+            world_from_node: self.poses(),
+            edges: self.edges.clone(),
+        };
+        let (poses, report) = optimize(&graph, 0, &self.config.optimize)?;
+        let mut max_shift: f64 = 0.0;
+        for (node, pose) in self.map.nodes.iter_mut().zip(poses) {
+            max_shift = max_shift.max((node.position() - pose.translation.vector).norm());
+            node.world_from_sensor = pose;
+        }
+        self.rebuild_voxels();
+        Ok(OptimizationSummary {
+            iterations: report.iterations,
+            initial_cost: report.initial_cost,
+            final_cost: report.final_cost,
+            time_ms: ms(start),
+            max_node_shift_m: max_shift,
+        })
+    }
+
+    /// The information matrix of an edge ending at `world_from_to`, in the pose graph's residual
+    /// convention (`[t, r]` in the `to` frame), from the match's covariance (world axes) plus the
+    /// configured floor, times `share`.
+    fn edge_information(
+        &self,
+        covariance_world: Option<&Matrix6<f64>>,
+        world_from_to: &Pose,
+        share: f64,
+    ) -> [[f64; 6]; 6] {
+        let floor_t = self.config.edge_sigma_floor_m.powi(2);
+        let floor_r = self.config.edge_sigma_floor_deg.to_radians().powi(2);
+        let to_from_world: Matrix3<f64> = world_from_to
+            .rotation
+            .inverse()
+            .to_rotation_matrix()
+            .into_inner();
+        let mut rotate = Matrix6::zeros();
+        rotate
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&to_from_world);
+        rotate
+            .fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&to_from_world);
+        let mut covariance = covariance_world
+            .map(|c| rotate * c * rotate.transpose())
+            .unwrap_or_else(Matrix6::zeros);
+        for i in 0..3 {
+            covariance[(i, i)] += floor_t;
+            covariance[(i + 3, i + 3)] += floor_r;
+        }
+        let covariance = 0.5 * (covariance + covariance.transpose());
+        let information = covariance.try_inverse().unwrap_or_else(|| {
+            Matrix6::from_diagonal(&nalgebra::Vector6::new(
+                1.0 / floor_t,
+                1.0 / floor_t,
+                1.0 / floor_t,
+                1.0 / floor_r,
+                1.0 / floor_r,
+                1.0 / floor_r,
+            ))
+        }) * share;
+        let information = 0.5 * (information + information.transpose());
+        std::array::from_fn(|i| std::array::from_fn(|j| information[(i, j)]))
+    }
+}
+
+fn ms(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64() * 1e3
+}

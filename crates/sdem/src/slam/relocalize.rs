@@ -1,0 +1,224 @@
+//! Relocalization: finding where a scan was taken in a saved map, and the fusion of a match with
+//! a prediction along the direction the scans leave free.
+
+use super::{ms, SlamConfig};
+use crate::error::{Error, Result};
+use crate::geometry::{Attitude, Pose, Vec3};
+use crate::localize::{
+    localize, CostConfig, Diagnostics, LocalizeConfig, OffsetPrior, SearchWindow,
+};
+use crate::map::{world_from_query, Descriptor, Map};
+use crate::sdem::Sdem;
+use crate::search::HeadingWindow;
+use serde::Serialize;
+use std::time::Instant;
+
+/// A scan relocalized in a saved map ([`relocalize`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct Relocalization {
+    /// The scan's estimated pose in the map's world frame.
+    pub world_from_sensor: crate::geometry::PoseRecord,
+    /// The node it was matched against.
+    pub node_id: usize,
+    /// The nodes tried, in order, with the reason each one failed (empty when it matched).
+    pub tried: Vec<(usize, String)>,
+    /// Eq. (1) at the best grid candidate, m².
+    pub cost: f64,
+    /// The match's diagnostics.
+    pub diagnostics: crate::localize::Diagnostics,
+    /// Wall time, ms.
+    pub time_ms: f64,
+}
+
+/// Where a scan to relocalize was taken, roughly (see [`relocalize`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Near {
+    /// The sensor's position in the map's world frame, metres.
+    pub position: Vec3,
+    /// How well it is known, metres (one σ), when it is a prediction (odometry since the last
+    /// known pose): then it also weighs in the cost ([`OffsetPrior`]), and along a direction the
+    /// scan leaves free (a corridor's axis) the position is the prediction's, as in
+    /// [`Slam::add_scan`]. Without it only the window is centred there.
+    ///
+    /// [`Slam::add_scan`]: super::Slam::add_scan
+    pub sigma_m: Option<f64>,
+}
+
+/// Finds where a scan was taken in a saved map: near `near` when given, else at the nodes whose
+/// place descriptors look most like the scan's, trying up to `max_nodes` nodes with the exact
+/// search (a window of [`SlamConfig::window_half_no_odometry_m`] around the node, or around
+/// `near`), nearest or most alike first, until one clears the inlier threshold of loop closure.
+///
+/// # Errors
+/// An empty map or scan, a `near` that is not finite or whose σ is not a positive length, or no
+/// node that matches.
+pub fn relocalize(
+    map: &Map,
+    config: &SlamConfig,
+    points_in_sensor: &[Vec3],
+    attitude: Option<Attitude>,
+    near: Option<Near>,
+    max_nodes: usize,
+) -> Result<Relocalization> {
+    let start = Instant::now();
+    if map.nodes.is_empty() {
+        return Err(Error::Invalid(
+            "the map has no node to relocalize in".into(),
+        ));
+    }
+    if let Some(n) = &near {
+        if !n.position.iter().all(|v| v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the position to relocalize near, {:?}, must be finite metres",
+                n.position.as_slice()
+            )));
+        }
+        if let Some(sigma_m) = n.sigma_m {
+            OffsetPrior {
+                offset: n.position.into(),
+                sigma_m,
+            }
+            .validate()?;
+        }
+    }
+    let near_position = near.map(|n| n.position);
+    let level = attitude.unwrap_or_default();
+    let query = Sdem::from_points(points_in_sensor, &level.rotation(), &config.sdem)?;
+    if query.known_cells() == 0 {
+        return Err(Error::Invalid("the scan has no usable point".into()));
+    }
+    let mut candidates: Vec<(usize, f64)> = match near_position {
+        Some(p) => map
+            .nodes
+            .iter()
+            .map(|n| (n.node_id, (n.position() - p).norm()))
+            .collect(),
+        None => {
+            let descriptor = Descriptor::from_levelled(query.points());
+            map.nodes
+                .iter()
+                .filter_map(|n| {
+                    let d =
+                        Descriptor::from_levelled(&n.points_levelled()).distance(&descriptor, 1)?;
+                    Some((n.node_id, d))
+                })
+                .collect()
+        }
+    };
+    candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+    candidates.truncate(max_nodes.max(1));
+    let heading = if attitude.is_some() {
+        config.heading_half_compass_deg
+    } else {
+        config.heading_half_no_prior_deg
+    };
+    let mut tried = Vec::new();
+    let mut best = None;
+    for &(node_id, _) in &candidates {
+        let origin = map.nodes[node_id].position();
+        let reference = map.merged_reference(&[node_id], &origin, &config.sdem)?;
+        let centre = near_position.map_or(Vec3::zeros(), |p| p - origin);
+        let prior = near.and_then(|n| n.sigma_m).map(|sigma_m| OffsetPrior {
+            offset: centre.into(),
+            sigma_m,
+        });
+        let localize_config = LocalizeConfig {
+            window: SearchWindow::around(&centre, config.window_half_no_odometry_m),
+            heading: HeadingWindow {
+                half_range_deg: heading,
+                step_deg: None,
+            },
+            cost: CostConfig {
+                prior,
+                ..config.localize.cost.clone()
+            },
+            ..config.localize.clone()
+        };
+        match localize(
+            &reference,
+            &Attitude::default(),
+            &query,
+            &level,
+            &localize_config,
+        ) {
+            Ok(found)
+                if found.diagnostics.inlier_fraction >= config.loop_closure.min_inlier_fraction =>
+            {
+                // The nearest (or most alike) node that matches well is the answer; the others
+                // are tried only when it does not.
+                best = Some((node_id, found, origin));
+                break;
+            }
+            Ok(found) => tried.push((
+                node_id,
+                format!(
+                    "only {:.0} % of the cells match",
+                    found.diagnostics.inlier_fraction * 100.0
+                ),
+            )),
+            Err(Error::Localize(why)) => tried.push((node_id, why)),
+            Err(e) => return Err(e),
+        }
+    }
+    let Some((node_id, found, origin)) = best else {
+        return Err(Error::Localize(format!(
+            "the scan matches none of the nodes tried: {}",
+            tried
+                .iter()
+                .map(|(n, why)| format!("node {n}: {why}"))
+                .collect::<Vec<_>>()
+                .join("; ")
+        )));
+    };
+    let mut pose = world_from_query(&origin, &found);
+    let mut diagnostics = found.diagnostics;
+    if let Some(Near {
+        position,
+        sigma_m: Some(sigma_m),
+    }) = near
+    {
+        take_prediction_along(&mut pose, &mut diagnostics, &position, sigma_m);
+    }
+    Ok(Relocalization {
+        world_from_sensor: (&pose).into(),
+        node_id,
+        tried,
+        cost: found.cost,
+        diagnostics,
+        time_ms: ms(start),
+    })
+}
+
+/// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): where `diagnostics` name
+/// a free direction (unit, world axes), moves `pose` along it to the `predicted` position's
+/// place, widens the covariance (world axes) there by the prediction's variance `sigma_m²`, and
+/// adds a note saying so to the ambiguity.
+pub(super) fn take_prediction_along(
+    pose: &mut Pose,
+    diagnostics: &mut Diagnostics,
+    predicted: &Vec3,
+    sigma_m: f64,
+) {
+    let Some(flat) = diagnostics.flat_direction else {
+        return;
+    };
+    let v = Vec3::from(flat);
+    let t = pose.translation.vector;
+    let along = v.dot(&(predicted - t));
+    pose.translation.vector = t + v * along;
+    if let Some(c) = diagnostics.covariance.as_mut() {
+        for i in 0..3 {
+            for j in 0..3 {
+                c[i][j] += v[i] * v[j] * sigma_m.powi(2);
+            }
+        }
+    }
+    diagnostics.ambiguity.push(format!(
+        "along ({:.2}, {:.2}, {:.2}) the position is the prediction's ({:+.1} cm from the \
+         match's)",
+        v.x,
+        v.y,
+        v.z,
+        along * 100.0
+    ));
+}
