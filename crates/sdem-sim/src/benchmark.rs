@@ -25,7 +25,7 @@
 //! # Ok::<(), sdem::Error>(())
 //! ```
 
-use crate::sim;
+use crate::sim::{self, wrap_angle};
 use nalgebra::{Translation3, Unit, UnitQuaternion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -36,7 +36,6 @@ use sdem::geometry::{attitude_of, pose_error, pose_from_parts, Attitude, Pose, V
 use sdem::localize::{localize, Localization, LocalizeConfig, SearchWindow};
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::sensor::SensorConfig;
-use std::f64::consts::{PI, TAU};
 use std::time::Instant;
 
 /// Mixed into the seed of the pairs' random streams, so they do not repeat the scene's.
@@ -306,11 +305,6 @@ pub(crate) fn draw_query_pose(
 /// Uniform in `[-half, half]`; always one draw, so the stream does not depend on `half`.
 pub(crate) fn symmetric(rng: &mut impl Rng, half: f64) -> f64 {
     half * rng.random_range(-1.0..=1.0)
-}
-
-/// The angle in [-π, π).
-pub(crate) fn wrap_angle(a: f64) -> f64 {
-    (a + PI).rem_euclid(TAU) - PI
 }
 
 /// `pose` moved by exactly `translation_m` along a random direction and turned by exactly
