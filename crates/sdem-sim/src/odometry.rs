@@ -3,7 +3,7 @@
 //! A robot's wheel/track odometry measures each step between stops with an error that grows with
 //! the step, and its heading error accumulates: dead reckoning drifts without bound. The dataset
 //! file `odometry.txt` holds the dead-reckoned `world_from_sensor` of each scan; only the relative
-//! motion between consecutive scans is meant to be used (see [`crate::io`]).
+//! motion between consecutive scans is meant to be used (see the dataset folder in `sdem_io`).
 
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
