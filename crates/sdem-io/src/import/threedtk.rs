@@ -1,6 +1,4 @@
-//! Importing other datasets into sdem's dataset layout: 3DTK folders and KITTI odometry sequences.
-//!
-//! # 3DTK folders (`scanNNN.3d` + `scanNNN.pose`, [`import_3dtk`])
+//! 3DTK folders (`scanNNN.3d` + `scanNNN.pose`, [`import_3dtk`]).
 //!
 //! 3DTK's frame is **left-handed**: x right, y up, z forward, centimetres. A point maps to sdem's
 //! frame (x forward, y left, z up, metres) by the fixed axis map `C`:
@@ -31,31 +29,22 @@
 //!
 //! 3DTK's poses are in 3DTK's world frame, the frame of its scan 0, and are kept there (not
 //! re-based on the first imported scan) so that the attitude keeps its roll and pitch.
-//!
-//! # KITTI odometry sequences (`velodyne/NNNNNN.bin`, `poses.txt`, `calib.txt`, [`import_kitti`])
-//!
-//! The Velodyne frame is already sdem's (x forward, y left, z up, metres): the selected `.bin`
-//! files are checked and copied unchanged to `scans/000000.bin`, …. KITTI's `poses.txt` holds the
-//! poses `P_i` of the left camera (x right, y down, z forward), so the Velodyne poses are
-//! `T_velo_i = Tr⁻¹ · P_i · Tr` with `Tr` the `Tr:` line of `calib.txt` (velodyne → camera), then
-//! re-based so that the first imported scan is the identity (DESIGN.md: the world origin is the
-//! first scan's sensor), and written as `poses_truth.txt` (KITTI's GPS/INS ground truth). KITTI
-//! has no gyro/compass reading here, so no `attitude.csv` is written. Without `poses.txt` (the
-//! test sequences 11–21) the scans are imported without truth.
 
-use super::dataset::{check_no_stale_file, ODOMETRY_FILE, SLAM6D_FILE};
-use super::poses::{parse_row_major_pose, to_rotation};
 use super::{
-    clear_dataset, numbered_lines, parse_finite, read_bytes, read_kitti_poses, read_points,
-    read_text, write_atomic, write_attitude_csv, write_points_ply, write_poses, write_sensor_toml,
-    ATTITUDE_FILE, DATASET_ENTRIES, SCANS_DIR, SENSOR_FILE, TRUTH_FILE,
+    check_out, check_source, numbered_files, scan_name, select, write_or_roll_back, ImportFormat,
+    ImportOptions, ImportSummary,
+};
+use crate::dataset::{ODOMETRY_FILE, SLAM6D_FILE};
+use crate::poses::to_rotation;
+use crate::{
+    numbered_lines, parse_finite, read_points, read_text, write_attitude_csv, write_points_ply,
+    write_poses, write_sensor_toml, ATTITUDE_FILE, SCANS_DIR, SENSOR_FILE,
 };
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
 use sdem::error::{Error, Result};
 use sdem::geometry::{attitude_of, Attitude, Pose, Vec3};
 use sdem::sensor::SensorConfig;
-use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// 3DTK points farther than this (metres) are dropped on import: the scanner's "no return"
 /// sentinel (~32.76 m) and beyond.
@@ -87,119 +76,6 @@ pub fn uos_sensor() -> SensorConfig {
 
 /// The folder name under which the 3DTK example data keeps slam6D's `.frames` files.
 const DEFAULT_FRAMES_DIR: &str = "slam6d_frames_2009";
-
-/// What kind of folder is imported.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub enum ImportFormat {
-    /// A 3DTK folder: `scanNNN.3d` with `scanNNN.pose`, optionally `.frames`.
-    #[serde(rename = "3dtk")]
-    Uos3dtk,
-    /// A KITTI odometry sequence: `velodyne/NNNNNN.bin`, optionally `poses.txt` + `calib.txt`.
-    #[serde(rename = "kitti")]
-    Kitti,
-}
-
-impl ImportFormat {
-    /// Guesses the format of `source` from its content: a `velodyne/` folder means KITTI, a
-    /// `scanNNN.3d` file means 3DTK.
-    ///
-    /// # Errors
-    /// [`Error::Invalid`] when `source` is not a folder or looks like neither.
-    pub fn detect(source: &Path) -> Result<ImportFormat> {
-        check_source(source)?;
-        if source.join("velodyne").is_dir() {
-            return Ok(ImportFormat::Kitti);
-        }
-        if !numbered_files(source, "scan", "3d")?.is_empty() {
-            return Ok(ImportFormat::Uos3dtk);
-        }
-        Err(Error::Invalid(format!(
-            "{} is neither a 3DTK folder (scanNNN.3d + scanNNN.pose) nor a KITTI sequence \
-             (velodyne/NNNNNN.bin); name the format or check the folder",
-            source.display()
-        )))
-    }
-}
-
-/// Which scans to import and where extra inputs are.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct ImportOptions {
-    /// The first scan number to import (the `NNN` of the file names); scans with a smaller
-    /// number are skipped.
-    pub first: usize,
-    /// How many scans to import from `first` on (in the order of their numbers); `None` for all.
-    pub count: Option<usize>,
-    /// 3DTK only: the folder of slam6D's `scanNNN.frames`. `None` looks for
-    /// `SOURCE/slam6d_frames_2009/`, then for `.frames` files in `SOURCE`.
-    pub frames_dir: Option<PathBuf>,
-}
-
-/// What an import read and wrote.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ImportSummary {
-    /// The format imported.
-    pub format: ImportFormat,
-    /// The source folder.
-    pub source: PathBuf,
-    /// The dataset folder written.
-    pub out: PathBuf,
-    /// The number of scans imported.
-    pub scans: usize,
-    /// The source file of each imported scan, in dataset order.
-    pub source_scans: Vec<PathBuf>,
-    /// The points kept in each scan.
-    pub points_per_scan: Vec<usize>,
-    /// Points dropped as farther than [`UOS_MAX_RANGE_M`] (3DTK), over all scans.
-    pub dropped_far: usize,
-    /// Points dropped as nearer than [`UOS_MIN_RANGE_M`] (3DTK), over all scans.
-    pub dropped_near: usize,
-    /// The files written, relative to `out` (`scans/` stands for the scan files).
-    pub written: Vec<String>,
-}
-
-impl ImportSummary {
-    /// The summary before any scan is written: what is imported from where, nothing counted yet.
-    fn empty<T>(format: ImportFormat, source: &Path, out: &Path, scans: &[(T, PathBuf)]) -> Self {
-        Self {
-            format,
-            source: source.to_path_buf(),
-            out: out.to_path_buf(),
-            scans: scans.len(),
-            source_scans: scans.iter().map(|(_, p)| p.clone()).collect(),
-            points_per_scan: Vec::with_capacity(scans.len()),
-            dropped_far: 0,
-            dropped_near: 0,
-            written: Vec::new(),
-        }
-    }
-}
-
-/// Imports `source` into the dataset folder `out`, guessing the format when `format` is `None`
-/// ([`ImportFormat::detect`]). See [`import_3dtk`] and [`import_kitti`].
-pub fn import_dataset(
-    source: &Path,
-    out: &Path,
-    format: Option<ImportFormat>,
-    options: &ImportOptions,
-) -> Result<ImportSummary> {
-    let format = match format {
-        Some(f) => f,
-        None => ImportFormat::detect(source)?,
-    };
-    match format {
-        ImportFormat::Uos3dtk => import_3dtk(source, out, options),
-        ImportFormat::Kitti => {
-            if let Some(frames) = &options.frames_dir {
-                return Err(Error::Invalid(format!(
-                    "a frames folder ({}) is for 3DTK imports only; {} is a KITTI sequence",
-                    frames.display(),
-                    source.display()
-                )));
-            }
-            import_kitti(source, out, options)
-        }
-    }
-}
 
 // ---------------------------------------------------------------------------------------------
 // Frames and poses
@@ -367,217 +243,6 @@ pub fn read_uos_frames_last(path: &Path) -> Result<Pose> {
     })
 }
 
-/// Parses the `Tr:` line of a KITTI `calib.txt` (the row-major 3×4 `camera_from_velodyne`;
-/// `Tr_velo_to_cam:` is accepted too) from `text`, which was read from `path`.
-///
-/// # Errors
-/// [`Error::Parse`] naming the line for a wrong number count, a non-number or a non-rotation;
-/// naming the file when there is no such line.
-pub fn parse_kitti_calib_tr(path: &Path, text: &str) -> Result<Pose> {
-    for (line_no, line) in numbered_lines(text) {
-        let Some((key, rest)) = line.split_once(':') else {
-            continue;
-        };
-        if !matches!(key.trim(), "Tr" | "Tr_velo_to_cam") {
-            continue;
-        }
-        let tokens: Vec<&str> = rest.split_whitespace().collect();
-        if tokens.len() != 12 {
-            return Err(Error::parse(
-                path,
-                Some(line_no),
-                format!(
-                    "{} numbers after '{}:'; Tr is 12 numbers, the row-major 3×4 [R | t] from \
-                     velodyne to camera",
-                    tokens.len(),
-                    key.trim()
-                ),
-            ));
-        }
-        return parse_row_major_pose(path, line_no, &tokens, "Tr");
-    }
-    Err(Error::parse(
-        path,
-        None,
-        "no 'Tr:' line (the velodyne-to-camera transform, 12 numbers); KITTI odometry's \
-         calib.txt has one",
-    ))
-}
-
-/// Reads the `Tr:` line of a KITTI `calib.txt` ([`parse_kitti_calib_tr`]).
-pub fn read_kitti_calib_tr(path: &Path) -> Result<Pose> {
-    let text = read_text(path)?;
-    parse_kitti_calib_tr(path, &text)
-}
-
-/// KITTI camera poses to Velodyne poses re-based on the first: with
-/// `T_velo_i = Tr⁻¹ · P_i · Tr`, returns `T_velo_0⁻¹ · T_velo_i` for each `i`, so the first
-/// is the identity.
-///
-/// # Arguments
-/// * `camera_poses` — `P_i`, the left camera's pose in `poses.txt` (camera 0 of frame 0 as world).
-/// * `camera_from_velodyne` — `Tr` from `calib.txt`.
-///
-/// # Example
-/// ```
-/// use sdem::geometry::Pose;
-/// // Camera axes: x right, y down, z forward. A camera that moved 1 m forward (its z)...
-/// let tr = Pose::from_parts(
-///     nalgebra::Translation3::identity(),
-///     nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(
-///         nalgebra::Matrix3::new(0.0, -1.0, 0.0, 0.0, 0.0, -1.0, 1.0, 0.0, 0.0),
-///     )),
-/// );
-/// let cams = [Pose::identity(), Pose::translation(0.0, 0.0, 1.0)];
-/// let velo = sdem_io::kitti_velodyne_poses(&cams, &tr);
-/// // ...moved 1 m along the Velodyne's x (forward).
-/// assert!((velo[1].translation.vector - nalgebra::Vector3::new(1.0, 0.0, 0.0)).norm() < 1e-12);
-/// ```
-pub fn kitti_velodyne_poses(camera_poses: &[Pose], camera_from_velodyne: &Pose) -> Vec<Pose> {
-    let tr = camera_from_velodyne;
-    let velo: Vec<Pose> = camera_poses.iter().map(|p| tr.inverse() * p * tr).collect();
-    let Some(first) = velo.first() else {
-        return Vec::new();
-    };
-    let first_inv = first.inverse();
-    let mut rebased: Vec<Pose> = velo.iter().map(|v| first_inv * v).collect();
-    // Exactly the identity, not the identity up to round-off.
-    rebased[0] = Pose::identity();
-    rebased
-}
-
-// ---------------------------------------------------------------------------------------------
-// Folders
-// ---------------------------------------------------------------------------------------------
-
-fn check_source(source: &Path) -> Result<()> {
-    if source.is_dir() {
-        Ok(())
-    } else if source.exists() {
-        Err(Error::Invalid(format!(
-            "{} is not a folder; import reads a 3DTK folder or a KITTI sequence folder",
-            source.display()
-        )))
-    } else {
-        Err(Error::Invalid(format!(
-            "{} does not exist; import reads a 3DTK folder or a KITTI sequence folder",
-            source.display()
-        )))
-    }
-}
-
-/// The visible files of `folder` named `PREFIX` + digits + `.EXT`, as `(number, path)` sorted
-/// by number.
-fn numbered_files(folder: &Path, prefix: &str, ext: &str) -> Result<Vec<(usize, PathBuf)>> {
-    let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
-    let mut files = Vec::new();
-    for entry in entries {
-        let path = entry.map_err(|e| Error::io(folder, e))?.path();
-        let Some(name) = path.file_name().and_then(|n| n.to_str()) else {
-            continue;
-        };
-        let Some(digits) = name
-            .strip_prefix(prefix)
-            .and_then(|n| n.strip_suffix(ext))
-            .and_then(|n| n.strip_suffix('.'))
-        else {
-            continue;
-        };
-        if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) || !path.is_file() {
-            continue;
-        }
-        if let Ok(number) = digits.parse::<usize>() {
-            files.push((number, path));
-        }
-    }
-    files.sort();
-    Ok(files)
-}
-
-/// Applies `first` and `count` to the numbered scan files.
-fn select(
-    files: Vec<(usize, PathBuf)>,
-    options: &ImportOptions,
-    folder: &Path,
-    what: &str,
-) -> Result<Vec<(usize, PathBuf)>> {
-    if files.is_empty() {
-        return Err(Error::Invalid(format!(
-            "{} holds no scans ({what})",
-            folder.display()
-        )));
-    }
-    let available: Vec<_> = files
-        .into_iter()
-        .filter(|(n, _)| *n >= options.first)
-        .collect();
-    let selected: Vec<_> = match options.count {
-        Some(0) => {
-            return Err(Error::Invalid(
-                "the scan count is 0; import at least one scan".into(),
-            ))
-        }
-        Some(count) if count > available.len() => {
-            return Err(Error::Invalid(format!(
-                "{count} scans asked from number {} on, but {} holds {} ({what})",
-                options.first,
-                folder.display(),
-                available.len()
-            )))
-        }
-        Some(count) => available.into_iter().take(count).collect(),
-        None => available,
-    };
-    if selected.is_empty() {
-        return Err(Error::Invalid(format!(
-            "{} holds no scan numbered {} or more ({what})",
-            folder.display(),
-            options.first
-        )));
-    }
-    Ok(selected)
-}
-
-/// Refuses to import into a folder that holds a dataset entry.
-fn check_out(out: &Path) -> Result<()> {
-    if out.exists() && !out.is_dir() {
-        return Err(Error::Invalid(format!(
-            "{} is not a folder; import writes a dataset folder",
-            out.display()
-        )));
-    }
-    for name in DATASET_ENTRIES {
-        let path = out.join(name);
-        if path.exists() {
-            return Err(Error::Invalid(format!(
-                "{} already exists; import writes into a folder without a dataset (remove it first)",
-                path.display()
-            )));
-        }
-    }
-    Ok(())
-}
-
-/// Runs the writing part of an import; on error removes what it wrote (the folder held no
-/// dataset entry before, see [`check_out`]).
-fn write_or_roll_back(out: &Path, write: impl FnOnce() -> Result<()>) -> Result<()> {
-    let created = !out.exists();
-    let result = std::fs::create_dir_all(out.join(SCANS_DIR))
-        .map_err(|e| Error::io(out.join(SCANS_DIR), e))
-        .and_then(|()| write());
-    if result.is_err() {
-        let _ = clear_dataset(out);
-        if created {
-            let _ = std::fs::remove_dir(out);
-        }
-    }
-    result
-}
-
-fn scan_name(index: usize, ext: &str) -> String {
-    format!("{index:06}.{ext}")
-}
-
 /// Keeps the points with `UOS_MIN_RANGE_M ≤ |p| ≤ UOS_MAX_RANGE_M`; returns them with the
 /// counts dropped as far and as near.
 fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
@@ -611,7 +276,7 @@ fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
 /// `source` missing or without `scanNNN.3d`; a `.pose` (or, with a frames folder, a `.frames`)
 /// missing for a selected scan; a malformed `.pose`, `.frames` or `.3d` (naming the file and
 /// line); a scan left without points by the range filter; `out` holding a dataset entry
-/// ([`DATASET_ENTRIES`]).
+/// ([`DATASET_ENTRIES`](crate::DATASET_ENTRIES)).
 pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result<ImportSummary> {
     check_source(source)?;
     let scans = select(
@@ -705,104 +370,13 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
     })?;
     Ok(summary)
 }
-
-/// Imports a KITTI odometry sequence folder into the dataset folder `out` (see the module
-/// documentation): `scans/NNNNNN.bin` copied unchanged and, when `poses.txt` is present,
-/// `poses_truth.txt` (+ `.tum`) with the Velodyne poses re-based on the first imported scan. No
-/// `attitude.csv` is written.
-///
-/// Poses and calibration are read and checked before anything is written; an error while
-/// writing removes what was written.
-///
-/// # Errors
-/// `source` missing or without `velodyne/NNNNNN.bin`; `poses.txt` present but `calib.txt`
-/// missing; a malformed `poses.txt` or `calib.txt` (naming the file and line); fewer poses than
-/// a selected scan's number needs; a malformed `.bin`; `out` holding a dataset entry.
-pub fn import_kitti(source: &Path, out: &Path, options: &ImportOptions) -> Result<ImportSummary> {
-    check_source(source)?;
-    let velodyne = source.join("velodyne");
-    if !velodyne.is_dir() {
-        return Err(Error::Invalid(format!(
-            "{} has no velodyne/ folder; a KITTI sequence holds velodyne/NNNNNN.bin",
-            source.display()
-        )));
-    }
-    let scans = select(
-        numbered_files(&velodyne, "", "bin")?,
-        options,
-        &velodyne,
-        "KITTI NNNNNN.bin files",
-    )?;
-    let poses_path = source.join("poses.txt");
-    let truth = if poses_path.is_file() {
-        let calib_path = source.join("calib.txt");
-        if !calib_path.is_file() {
-            return Err(Error::Invalid(format!(
-                "{} is missing; it holds Tr, which turns the camera poses of {} into Velodyne poses",
-                calib_path.display(),
-                poses_path.display()
-            )));
-        }
-        let tr = read_kitti_calib_tr(&calib_path)?;
-        let camera_poses = read_kitti_poses(&poses_path)?;
-        let mut selected = Vec::with_capacity(scans.len());
-        for (number, scan) in &scans {
-            let pose = camera_poses.get(*number).ok_or_else(|| {
-                Error::Invalid(format!(
-                    "{} has {} poses but {} needs pose {} (line {})",
-                    poses_path.display(),
-                    camera_poses.len(),
-                    scan.display(),
-                    number,
-                    number + 1
-                ))
-            })?;
-            selected.push(*pose);
-        }
-        Some(kitti_velodyne_poses(&selected, &tr))
-    } else {
-        None
-    };
-    check_out(out)?;
-    if truth.is_none() {
-        check_no_stale_file(out, TRUTH_FILE, "truth")?;
-    }
-
-    let mut summary = ImportSummary::empty(ImportFormat::Kitti, source, out, &scans);
-    write_or_roll_back(out, || {
-        for (index, (_, scan)) in scans.iter().enumerate() {
-            let points = read_points(scan)?.len();
-            let bytes = read_bytes(scan)?;
-            let target = out.join(SCANS_DIR).join(scan_name(index, "bin"));
-            write_atomic(&target, |w| w.write_all(&bytes))?;
-            summary.points_per_scan.push(points);
-        }
-        summary
-            .written
-            .push(format!("{SCANS_DIR}/ ({} .bin)", scans.len()));
-        if let Some(truth) = &truth {
-            write_poses(&out.join(TRUTH_FILE), truth)?;
-            summary.written.push(TRUTH_FILE.into());
-        }
-        Ok(())
-    })?;
-    Ok(summary)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::Dataset;
-    use sdem::geometry::pose_error;
-
-    fn write(dir: &Path, name: &str, content: &str) -> PathBuf {
-        let path = dir.join(name);
-        if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent).unwrap();
-        }
-        std::fs::write(&path, content).unwrap();
-        path
-    }
+    use crate::import::import_dataset;
+    use crate::import::test_files::write;
+    use crate::{read_kitti_poses, Dataset};
+    use std::path::PathBuf;
 
     /// The 3DTK → sdem point map, as the `.3d` reader applies it.
     fn sdem_point(uos_cm: [f64; 3]) -> Vec3 {
@@ -947,49 +521,6 @@ mod tests {
                 .unwrap_err()
                 .to_string();
             assert!(err.contains(want) && err.contains(name), "{name}: {err}");
-        }
-    }
-
-    #[test]
-    fn kitti_calib_and_velodyne_poses() {
-        let dir = tempfile::tempdir().unwrap();
-        // Tr: velodyne (x fwd, y left, z up) → camera (x right, y down, z fwd), plus an offset.
-        let calib = "P0: 1 0 0 0 0 1 0 0 0 0 1 0\n\
-                     Tr: 0 -1 0 0.1 0 0 -1 -0.05 1 0 0 -0.3\n";
-        let path = write(dir.path(), "calib.txt", calib);
-        let tr = read_kitti_calib_tr(&path).unwrap();
-        assert!((tr * nalgebra::Point3::new(1.0, 0.0, 0.0)).coords.z > 0.0);
-        // The camera moves 1 m forward per frame and turns 10° left (about its −y, i.e. up).
-        let step = Pose::from_parts(
-            Translation3::new(0.0, 0.0, 1.0),
-            UnitQuaternion::from_axis_angle(&-Vector3::y_axis(), 10f64.to_radians()),
-        );
-        let cams: Vec<Pose> = (0..4)
-            .scan(Pose::identity(), |p, _| {
-                let now = *p;
-                *p *= step;
-                Some(now)
-            })
-            .collect();
-        let velo = kitti_velodyne_poses(&cams[1..], &tr);
-        assert_eq!(velo.len(), 3);
-        let (dt, dr) = pose_error(&Pose::identity(), &velo[0]);
-        assert!(dt < 1e-12 && dr < 1e-12);
-        // In the Velodyne frame each step turns +10° (yaw, left) and goes forward.
-        let rel = velo[0].inverse() * velo[1];
-        assert!((attitude_of(&rel).yaw.to_degrees() - 10.0).abs() < 1e-9);
-        assert!(rel.translation.vector.x > 0.9);
-
-        for (name, text, want) in [
-            ("c1.txt", "P0: 1 0 0\n", "c1.txt: no 'Tr:'"),
-            ("c2.txt", "P0: 1\nTr: 1 0 0 0 0 1 0 0 0 0 1\n", "c2.txt:2"),
-            ("c3.txt", "Tr: 1 0 0 0 0 1 0 0 0 0 1 z\n", "c3.txt:1"),
-            ("c4.txt", "Tr: 2 0 0 0 0 1 0 0 0 0 1 0\n", "c4.txt:1"),
-        ] {
-            let err = read_kitti_calib_tr(&write(dir.path(), name, text))
-                .unwrap_err()
-                .to_string();
-            assert!(err.contains(want), "{name}: {err}");
         }
     }
 
@@ -1161,108 +692,5 @@ mod tests {
             let name = e.file_name().into_string().unwrap();
             !name.contains(".tmp-") && (!e.path().is_dir() || nothing_left(&e.path()))
         })
-    }
-
-    fn kitti_folder(dir: &Path, n: usize) -> PathBuf {
-        let source = dir.join("kitti");
-        std::fs::create_dir_all(source.join("velodyne")).unwrap();
-        for i in 0..n {
-            let bytes: Vec<u8> = [[1.0f32 + i as f32, 2.0, 3.0, 0.5], [4.0, 5.0, 6.0, 0.1]]
-                .iter()
-                .flat_map(|p| p.iter().flat_map(|v| v.to_le_bytes()))
-                .collect();
-            std::fs::write(source.join(format!("velodyne/{i:06}.bin")), bytes).unwrap();
-        }
-        // Camera 0 moves 0.8 m forward (its z) per frame.
-        let poses: String = (0..n)
-            .map(|i| format!("1 0 0 0 0 1 0 0 0 0 1 {}\n", 0.8 * i as f64))
-            .collect();
-        write(&source, "poses.txt", &poses);
-        write(
-            &source,
-            "calib.txt",
-            "P0: 1 0 0 0 0 1 0 0 0 0 1 0\nTr: 0 -1 0 0 0 0 -1 0 1 0 0 -0.27\n",
-        );
-        source
-    }
-
-    #[test]
-    fn import_kitti_writes_a_dataset() {
-        let dir = tempfile::tempdir().unwrap();
-        let source = kitti_folder(dir.path(), 5);
-        let out = dir.path().join("ds");
-        let options = ImportOptions {
-            first: 2,
-            count: Some(2),
-            frames_dir: None,
-        };
-        let summary = import_dataset(&source, &out, None, &options).unwrap();
-        assert_eq!(summary.format, ImportFormat::Kitti);
-        assert_eq!(summary.points_per_scan, vec![2, 2]);
-        let dataset = Dataset::open(&out).unwrap();
-        assert!(dataset.attitudes.is_none() && dataset.odometry.is_none());
-        assert_eq!(dataset.scan_paths[0], out.join("scans/000000.bin"));
-        assert_eq!(
-            std::fs::read(&dataset.scan_paths[1]).unwrap(),
-            std::fs::read(source.join("velodyne/000003.bin")).unwrap()
-        );
-        let truth = dataset.truth.unwrap();
-        let (dt, dr) = pose_error(&Pose::identity(), &truth[0]);
-        assert!(dt < 1e-12 && dr < 1e-12);
-        assert!((truth[1].translation.vector - Vec3::new(0.8, 0.0, 0.0)).norm() < 1e-9);
-
-        // Without poses.txt: no truth.
-        let out2 = dir.path().join("ds2");
-        std::fs::remove_file(source.join("poses.txt")).unwrap();
-        import_kitti(&source, &out2, &ImportOptions::default()).unwrap();
-        let dataset = Dataset::open(&out2).unwrap();
-        assert_eq!(dataset.len(), 5);
-        assert!(dataset.truth.is_none());
-    }
-
-    #[test]
-    fn import_kitti_errors() {
-        let dir = tempfile::tempdir().unwrap();
-        let source = kitti_folder(dir.path(), 3);
-        let out = dir.path().join("ds");
-        let opts = ImportOptions::default();
-        let err = import_dataset(
-            &source,
-            &out,
-            None,
-            &ImportOptions {
-                frames_dir: Some(dir.path().into()),
-                ..Default::default()
-            },
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(err.contains("3DTK imports only"), "{err}");
-        write(&source, "poses.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0\n");
-        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
-        assert!(err.contains("poses.txt:2"), "{err}");
-        write(&source, "poses.txt", "1 0 0 0 0 1 0 0 0 0 1 0\n");
-        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
-        assert!(
-            err.contains("1 poses") && err.contains("000001.bin"),
-            "{err}"
-        );
-        write(&source, "poses.txt", &"1 0 0 0 0 1 0 0 0 0 1 0\n".repeat(3));
-        write(&source, "calib.txt", "Tr: 1 0 0\n");
-        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
-        assert!(err.contains("calib.txt:1"), "{err}");
-        std::fs::remove_file(source.join("calib.txt")).unwrap();
-        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
-        assert!(err.contains("calib.txt is missing"), "{err}");
-        write(&source, "calib.txt", "Tr: 1 0 0 0 0 1 0 0 0 0 1 0\n");
-        std::fs::write(source.join("velodyne/000002.bin"), [0u8; 7]).unwrap();
-        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
-        assert!(err.contains("000002.bin"), "{err}");
-        assert!(!out.exists());
-        for i in 0..3 {
-            std::fs::remove_file(source.join(format!("velodyne/{i:06}.bin"))).unwrap();
-        }
-        let err = import_kitti(&source, &out, &opts).unwrap_err().to_string();
-        assert!(err.contains("no scans"), "{err}");
     }
 }
