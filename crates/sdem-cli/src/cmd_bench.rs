@@ -11,14 +11,15 @@
 //!    and again with the compass ignored (a full turn of heading searched).
 //! 3. The pose graph's optimization on a 1,000-node synthetic loop.
 
+use crate::bench_tally::Tally;
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
 use sdem::geometry::Vec3;
 use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow};
 use sdem::sdem::SdemConfig;
 use sdem_sim::benchmark::{
-    bench_pairs, localize_config, localize_pair, paper_pair, success_rate, summarize, BenchPair,
-    PairConfig, PairResult, Stats, PAPER_MOVE_M,
+    bench_pairs, localize_config, localize_pair, paper_pair, summarize, BenchPair, PairConfig,
+    Stats, PAPER_MOVE_M,
 };
 use serde::Serialize;
 use std::time::Instant;
@@ -183,56 +184,6 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
     })
 }
 
-/// A localization within this of the truth is a success, metres.
-pub(crate) const SUCCESS_M: f64 = 0.02;
-
-/// The errors and times of the pairs a bench localized, in the order localized.
-#[derive(Default)]
-pub(crate) struct Tally {
-    translation_mm: Vec<f64>,
-    rotation_deg: Vec<f64>,
-    times_ms: Vec<f64>,
-}
-
-impl Tally {
-    /// Records one pair: its result, or `None` when the localization returned an error (which
-    /// counts as infinitely wrong). Returns whether the pair failed (an error, or off by
-    /// [`SUCCESS_M`] or more).
-    pub(crate) fn record(&mut self, result: Option<&PairResult>) -> bool {
-        match result {
-            Some(r) => {
-                self.translation_mm.push(r.translation_error_m * 1e3);
-                self.rotation_deg.push(r.rotation_error_deg);
-                self.times_ms.push(r.time_ms);
-                r.translation_error_m >= SUCCESS_M
-            }
-            None => {
-                self.translation_mm.push(f64::NAN);
-                self.rotation_deg.push(f64::NAN);
-                true
-            }
-        }
-    }
-
-    pub(crate) fn translation_error_mm(&self) -> Stats {
-        summarize(&self.translation_mm)
-    }
-
-    pub(crate) fn rotation_error_deg(&self) -> Stats {
-        summarize(&self.rotation_deg)
-    }
-
-    /// Times of the localizations that returned (errors have none).
-    pub(crate) fn time_ms(&self) -> Stats {
-        summarize(&self.times_ms)
-    }
-
-    pub(crate) fn success_rate(&self) -> f64 {
-        let errors_m: Vec<f64> = self.translation_mm.iter().map(|e| e / 1e3).collect();
-        success_rate(&errors_m, SUCCESS_M)
-    }
-}
-
 /// The seeded pairs of `args` (checked), simulated once for every heading window measured.
 fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
     let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
@@ -341,20 +292,31 @@ pub fn run(args: Args) -> Result<()> {
     if args.faults {
         return crate::cmd_bench_faults::run(&args.fault_args(), &say);
     }
-    let exact = exact_vs_exhaustive(args.quick, 0.0, &say)?;
+    let report = measure(&args, &say)?;
+    if args.json {
+        return print_json(&report);
+    }
+    print_report(&report);
+    Ok(())
+}
+
+/// Runs the three measurements: the exact search twice, the seeded pairs with and without the
+/// compass, and the pose graph.
+fn measure(args: &Args, say: &dyn Fn(&str)) -> Result<Report> {
+    let exact = exact_vs_exhaustive(args.quick, 0.0, say)?;
     // The default heading window; --quick narrows it so the oracle stays short.
     let heading_deg = if args.quick {
         3.0
     } else {
         HeadingWindow::default().half_range_deg
     };
-    let exact_heading = exact_vs_exhaustive(args.quick, heading_deg, &say)?;
-    let seeded = seeded_pairs(&args, &say)?;
-    let pairs = accuracy(&args, &seeded, HeadingWindow::default().half_range_deg);
-    let pairs_no_compass = accuracy(&args, &seeded, 180.0);
+    let exact_heading = exact_vs_exhaustive(args.quick, heading_deg, say)?;
+    let seeded = seeded_pairs(args, say)?;
+    let pairs = accuracy(args, &seeded, HeadingWindow::default().half_range_deg);
+    let pairs_no_compass = accuracy(args, &seeded, 180.0);
     say("pose graph: optimizing a 1,000-node loop ...");
     let graph = sdem_sim::pose_graphs::bench_1000_nodes()?;
-    let report = Report {
+    Ok(Report {
         threads: rayon::current_num_threads(),
         exact,
         exact_heading,
@@ -368,17 +330,29 @@ pub fn run(args: Args) -> Result<()> {
             ate_before_m: graph.ate_before_m,
             ate_after_m: graph.ate_after_m,
         },
-    };
-    if args.json {
-        return print_json(&report);
-    }
+    })
+}
+
+/// Prints the report as text.
+fn print_report(report: &Report) {
     println!("sdem bench ({} threads)", report.threads);
     println!();
     println!("1. Exact search against the exhaustive oracle (the paper's pair)");
     for e in [&report.exact, &report.exact_heading] {
         print_exact(e);
     }
-    let p = &report.pairs;
+    print_pairs(&report.pairs, &report.pairs_no_compass);
+    let g = &report.pose_graph;
+    println!();
+    println!(
+        "3. Pose graph: {} nodes, {} edges (a drifting loop, 3 closures): {:.0} ms, {} iterations; \
+         ATE {:.2} m -> {:.2} m",
+        g.nodes, g.edges, g.time_ms, g.iterations, g.ate_before_m, g.ate_after_m
+    );
+}
+
+/// Prints part 2: the seeded pairs with the compass (`p`) and without (`n`).
+fn print_pairs(p: &PairsReport, n: &PairsReport) {
     println!();
     println!(
         "2. {} seeded pairs (seed {}): motion within ±0.5 m, compass off by up to 10°; search at {} cm, heading ±{}°",
@@ -403,7 +377,6 @@ pub fn run(args: Args) -> Result<()> {
     for f in &p.failures {
         println!("   failed: {f}");
     }
-    let n = &report.pairs_no_compass;
     println!(
         "   no compass at all (heading ±{}°): time median {:.0} ms, 95th percentile {:.0} ms; \
          error median {:.2} mm; success {:.1} %",
@@ -416,12 +389,4 @@ pub fn run(args: Args) -> Result<()> {
     for f in &n.failures {
         println!("   failed without the compass: {f}");
     }
-    let g = &report.pose_graph;
-    println!();
-    println!(
-        "3. Pose graph: {} nodes, {} edges (a drifting loop, 3 closures): {:.0} ms, {} iterations; \
-         ATE {:.2} m -> {:.2} m",
-        g.nodes, g.edges, g.time_ms, g.iterations, g.ate_before_m, g.ate_after_m
-    );
-    Ok(())
 }

@@ -7,7 +7,7 @@
 //! rotation errors, time, and how many failures the diagnostics flagged (`ambiguous`, or an
 //! error) so the robot knows not to trust them.
 
-use crate::cmd_bench::Tally;
+use crate::bench_tally::Tally;
 use crate::output::print_json;
 use anyhow::{bail, Result};
 use sdem::sdem::SdemConfig;
@@ -132,20 +132,9 @@ fn run_case(
         }
     }
     bar.finish_and_clear();
-    let what = if faults.is_empty() {
-        "no fault".to_string()
-    } else if faults.len() == Fault::ALL.len() {
-        "every fault at once".to_string()
-    } else {
-        faults
-            .iter()
-            .map(|f| f.describe(config))
-            .collect::<Vec<_>>()
-            .join("; ")
-    };
     Ok(CaseReport {
         case: name.to_string(),
-        what,
+        what: describe(faults, config),
         pairs: pairs.len(),
         success_rate_2cm: tally.success_rate(),
         translation_error_mm: tally.translation_error_mm(),
@@ -156,6 +145,21 @@ fn run_case(
         false_alarm_reasons,
         failures,
     })
+}
+
+/// What a case's faults do, in words.
+fn describe(faults: &[Fault], config: &FaultConfig) -> String {
+    if faults.is_empty() {
+        "no fault".to_string()
+    } else if faults.len() == Fault::ALL.len() {
+        "every fault at once".to_string()
+    } else {
+        faults
+            .iter()
+            .map(|f| f.describe(config))
+            .collect::<Vec<_>>()
+            .join("; ")
+    }
 }
 
 /// A short name for one of [`sdem::localize::Diagnostics::ambiguity`]'s reasons.
@@ -201,6 +205,12 @@ pub fn run(args: &FaultArgs, say: &dyn Fn(&str)) -> Result<()> {
     if args.json {
         return print_json(&report);
     }
+    print_text(&report, &config);
+    Ok(())
+}
+
+/// Prints the report as text: one row per case, then every failure.
+fn print_text(report: &Report, config: &FaultConfig) {
     println!(
         "sdem bench --faults ({} threads, seed {}): window ±{} m around the odometry prior \
          ({} % error), heading ±{}° around the compass, grid {} cm",
@@ -245,5 +255,4 @@ pub fn run(args: &FaultArgs, say: &dyn Fn(&str)) -> Result<()> {
             println!("{} failed: {f}", c.case);
         }
     }
-    Ok(())
 }

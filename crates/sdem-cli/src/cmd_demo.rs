@@ -152,45 +152,16 @@ pub fn run(args: Args) -> Result<()> {
         ..Default::default()
     };
     if !args.json {
-        println!("sdem demo — Nagatani et al. (IROS 2003), Sec. V, on a simulated sensor\n");
-        println!(
-            "1. The paper's preparatory experiment: an indoor room, scans 1° x 1°, 5 mm noise,"
-        );
-        println!("   window x -50..50, y -30..60, z -10..10 cm at 1 cm.");
+        print_paper_heading();
     }
     let paper = paper_experiment(&config).context("the paper's experiment")?;
     if !args.json {
-        for t in &paper {
-            println!("   {}", t.case);
-            println!("     truth     {}", pose_line(&t.truth));
-            println!("     estimate  {}", pose_line(&t.estimate));
-            println!(
-                "     error     {:.2} cm  ({} candidates, {:.0} ms)",
-                t.error_m * 100.0,
-                t.localization.candidates_evaluated,
-                t.time_ms
-            );
-        }
-        println!(
-            "\n2. Stop-and-go through the ditch into the void ({} stops, seed {})",
-            config.stops, config.seed
-        );
-        println!("   stop   step error   position error   overlap   time");
+        print_paper(&paper);
+        print_run_heading(&config);
     }
     let stops = stop_and_go_run(&config).context("the stop-and-go run")?;
     if !args.json {
-        for (i, s) in stops.iter().enumerate() {
-            match &s.step {
-                Some(t) => println!(
-                    "   {i:4}   {:7.2} cm   {:11.2} cm   {:7}   {:4.0} ms",
-                    t.error_m * 100.0,
-                    s.position_error_m * 100.0,
-                    t.localization.overlap,
-                    t.time_ms
-                ),
-                None => println!("   {i:4}   (origin)"),
-            }
-        }
+        print_stops(&stops);
     }
     let report = Report {
         paper_experiment: paper.iter().map(CaseReport::from).collect(),
@@ -201,6 +172,59 @@ pub fn run(args: Args) -> Result<()> {
     if args.json {
         return print_json(&report);
     }
+    print_summary(&args, &report);
+    Ok(())
+}
+
+/// Prints what the paper's experiment is, before it runs.
+fn print_paper_heading() {
+    println!("sdem demo — Nagatani et al. (IROS 2003), Sec. V, on a simulated sensor\n");
+    println!("1. The paper's preparatory experiment: an indoor room, scans 1° x 1°, 5 mm noise,");
+    println!("   window x -50..50, y -30..60, z -10..10 cm at 1 cm.");
+}
+
+/// Prints each case of the paper's experiment: truth, estimate, error.
+fn print_paper(paper: &[Trial]) {
+    for t in paper {
+        println!("   {}", t.case);
+        println!("     truth     {}", pose_line(&t.truth));
+        println!("     estimate  {}", pose_line(&t.estimate));
+        println!(
+            "     error     {:.2} cm  ({} candidates, {:.0} ms)",
+            t.error_m * 100.0,
+            t.localization.candidates_evaluated,
+            t.time_ms
+        );
+    }
+}
+
+/// Prints what the stop-and-go run is and its table's header, before it runs.
+fn print_run_heading(config: &ExperimentConfig) {
+    println!(
+        "\n2. Stop-and-go through the ditch into the void ({} stops, seed {})",
+        config.stops, config.seed
+    );
+    println!("   stop   step error   position error   overlap   time");
+}
+
+/// Prints one row per stop of the run.
+fn print_stops(stops: &[RunStop]) {
+    for (i, s) in stops.iter().enumerate() {
+        match &s.step {
+            Some(t) => println!(
+                "   {i:4}   {:7.2} cm   {:11.2} cm   {:7}   {:4.0} ms",
+                t.error_m * 100.0,
+                s.position_error_m * 100.0,
+                t.localization.overlap,
+                t.time_ms
+            ),
+            None => println!("   {i:4}   (origin)"),
+        }
+    }
+}
+
+/// Prints the run's totals and the files written.
+fn print_summary(args: &Args, report: &Report) {
     println!(
         "\n   path {:.2} m, largest step error {:.2} cm, final position error {:.2} cm",
         report.run.path_length_m,
@@ -212,5 +236,4 @@ pub fn run(args: Args) -> Result<()> {
          section.png, panorama.png, slice.png, cost.png, viewer.html",
         args.out.display()
     );
-    Ok(())
 }

@@ -2,7 +2,7 @@
 
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
-use sdem_io::{import_dataset, ImportFormat, ImportOptions};
+use sdem_io::{import_dataset, ImportFormat, ImportOptions, ImportSummary};
 use std::path::PathBuf;
 
 /// Arguments of `sdem import`.
@@ -51,6 +51,38 @@ enum Format {
 
 /// Runs `sdem import`.
 pub fn run(args: Args) -> Result<()> {
+    check_args(&args)?;
+    let format = args.format.map(|f| match f {
+        Format::Uos3dtk => ImportFormat::Uos3dtk,
+        Format::Kitti => ImportFormat::Kitti,
+    });
+    let options = ImportOptions {
+        first: args.first,
+        count: args.count,
+        frames_dir: args.frames.clone(),
+    };
+    let format = match format {
+        Some(f) => f,
+        None => ImportFormat::detect(&args.source)?,
+    };
+    if args.force {
+        sdem_io::clear_dataset(&args.out).with_context(|| {
+            format!(
+                "cannot remove the old dataset in {} for --force",
+                args.out.display()
+            )
+        })?;
+    }
+    let summary = import_dataset(&args.source, &args.out, Some(format), &options)?;
+    if args.json {
+        return print_json(&summary);
+    }
+    print_text(&args, &summary);
+    Ok(())
+}
+
+/// Checks the source, `--count`, and that `--out` is a folder that is empty or may be replaced.
+fn check_args(args: &Args) -> Result<()> {
     if !args.source.exists() {
         bail!(
             "{} does not exist; import reads a 3DTK folder or a KITTI sequence folder",
@@ -78,31 +110,11 @@ pub fn run(args: Args) -> Result<()> {
             );
         }
     }
-    let format = args.format.map(|f| match f {
-        Format::Uos3dtk => ImportFormat::Uos3dtk,
-        Format::Kitti => ImportFormat::Kitti,
-    });
-    let options = ImportOptions {
-        first: args.first,
-        count: args.count,
-        frames_dir: args.frames.clone(),
-    };
-    let format = match format {
-        Some(f) => f,
-        None => ImportFormat::detect(&args.source)?,
-    };
-    if args.force {
-        sdem_io::clear_dataset(&args.out).with_context(|| {
-            format!(
-                "cannot remove the old dataset in {} for --force",
-                args.out.display()
-            )
-        })?;
-    }
-    let summary = import_dataset(&args.source, &args.out, Some(format), &options)?;
-    if args.json {
-        return print_json(&summary);
-    }
+    Ok(())
+}
+
+/// Prints the summary as text.
+fn print_text(args: &Args, summary: &ImportSummary) {
     let name = match summary.format {
         ImportFormat::Uos3dtk => "3DTK",
         ImportFormat::Kitti => "KITTI",
@@ -129,5 +141,4 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     println!("  wrote {}", summary.written.join(", "));
-    Ok(())
 }

@@ -3,9 +3,9 @@
 use crate::output::{elapsed_ms, pose_line, print_json};
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
-use sdem::geometry::{pose_error, PoseRecord};
+use sdem::geometry::{pose_error, Pose, PoseRecord};
 use sdem::localize::{
-    localize, Diagnostics, HeadingWindow, LocalizeConfig, OffsetPrior, RefineOutcome,
+    localize, Diagnostics, HeadingWindow, Localization, LocalizeConfig, OffsetPrior, RefineOutcome,
     RefinementSummary, SearchMode, SearchWindow,
 };
 use sdem::sdem::{Sdem, SdemConfig};
@@ -279,6 +279,25 @@ pub fn run(args: Args) -> Result<()> {
         resolution_deg: args.resolution,
         ..Default::default()
     };
+    let config = localize_config(&args)?;
+    let pair = (reference_index, query_index);
+    let (found, time_ms) = localize_scans(&dataset, pair, &sdem_config, &config)?;
+    let truth = dataset
+        .truth
+        .as_ref()
+        .map(|t| t[reference_index].inverse() * t[query_index]);
+    let report = make_report(pair, &found, &config, time_ms, truth.as_ref());
+    if args.json {
+        return print_json(&report);
+    }
+    print_estimate(&report, &found, truth.as_ref());
+    print_fit(&report, &found.diagnostics, &config);
+    print_search(&report, &found, &config);
+    Ok(())
+}
+
+/// The search's settings from the arguments, checked.
+fn localize_config(args: &Args) -> Result<LocalizeConfig> {
     if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
         bail!(
             "--heading-window {} must lie in 0..=180 degrees (0 trusts the compass)",
@@ -309,7 +328,7 @@ pub fn run(args: Args) -> Result<()> {
         Some(text) => Some(parse_prior(text)?),
         None => None,
     };
-    let config = LocalizeConfig {
+    Ok(LocalizeConfig {
         window: args.window.unwrap_or_else(SearchWindow::paper),
         step_m: args.step,
         heading: HeadingWindow {
@@ -324,7 +343,17 @@ pub fn run(args: Args) -> Result<()> {
         },
         runner_up: !args.no_runner_up,
         ..Default::default()
-    };
+    })
+}
+
+/// Localizes scan `query` of the dataset against scan `reference`; returns the result and the
+/// time it took (building the two S-DEMs and the search), milliseconds.
+fn localize_scans(
+    dataset: &Dataset,
+    (reference_index, query_index): (usize, usize),
+    sdem_config: &SdemConfig,
+    config: &LocalizeConfig,
+) -> Result<(Localization, f64)> {
     // Without attitude.csv: the level attitude (checked in range above).
     let reference_attitude = dataset
         .attitude_or_level(reference_index)
@@ -337,25 +366,32 @@ pub fn run(args: Args) -> Result<()> {
     let (reference, query) = Sdem::pair_from_points(
         (&reference_points, &reference_attitude.rotation()),
         (&query_points, &query_attitude.rotation()),
-        &sdem_config,
+        sdem_config,
     )?;
     let found = localize(
         &reference,
         &reference_attitude,
         &query,
         &query_attitude,
-        &config,
+        config,
     )
     .with_context(|| format!("scan {query_index} against scan {reference_index}"))?;
-    let time_ms = elapsed_ms(start);
-    let truth = dataset
-        .truth
-        .as_ref()
-        .map(|t| t[reference_index].inverse() * t[query_index]);
-    let errors = truth.map(|t| pose_error(&t, &found.reference_from_query));
-    let report = Report {
-        reference: reference_index,
-        query: query_index,
+    Ok((found, elapsed_ms(start)))
+}
+
+/// The report of one localization, with its errors against `truth` (`reference_from_query`)
+/// when the dataset has it.
+fn make_report(
+    (reference, query): (usize, usize),
+    found: &Localization,
+    config: &LocalizeConfig,
+    time_ms: f64,
+    truth: Option<&Pose>,
+) -> Report {
+    let errors = truth.map(|t| pose_error(t, &found.reference_from_query));
+    Report {
+        reference,
+        query,
         reference_from_query: PoseRecord::from(&found.reference_from_query),
         heading_correction_deg: found.heading_correction.to_degrees(),
         cost: found.cost,
@@ -365,28 +401,31 @@ pub fn run(args: Args) -> Result<()> {
         candidates_evaluated: found.candidates_evaluated,
         nodes_bounded: found.nodes_bounded,
         search: config.mode,
-        cost_model: model,
+        cost_model: config.cost.model,
         on_window_edge: found.on_window_edge,
         refined: found.refined,
         refinement: RefinementSummary::new(found.refined, found.refinement.as_ref()),
         diagnostics: found.diagnostics.clone(),
         time_ms,
-        truth: truth.as_ref().map(PoseRecord::from),
+        truth: truth.map(PoseRecord::from),
         error_m: errors.map(|e| e.0),
         error_deg: errors.map(|e| e.1.to_degrees()),
-    };
-    if args.json {
-        return print_json(&report);
     }
-    println!("scan {query_index} in the frame of scan {reference_index}:");
+}
+
+/// Prints the estimate, the truth and the error, and the heading correction and refinement.
+fn print_estimate(report: &Report, found: &Localization, truth: Option<&Pose>) {
+    println!(
+        "scan {} in the frame of scan {}:",
+        report.query, report.reference
+    );
     println!("  estimate  {}", pose_line(&found.reference_from_query));
-    if let Some(t) = &truth {
+    if let Some(t) = truth {
         println!("  truth     {}", pose_line(t));
     }
     if let (Some(e_m), Some(e_deg)) = (report.error_m, report.error_deg) {
         println!("  error     {:.2} cm, {:.3}°", e_m * 100.0, e_deg);
     }
-    let d = &found.diagnostics;
     let refined = match (report.refinement.iterations, report.refinement.converged) {
         (Some(n), Some(true)) => format!("{:?}, {n} iterations", found.refined),
         (Some(n), _) => format!(
@@ -399,6 +438,10 @@ pub fn run(args: Args) -> Result<()> {
         "  heading correction {:+.2}° to the compass; refined: {refined}",
         report.heading_correction_deg
     );
+}
+
+/// Prints how well the scans fit: the cost and overlap, the runner-up, the weakest direction.
+fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeConfig) {
     println!(
         "  cost {:.3e} m² (rms {:.2} cm) over {} cells ({:.0} % of the query, {:.0} % within \
          {} cm)",
@@ -436,6 +479,10 @@ pub fn run(args: Args) -> Result<()> {
             s * 1e3
         );
     }
+}
+
+/// Prints the search's effort and its warnings: ambiguity, an optimum on the window's edge.
+fn print_search(report: &Report, found: &Localization, config: &LocalizeConfig) {
     println!(
         "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({:?})",
         report.candidates_evaluated,
@@ -444,6 +491,7 @@ pub fn run(args: Args) -> Result<()> {
         report.time_ms,
         config.mode
     );
+    let d = &found.diagnostics;
     if d.ambiguous {
         for why in &d.ambiguity {
             println!("  AMBIGUOUS: {why}");
@@ -454,5 +502,4 @@ pub fn run(args: Args) -> Result<()> {
             "  warning: the optimum lies on the window's edge; the true position may be outside it"
         );
     }
-    Ok(())
 }

@@ -78,6 +78,21 @@ struct Summary {
 
 /// Runs `sdem simulate`.
 pub fn run(args: Args) -> Result<()> {
+    check_out_and_stops(&args)?;
+    let sensor = sensor_config(&args)?;
+    let odometry_noise = odometry_noise(&args)?;
+    let faults = parse_faults(&args.faults)?;
+    let (run, injected) = simulate(&args, &sensor, &faults)?;
+    let summary = write(&args, &sensor, &odometry_noise, &run, faults, injected)?;
+    if args.json {
+        return print_json(&summary);
+    }
+    print_text(&args, &summary);
+    Ok(())
+}
+
+/// Refuses to write over a dataset without `--force`, and a route longer than the scene's.
+fn check_out_and_stops(args: &Args) -> Result<()> {
     if args.out.join("scans").exists() && !args.force {
         bail!(
             "{} already holds a dataset (scans/); choose another --out or pass --force to replace it",
@@ -92,6 +107,11 @@ pub fn run(args: Args) -> Result<()> {
             sim::MAX_STOPS
         );
     }
+    Ok(())
+}
+
+/// The sensor model from the arguments, validated.
+fn sensor_config(args: &Args) -> Result<SensorConfig> {
     let mut sensor = SensorConfig {
         range_noise_m: args.range_noise,
         trusted_range_m: args.trusted_range,
@@ -101,6 +121,11 @@ pub fn run(args: Args) -> Result<()> {
         sensor.compass_noise_deg = c;
     }
     sensor.validate()?;
+    Ok(sensor)
+}
+
+/// The odometry's noise from the arguments, checked.
+fn odometry_noise(args: &Args) -> Result<OdometryNoise> {
     let odometry_noise = OdometryNoise {
         translation_frac: args.odometry_noise,
         yaw_deg_per_step: args.odometry_yaw_noise_deg,
@@ -117,33 +142,59 @@ pub fn run(args: Args) -> Result<()> {
             args.odometry_yaw_noise_deg
         );
     }
-    let faults = args
-        .faults
+    Ok(odometry_noise)
+}
+
+/// The faults named by `--fault`.
+fn parse_faults(names: &[String]) -> Result<Vec<Fault>> {
+    names
         .iter()
         .map(|name| {
             name.parse::<Fault>()
                 .with_context(|| format!("--fault {name}"))
         })
-        .collect::<Result<Vec<_>>>()?;
+        .collect::<Result<Vec<_>>>()
+}
+
+/// Simulates the route's sweeps, with `faults` injected at every stop; returns the stops and,
+/// per stop, what the faults did (empty without faults).
+fn simulate(
+    args: &Args,
+    sensor: &SensorConfig,
+    faults: &[Fault],
+) -> Result<(Vec<sim::SimStop>, Vec<Injected>)> {
     let scene = sim::collapsed_building(args.seed);
     let stops = sim::collapsed_building_stops(&scene, args.seed, args.stops, &sensor.lift)?;
     let bar = crate::progress::bar(1, args.json, "simulating the sweeps");
     let (run, injected) = if faults.is_empty() {
         (
-            sim::simulate_run(&scene, &stops, &sensor, args.seed)?,
+            sim::simulate_run(&scene, &stops, sensor, args.seed)?,
             Vec::new(),
         )
     } else {
         simulate_run_with_faults(
             &scene,
             &stops,
-            &sensor,
+            sensor,
             args.seed,
-            &faults,
+            faults,
             &FaultConfig::default(),
         )?
     };
     bar.finish_and_clear();
+    Ok((run, injected))
+}
+
+/// Writes the dataset folder (after clearing the old one with `--force`): scans, sweeps, truth,
+/// odometry unless `--no-odometry`, the sensor model. Returns what was written.
+fn write(
+    args: &Args,
+    sensor: &SensorConfig,
+    odometry_noise: &OdometryNoise,
+    run: &[sim::SimStop],
+    faults: Vec<Fault>,
+    injected: Vec<Injected>,
+) -> Result<Summary> {
     let scans: Vec<_> = run
         .iter()
         .map(|s| (s.sweep.points_in_sensor(), s.sweep.mean_attitude()))
@@ -156,17 +207,17 @@ pub fn run(args: Args) -> Result<()> {
     let odometry = if args.no_odometry {
         None
     } else {
-        Some(simulate_odometry(&truth, &odometry_noise, args.seed)?)
+        Some(simulate_odometry(&truth, odometry_noise, args.seed)?)
     };
     sdem_io::write_dataset(
         &args.out,
-        &sensor,
+        sensor,
         &scans,
         Some(&sweeps),
         Some(&truth),
         odometry.as_deref(),
     )?;
-    let summary = Summary {
+    Ok(Summary {
         out: args.out.clone(),
         seed: args.seed,
         stops: run.len(),
@@ -174,10 +225,11 @@ pub fn run(args: Args) -> Result<()> {
         odometry: odometry.is_some(),
         faults,
         injected,
-    };
-    if args.json {
-        return print_json(&summary);
-    }
+    })
+}
+
+/// Prints the summary as text.
+fn print_text(args: &Args, summary: &Summary) {
     println!(
         "wrote {} stops of a collapsed building (seed {}) to {}",
         summary.stops,
@@ -208,7 +260,6 @@ pub fn run(args: Args) -> Result<()> {
             total(|i| i.rubble_returns)
         );
     }
-    Ok(())
 }
 
 /// Removes the files of the dataset in `root` that sdem writes (and nothing else).

@@ -2,8 +2,8 @@
 
 use crate::output::{elapsed_ms, pose_line, print_json};
 use anyhow::{bail, Context, Result};
-use sdem::geometry::Pose;
-use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamConfig, TrajectoryErrors};
+use sdem::geometry::{Pose, Vec3};
+use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamConfig, StepReport, TrajectoryErrors};
 use sdem_io::{
     load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
     write_voxel_map, Dataset, NodeFiles,
@@ -82,11 +82,51 @@ const MAP_DIR: &str = "map";
 const REPORT_FILE: &str = "report.json";
 const STEPS_FILE: &str = "steps.json";
 
+/// A run of the loop: the mapper and its step log, fresh or restored from OUT/map.
+struct Run {
+    slam: Slam,
+    /// The log of every step so far, as written to steps.json.
+    steps: Vec<Value>,
+    /// With `--resume`: the number of nodes the saved map held.
+    resumed_at: Option<usize>,
+    /// The node files OUT/map holds, as far as this run knows (see `sdem_io::save_map`).
+    node_files: NodeFiles,
+}
+
+/// What the run wrote after its last scan, for the report.
+struct Outputs {
+    poses: Vec<Pose>,
+    cloud: Vec<Vec3>,
+    pictures: Vec<PathBuf>,
+}
+
 /// Runs `sdem slam`.
 pub fn run(args: Args) -> Result<()> {
     let start = Instant::now();
     let dataset = Dataset::open(&args.dataset)?;
     let map_dir = args.out.join(MAP_DIR);
+    prepare_out(&args, &map_dir)?;
+    let mut run = if args.resume {
+        resume(&args, &map_dir)?
+    } else {
+        start_fresh(&args, &dataset)?
+    };
+    write_config(&args.out, run.slam.config())?;
+    let total = map_scans(&args, &dataset, &map_dir, &mut run)?;
+    let outputs = write_outputs(&args, &run.slam)?;
+    let report = make_report(&args, &dataset, run, total, outputs, start)?;
+    let report_text = serde_json::to_vec_pretty(&report).context("cannot encode the report")?;
+    write_atomic(&args.out.join(REPORT_FILE), |w| w.write_all(&report_text))?;
+    if args.json {
+        print_json(&summary(&report))?;
+    } else {
+        print_text(&args, &report);
+    }
+    Ok(())
+}
+
+/// Refuses to overwrite or resume the wrong map, then creates the output folder.
+fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
     let has_map = map_dir.join(sdem_io::MAP_MANIFEST).exists();
     if has_map && !args.resume && !args.force {
         bail!(
@@ -102,136 +142,186 @@ pub fn run(args: Args) -> Result<()> {
         );
     }
     std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
+        .with_context(|| format!("cannot create {}", args.out.display()))
+}
 
-    let (mut slam, mut steps, resumed_at, mut node_files) = if args.resume {
-        let saved = load_map(&map_dir)?;
-        if args.config.is_some() || args.step.is_some() || args.no_loop_closure {
-            bail!("--resume continues with the saved map's configuration; drop --config, --step and --no-loop-closure");
-        }
-        let steps = read_steps(&args.out.join(STEPS_FILE), saved.map.nodes.len())?;
-        let next = saved.map.nodes.len();
-        let slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
-        (slam, steps, Some(next), saved.node_files)
-    } else {
-        let mut config = match &args.config {
-            Some(path) => sdem_io::read_slam_config(path)?,
-            None => {
-                let mut config = SlamConfig::default();
-                if let Some(sensor) = &dataset.sensor {
-                    config.sdem.resolution_deg = sensor.matched_sdem_resolution_deg();
-                }
-                config
+/// `--resume`: the saved map and step log, with the saved configuration.
+fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
+    let saved = load_map(map_dir)?;
+    if args.config.is_some() || args.step.is_some() || args.no_loop_closure {
+        bail!("--resume continues with the saved map's configuration; drop --config, --step and --no-loop-closure");
+    }
+    let steps = read_steps(&args.out.join(STEPS_FILE), saved.map.nodes.len())?;
+    let next = saved.map.nodes.len();
+    let slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+    Ok(Run {
+        slam,
+        steps,
+        resumed_at: Some(next),
+        node_files: saved.node_files,
+    })
+}
+
+/// A new run with the configuration of `--config` (or the defaults, matched to the dataset's
+/// sensor), `--step` and `--no-loop-closure`.
+fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
+    let mut config = match &args.config {
+        Some(path) => sdem_io::read_slam_config(path)?,
+        None => {
+            let mut config = SlamConfig::default();
+            if let Some(sensor) = &dataset.sensor {
+                config.sdem.resolution_deg = sensor.matched_sdem_resolution_deg();
             }
-        };
-        if let Some(step) = args.step {
-            if !(step.is_finite() && step > 0.0) {
-                bail!("--step {step} must be a positive number of metres");
-            }
-            config.localize.step_m = step;
+            config
         }
-        if args.no_loop_closure {
-            config.loop_closure.enabled = false;
-        }
-        (Slam::new(config)?, Vec::new(), None, NodeFiles::default())
     };
-    let config_text =
-        toml::to_string_pretty(slam.config()).context("cannot encode the configuration")?;
-    write_atomic(&args.out.join("config.toml"), |w| {
+    if let Some(step) = args.step {
+        if !(step.is_finite() && step > 0.0) {
+            bail!("--step {step} must be a positive number of metres");
+        }
+        config.localize.step_m = step;
+    }
+    if args.no_loop_closure {
+        config.loop_closure.enabled = false;
+    }
+    Ok(Run {
+        slam: Slam::new(config)?,
+        steps: Vec::new(),
+        resumed_at: None,
+        node_files: NodeFiles::default(),
+    })
+}
+
+/// Writes `config.toml`: the configuration the run uses, for `--config` and for the record.
+fn write_config(out: &Path, config: &SlamConfig) -> Result<()> {
+    let config_text = toml::to_string_pretty(config).context("cannot encode the configuration")?;
+    write_atomic(&out.join("config.toml"), |w| {
         w.write_all(config_text.as_bytes())
     })?;
+    Ok(())
+}
 
+/// The loop: maps every scan not mapped yet (up to `--max-scans`), saving the map and the step
+/// log after each. Returns the number of scans to be mapped in all.
+fn map_scans(args: &Args, dataset: &Dataset, map_dir: &Path, run: &mut Run) -> Result<usize> {
     let total = args.max_scans.unwrap_or(dataset.len()).min(dataset.len());
-    let first = slam.map.nodes.len();
+    let first = run.slam.map.nodes.len();
     if first > total {
         bail!("the saved map has {first} nodes but only {total} scans are to be processed");
     }
     let bar = crate::progress::bar((total - first) as u64, args.json, "scans");
     for index in first..total {
-        let saved_note = || {
-            if index == 0 {
-                "nothing was mapped yet".to_string()
-            } else {
-                format!(
-                    "the map up to scan {} is saved in {}; mend the input and continue with --resume",
-                    index - 1,
-                    map_dir.display()
-                )
-            }
-        };
-        let points = dataset
-            .load_scan(index)
-            .with_context(|| format!("scan {index} cannot be read; {}", saved_note()))?;
-        let attitude = dataset.attitudes.as_ref().map(|a| a[index]);
-        let odometry = match (&dataset.odometry, index) {
-            (Some(odometry), i) if i > 0 => Some((odometry[i], odometry[i - 1])),
-            _ => None,
-        };
-        let step = slam
-            .add_scan(&ScanInput {
-                scan_index: index,
-                points_in_sensor: &points,
-                attitude,
-                odometry,
-            })
-            .with_context(|| {
-                format!(
-                    "scan {index} ({}) could not be mapped; {}",
-                    dataset.scan_paths[index].display(),
-                    saved_note()
-                )
-            })?;
+        let step = map_scan(dataset, &mut run.slam, map_dir, index)?;
         if !args.json {
-            let closures: Vec<String> = step
-                .loop_closures
-                .iter()
-                .map(|c| {
-                    if c.accepted {
-                        format!("loop {}→{} accepted", c.from, c.to)
-                    } else {
-                        format!("loop {}→{} rejected ({})", c.from, c.to, c.reason)
-                    }
-                })
-                .collect();
-            bar.suspend(|| {
-                eprintln!(
-                    "scan {index:4}/{total}: {}  {:6.0} ms  refs {:?}{}{}",
-                    pose_line(&Pose::from(&step.pose)),
-                    step.time_ms,
-                    step.reference_nodes.iter().map(|r| r.0).collect::<Vec<_>>(),
-                    if closures.is_empty() {
-                        String::new()
-                    } else {
-                        format!("  {}", closures.join(", "))
-                    },
-                    if step.ambiguity.is_empty() {
-                        String::new()
-                    } else {
-                        "  AMBIGUOUS".into()
-                    }
-                )
-            });
+            bar.suspend(|| eprintln!("{}", step_line(index, total, &step)));
         }
         bar.inc(1);
-        steps.push(serde_json::to_value(&step).context("cannot encode the step")?);
-        // The map first, then the step log: a kill between the two loses one step's log line,
-        // never the map.
-        save_map(
-            &map_dir,
-            &mut node_files,
-            slam.config(),
-            &slam.map,
-            &slam.edges,
-            &slam.loop_closures,
-            Some(&args.dataset),
-        )?;
-        let steps_text = serde_json::to_vec(&steps).context("cannot encode the step log")?;
-        write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;
+        run.steps
+            .push(serde_json::to_value(&step).context("cannot encode the step")?);
+        save_progress(args, map_dir, run)?;
     }
-
     bar.finish_and_clear();
+    Ok(total)
+}
 
-    // Final outputs.
+/// What an error while mapping scan `index` adds: what is saved and how to go on.
+fn saved_note(index: usize, map_dir: &Path) -> String {
+    if index == 0 {
+        "nothing was mapped yet".to_string()
+    } else {
+        format!(
+            "the map up to scan {} is saved in {}; mend the input and continue with --resume",
+            index - 1,
+            map_dir.display()
+        )
+    }
+}
+
+/// Reads scan `index` of the dataset and adds it to the map.
+fn map_scan(
+    dataset: &Dataset,
+    slam: &mut Slam,
+    map_dir: &Path,
+    index: usize,
+) -> Result<StepReport> {
+    let points = dataset.load_scan(index).with_context(|| {
+        format!(
+            "scan {index} cannot be read; {}",
+            saved_note(index, map_dir)
+        )
+    })?;
+    let attitude = dataset.attitudes.as_ref().map(|a| a[index]);
+    let odometry = match (&dataset.odometry, index) {
+        (Some(odometry), i) if i > 0 => Some((odometry[i], odometry[i - 1])),
+        _ => None,
+    };
+    slam.add_scan(&ScanInput {
+        scan_index: index,
+        points_in_sensor: &points,
+        attitude,
+        odometry,
+    })
+    .with_context(|| {
+        format!(
+            "scan {index} ({}) could not be mapped; {}",
+            dataset.scan_paths[index].display(),
+            saved_note(index, map_dir)
+        )
+    })
+}
+
+/// The progress line of one step, for stderr.
+fn step_line(index: usize, total: usize, step: &StepReport) -> String {
+    let closures: Vec<String> = step
+        .loop_closures
+        .iter()
+        .map(|c| {
+            if c.accepted {
+                format!("loop {}→{} accepted", c.from, c.to)
+            } else {
+                format!("loop {}→{} rejected ({})", c.from, c.to, c.reason)
+            }
+        })
+        .collect();
+    format!(
+        "scan {index:4}/{total}: {}  {:6.0} ms  refs {:?}{}{}",
+        pose_line(&Pose::from(&step.pose)),
+        step.time_ms,
+        step.reference_nodes.iter().map(|r| r.0).collect::<Vec<_>>(),
+        if closures.is_empty() {
+            String::new()
+        } else {
+            format!("  {}", closures.join(", "))
+        },
+        if step.ambiguity.is_empty() {
+            String::new()
+        } else {
+            "  AMBIGUOUS".into()
+        }
+    )
+}
+
+/// Saves the map, then the step log: a kill between the two loses one step's log line, never
+/// the map.
+fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
+    let slam = &run.slam;
+    save_map(
+        map_dir,
+        &mut run.node_files,
+        slam.config(),
+        &slam.map,
+        &slam.edges,
+        &slam.loop_closures,
+        Some(&args.dataset),
+    )?;
+    let steps_text = serde_json::to_vec(&run.steps).context("cannot encode the step log")?;
+    write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;
+    Ok(())
+}
+
+/// Writes the final outputs: poses.txt (+ .tum), map.ply, map.sdemvox and, unless
+/// `--no-pictures`, the pictures and viewer.html.
+fn write_outputs(args: &Args, slam: &Slam) -> Result<Outputs> {
     let poses = slam.poses();
     write_poses(&args.out.join("poses.txt"), &poses)?;
     let cloud = slam.merged_cloud();
@@ -249,32 +339,65 @@ pub fn run(args: Args) -> Result<()> {
             &cloud,
         )?
     };
+    Ok(Outputs {
+        poses,
+        cloud,
+        pictures,
+    })
+}
+
+/// The errors of `poses` against the `--compare` file, when given.
+fn compare_errors(args: &Args, poses: &[Pose]) -> Result<Option<TrajectoryErrors>> {
+    let Some(path) = &args.compare else {
+        return Ok(None);
+    };
+    let reference = read_kitti_poses(path)?;
+    if reference.len() < poses.len() {
+        bail!(
+            "{} holds {} poses, fewer than the {} scans mapped",
+            path.display(),
+            reference.len(),
+            poses.len()
+        );
+    }
+    Ok(Some(trajectory_errors(poses, &reference[..poses.len()])?))
+}
+
+/// The median of `v` (the upper one of an even count), 0 when empty.
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The report of the whole run: counts, times, errors against the truth and `--compare`, and
+/// every step.
+fn make_report(
+    args: &Args,
+    dataset: &Dataset,
+    run: Run,
+    total: usize,
+    outputs: Outputs,
+    start: Instant,
+) -> Result<Report> {
+    let Outputs {
+        poses,
+        cloud,
+        pictures,
+    } = outputs;
     let truth = match &dataset.truth {
         Some(t) => Some(trajectory_errors(&poses, &t[..poses.len()])?),
         None => None,
     };
-    let compare = match &args.compare {
-        Some(path) => {
-            let reference = read_kitti_poses(path)?;
-            if reference.len() < poses.len() {
-                bail!(
-                    "{} holds {} poses, fewer than the {} scans mapped",
-                    path.display(),
-                    reference.len(),
-                    poses.len()
-                );
-            }
-            Some(trajectory_errors(&poses, &reference[..poses.len()])?)
-        }
-        None => None,
-    };
-    let median = |mut v: Vec<f64>| -> f64 {
-        if v.is_empty() {
-            return 0.0;
-        }
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
+    let compare = compare_errors(args, &poses)?;
+    let Run {
+        slam,
+        steps,
+        resumed_at,
+        ..
+    } = run;
     let (occupied_voxels, free_voxels) = slam.voxels.counts();
     let points_total: usize = slam
         .map
@@ -282,7 +405,7 @@ pub fn run(args: Args) -> Result<()> {
         .iter()
         .map(|n| n.points_in_sensor.len())
         .sum();
-    let report = Report {
+    Ok(Report {
         dataset: args.dataset.clone(),
         scans: total,
         nodes: slam.map.nodes.len(),
@@ -305,56 +428,53 @@ pub fn run(args: Args) -> Result<()> {
         truth,
         compare,
         steps,
-    };
-    let report_text = serde_json::to_vec_pretty(&report).context("cannot encode the report")?;
-    write_atomic(&args.out.join(REPORT_FILE), |w| w.write_all(&report_text))?;
-    if args.json {
-        print_json(&summary(&report))?;
-    } else {
+    })
+}
+
+/// Prints the report as text.
+fn print_text(args: &Args, report: &Report) {
+    println!(
+        "mapped {} scans in {:.1} s (median {:.0} ms per scan); {} loop closures accepted, {} rejected",
+        report.nodes,
+        report.time_ms / 1e3,
+        report.step_time_ms_median,
+        report.loop_closures_accepted,
+        report.loop_closures_rejected
+    );
+    if let Some(t) = &report.truth {
         println!(
-            "mapped {} scans in {:.1} s (median {:.0} ms per scan); {} loop closures accepted, {} rejected",
-            report.nodes,
-            report.time_ms / 1e3,
-            report.step_time_ms_median,
-            report.loop_closures_accepted,
-            report.loop_closures_rejected
-        );
-        if let Some(t) = &report.truth {
-            println!(
-                "against poses_truth.txt: ATE RMSE {:.2} cm (max {:.2} cm), RPE {:.2} cm / {:.3}°",
-                t.ate_rmse_m * 100.0,
-                t.ate_max_m * 100.0,
-                t.rpe_translation_rmse_m * 100.0,
-                t.rpe_rotation_rmse_deg
-            );
-        }
-        if let Some(t) = &report.compare {
-            println!(
-                "against {}: ATE RMSE {:.2} cm (max {:.2} cm), RPE {:.2} cm / {:.3}°",
-                args.compare
-                    .as_deref()
-                    .map(Path::display)
-                    .map(|d| d.to_string())
-                    .unwrap_or_default(),
-                t.ate_rmse_m * 100.0,
-                t.ate_max_m * 100.0,
-                t.rpe_translation_rmse_m * 100.0,
-                t.rpe_rotation_rmse_deg
-            );
-        }
-        println!(
-            "wrote {}: poses.txt, poses.tum, report.json, map.ply ({} points), map.sdemvox ({} occupied voxels), config.toml, map/{}",
-            args.out.display(),
-            report.map_points,
-            report.occupied_voxels,
-            if report.pictures.is_empty() {
-                ""
-            } else {
-                ", plan.png, section.png, panorama.png, slice.png, cost.png, viewer.html"
-            }
+            "against poses_truth.txt: ATE RMSE {:.2} cm (max {:.2} cm), RPE {:.2} cm / {:.3}°",
+            t.ate_rmse_m * 100.0,
+            t.ate_max_m * 100.0,
+            t.rpe_translation_rmse_m * 100.0,
+            t.rpe_rotation_rmse_deg
         );
     }
-    Ok(())
+    if let Some(t) = &report.compare {
+        println!(
+            "against {}: ATE RMSE {:.2} cm (max {:.2} cm), RPE {:.2} cm / {:.3}°",
+            args.compare
+                .as_deref()
+                .map(Path::display)
+                .map(|d| d.to_string())
+                .unwrap_or_default(),
+            t.ate_rmse_m * 100.0,
+            t.ate_max_m * 100.0,
+            t.rpe_translation_rmse_m * 100.0,
+            t.rpe_rotation_rmse_deg
+        );
+    }
+    println!(
+        "wrote {}: poses.txt, poses.tum, report.json, map.ply ({} points), map.sdemvox ({} occupied voxels), config.toml, map/{}",
+        args.out.display(),
+        report.map_points,
+        report.occupied_voxels,
+        if report.pictures.is_empty() {
+            ""
+        } else {
+            ", plan.png, section.png, panorama.png, slice.png, cost.png, viewer.html"
+        }
+    );
 }
 
 /// The report without its per-step list, for `--json` on stdout (report.json has it all).

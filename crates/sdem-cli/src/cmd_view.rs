@@ -118,56 +118,10 @@ pub fn run(args: Args) -> Result<()> {
             vec![scan.out]
         }
         What::Slice(slice) => {
-            if !slice.elevation.is_finite() || slice.elevation.abs() > 90.0 {
-                bail!(
-                    "--elevation {} must lie in -90..=90 degrees",
-                    slice.elevation
-                );
-            }
-            let (sdem, label) = scan_sdem(&slice.scan)?;
-            write_png(
-                &slice.scan.out,
-                &sdem_polar_slice(&sdem, slice.elevation, &label),
-            )?;
+            write_slice(&slice)?;
             vec![slice.scan.out]
         }
-        What::Map(map) => {
-            let map_dir = map.slam_out.join("map");
-            if !map_dir.join(sdem_io::MAP_MANIFEST).exists() {
-                bail!(
-                    "{} is not a `sdem slam` output folder: {} is missing",
-                    map.slam_out.display(),
-                    map_dir.join(sdem_io::MAP_MANIFEST).display()
-                );
-            }
-            let saved = load_map(&map_dir)?;
-            let cloud_path = map.slam_out.join("map.ply");
-            let cloud = if cloud_path.exists() {
-                read_points(&cloud_path)?
-            } else {
-                // A run cut short writes map/ before map.ply: draw the nodes' own points.
-                saved
-                    .map
-                    .nodes
-                    .iter()
-                    .flat_map(|n| n.points_in_world())
-                    .collect()
-            };
-            let out_dir = map.out_dir.unwrap_or(map.slam_out);
-            // One step: the bar shows the elapsed time while the pictures are drawn.
-            let bar = crate::progress::bar(1, args.json, "pictures");
-            let written = write_map_pictures(
-                &out_dir,
-                &map_name(saved.dataset.as_deref(), &out_dir),
-                &saved.map,
-                &saved.loop_closures,
-                &saved.config,
-                &cloud,
-            )?;
-            bar.inc(1);
-            bar.finish_and_clear();
-            written
-        }
+        What::Map(map) => write_map_view(map, args.json)?,
         What::Cost(cost) => {
             write_cost_picture(&cost)?;
             vec![cost.out]
@@ -181,6 +135,60 @@ pub fn run(args: Args) -> Result<()> {
         }
         Ok(())
     }
+}
+
+/// `sdem view slice`: one elevation band of a scan's S-DEM.
+fn write_slice(slice: &SliceArgs) -> Result<()> {
+    if !slice.elevation.is_finite() || slice.elevation.abs() > 90.0 {
+        bail!(
+            "--elevation {} must lie in -90..=90 degrees",
+            slice.elevation
+        );
+    }
+    let (sdem, label) = scan_sdem(&slice.scan)?;
+    write_png(
+        &slice.scan.out,
+        &sdem_polar_slice(&sdem, slice.elevation, &label),
+    )
+}
+
+/// `sdem view map`: the pictures of a `sdem slam` output folder; returns the paths written.
+fn write_map_view(map: MapArgs, json: bool) -> Result<Vec<PathBuf>> {
+    let map_dir = map.slam_out.join("map");
+    if !map_dir.join(sdem_io::MAP_MANIFEST).exists() {
+        bail!(
+            "{} is not a `sdem slam` output folder: {} is missing",
+            map.slam_out.display(),
+            map_dir.join(sdem_io::MAP_MANIFEST).display()
+        );
+    }
+    let saved = load_map(&map_dir)?;
+    let cloud_path = map.slam_out.join("map.ply");
+    let cloud = if cloud_path.exists() {
+        read_points(&cloud_path)?
+    } else {
+        // A run cut short writes map/ before map.ply: draw the nodes' own points.
+        saved
+            .map
+            .nodes
+            .iter()
+            .flat_map(|n| n.points_in_world())
+            .collect()
+    };
+    let out_dir = map.out_dir.unwrap_or(map.slam_out);
+    // One step: the bar shows the elapsed time while the pictures are drawn.
+    let bar = crate::progress::bar(1, json, "pictures");
+    let written = write_map_pictures(
+        &out_dir,
+        &map_name(saved.dataset.as_deref(), &out_dir),
+        &saved.map,
+        &saved.loop_closures,
+        &saved.config,
+        &cloud,
+    )?;
+    bar.inc(1);
+    bar.finish_and_clear();
+    Ok(written)
 }
 
 /// What the pictures' titles call a map: the dataset folder's name, else the output folder's.
@@ -238,6 +246,23 @@ pub fn write_map_pictures(
         "section.png",
         map_section(&view, &Section::through_trajectory(&view, 0.1), name),
     )?;
+    write_last_node_pictures(name, map, config, &mut png)?;
+    let page = viewer_html(&view, &format!("sdem map: {name}"));
+    let path = out_dir.join("viewer.html");
+    write_atomic(&path, |w| w.write_all(page.as_bytes()))?;
+    written.push(path);
+    Ok(written)
+}
+
+/// For the last node of `map`: `panorama.png` and `slice.png`, and `cost.png` against the node
+/// before it when there is one, each handed to `png` with its file name.
+fn write_last_node_pictures(
+    name: &str,
+    map: &Map,
+    config: &SlamConfig,
+    png: &mut dyn FnMut(&str, RgbImage) -> Result<()>,
+) -> Result<()> {
+    let nodes = &map.nodes;
     let sdem_config = &config.sdem;
     let node_sdem = |i: usize| -> Result<Sdem> {
         let node = &nodes[i];
@@ -275,11 +300,7 @@ pub fn write_map_pictures(
             )?;
         }
     }
-    let page = viewer_html(&view, &format!("sdem map: {name}"));
-    let path = out_dir.join("viewer.html");
-    write_atomic(&path, |w| w.write_all(page.as_bytes()))?;
-    written.push(path);
-    Ok(written)
+    Ok(())
 }
 
 /// Writes `image` as a PNG at `path`, creating its folder.
@@ -359,30 +380,11 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
             );
         }
     }
-    if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
-        bail!(
-            "--heading-window {} must lie in 0..=180 degrees",
-            args.heading_window
-        );
-    }
     let sdem_config = SdemConfig {
         resolution_deg: args.resolution,
         ..Default::default()
     };
-    let mut config = LocalizeConfig::default();
-    if let Some(window) = args.window {
-        config.window = window;
-    }
-    config.heading.half_range_deg = args.heading_window;
-    if !(args.search_step.is_finite() && args.search_step > 0.0) {
-        bail!(
-            "--search-step {} must be a positive number of metres",
-            args.search_step
-        );
-    }
-    config.step_m = args.search_step;
-    // The picture needs the optimum only, not the runner-up search.
-    config.runner_up = false;
+    let config = cost_localize_config(args)?;
     let build = |index: usize| -> Result<(Sdem, sdem::geometry::Attitude)> {
         let attitude = dataset.attitude_or_level(index).unwrap_or_default();
         let points = dataset.load_scan(index)?;
@@ -426,4 +428,29 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
             ),
         ),
     )
+}
+
+/// The localization `sdem view cost` runs to find the optimum, from the arguments, checked.
+fn cost_localize_config(args: &CostArgs) -> Result<LocalizeConfig> {
+    if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
+        bail!(
+            "--heading-window {} must lie in 0..=180 degrees",
+            args.heading_window
+        );
+    }
+    let mut config = LocalizeConfig::default();
+    if let Some(window) = args.window {
+        config.window = window;
+    }
+    config.heading.half_range_deg = args.heading_window;
+    if !(args.search_step.is_finite() && args.search_step > 0.0) {
+        bail!(
+            "--search-step {} must be a positive number of metres",
+            args.search_step
+        );
+    }
+    config.step_m = args.search_step;
+    // The picture needs the optimum only, not the runner-up search.
+    config.runner_up = false;
+    Ok(config)
 }

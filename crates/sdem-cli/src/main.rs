@@ -3,6 +3,7 @@
 //! This binary parses arguments, reports progress and prints results; the work is done by the
 //! `sdem` library. Errors go to stderr as one line, with a non-zero exit code.
 
+mod bench_tally;
 mod cmd_bench;
 mod cmd_bench_faults;
 mod cmd_demo;
