@@ -159,7 +159,7 @@
 //!   pose format above ([`read_kitti_poses`]). Dead reckoning drifts without bound, so only the
 //!   relative motion between consecutive scans, `odometry[i-1]⁻¹ · odometry[i]`, is used (as the
 //!   prior of a search window), never the absolute poses. `sdem simulate` writes it with noise
-//!   proportional to each step ([`sdem_sim::odometry`]); `sdem import` writes 3DTK's `.pose` files
+//!   proportional to each step (`sdem_sim::odometry`); `sdem import` writes 3DTK's `.pose` files
 //!   there.
 //! - **`poses_truth.txt`**: ground truth, used only to report errors. An imported reference that
 //!   is not ground truth (slam6D's ICP result) goes to `poses_slam6d.txt` instead.

@@ -1,7 +1,9 @@
 //! The seeded collapsed building: a room, a narrow ditch and a wider void, with obstacles that
 //! keep the route drivable.
 
-use super::route::{plan_route, Route, TURN_RADIUS_M};
+use super::route::{
+    plan_route, Route, COLLAPSED_BUILDING_START_HEIGHT_M, MOUTH_X_M, TURN_RADIUS_M,
+};
 use super::scene::Scene;
 use super::solids::{Ellipsoid, OrientedBox, Solid};
 use super::{aabb, yaw_rotation, yawed_box, Frame2};
@@ -11,12 +13,6 @@ use rand_chacha::ChaCha8Rng;
 use sdem::geometry::Vec3;
 use std::f64::consts::PI;
 
-/// Height of the sensor above the flat room floor at the first stop of [`collapsed_building`],
-/// metres: the room floor lies at `z = -COLLAPSED_BUILDING_START_HEIGHT_M`.
-pub const COLLAPSED_BUILDING_START_HEIGHT_M: f64 = 0.40;
-
-/// Where the room's front wall and the ditch's mouth are, x in metres.
-pub(super) const MOUTH_X_M: f64 = 1.0;
 /// Radius of the tube around the route kept clear of obstacles in the room and the void, metres.
 const TUBE_RADIUS_M: f64 = 0.27;
 /// The same in the ditch above the robot's tracks, where its sensor squeezes past broken

@@ -39,14 +39,15 @@ mod stops;
 #[cfg(test)]
 mod tests;
 
-pub use building::{collapsed_building, COLLAPSED_BUILDING_START_HEIGHT_M};
+pub use building::collapsed_building;
 pub use fixed_scenes::{
     corridor, paper_room, CORRIDOR_SENSOR_HEIGHT_M, PAPER_ROOM_SENSOR_HEIGHT_M,
 };
+pub use route::{COLLAPSED_BUILDING_START_HEIGHT_M, MAX_STOPS};
 pub use scanner::{scan, simulate_changing_run, simulate_run, SimStop};
 pub use scene::{Scene, MIN_STANDING_GAP_M};
 pub use solids::{Ellipsoid, OrientedBox, Solid};
-pub use stops::{collapsed_building_stops, Stop, MAX_STOPS, MIN_SENSOR_CLEARANCE_M};
+pub use stops::{collapsed_building_stops, Stop, MIN_SENSOR_CLEARANCE_M};
 
 use nalgebra::{Rotation3, Vector3};
 use sdem::geometry::Vec3;

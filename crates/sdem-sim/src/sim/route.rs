@@ -1,9 +1,19 @@
 //! The drivable route through the collapsed building: lines and arcs with where stops go.
 
-use super::building::MOUTH_X_M;
-use super::stops::MAX_STOPS;
 use super::wrap_angle;
 use std::f64::consts::TAU;
+
+/// Height of the sensor above the flat room floor at the first stop of
+/// [`collapsed_building`](super::collapsed_building), metres: the room floor lies at
+/// `z = -COLLAPSED_BUILDING_START_HEIGHT_M`.
+pub const COLLAPSED_BUILDING_START_HEIGHT_M: f64 = 0.40;
+
+/// Where the room's front wall and the ditch's mouth are, x in metres.
+pub(super) const MOUTH_X_M: f64 = 1.0;
+
+/// The most stops [`collapsed_building_stops`](super::collapsed_building_stops) can place along
+/// its route.
+pub const MAX_STOPS: usize = 40;
 
 /// Turning radius of every bend of the route, metres.
 pub(super) const TURN_RADIUS_M: f64 = 1.1;

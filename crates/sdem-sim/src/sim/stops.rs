@@ -1,6 +1,6 @@
 //! Stops of a stop-and-go run along the collapsed building's route: where the robot stands.
 
-use super::building::COLLAPSED_BUILDING_START_HEIGHT_M;
+use super::route::{COLLAPSED_BUILDING_START_HEIGHT_M, MAX_STOPS};
 use super::scene::Scene;
 use super::{yaw_rotation, Frame2};
 use rand::{Rng, SeedableRng};
@@ -10,8 +10,6 @@ use sdem::error::{Error, Result};
 use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
 use sdem::sensor::LiftConfig;
 
-/// The most stops [`collapsed_building_stops`] can place along its route.
-pub const MAX_STOPS: usize = 40;
 /// Every stop's sensor origin is at least this far from any surface, metres.
 pub const MIN_SENSOR_CLEARANCE_M: f64 = 0.15;
 /// Longitudinal jitter of each stop along the route, metres (± this, uniform).

@@ -1,7 +1,7 @@
 //! The bound: a lower bound on the cost of every candidate in a box, from where each query point
 //! (or group of nearby points) may lie over the box and the cone of reference cells it sees there.
 
-use super::queue::Node;
+use super::queue::{Node, PointHint};
 use super::search::BranchAndBound;
 use super::tables::{PlaneRows, RangeTables, LANES};
 use crate::geometry::fast_atan2;
@@ -13,21 +13,6 @@ use crate::sdem::{floor_i32, wrap_column};
 /// bench pair 3 / the paper's pair with ±10° of heading): 0.1 → 7,796 / 5,744, 0.3 → 7,796 /
 /// 6,136, 0.6 → 12,228 / 9,512, and no faster at 0.2–0.3 (larger groups widen every reach).
 const GROUP_REACH_FRACTION: f64 = 0.1;
-
-/// What a box's bound, taken point by point (grouping level 0), learned for the boxes inside it.
-#[doc(hidden)]
-pub struct PointHint {
-    /// The points whose term is `τ²` at every candidate of the box: they are `τ²` in every box
-    /// inside it too, and are counted without being bounded again.
-    #[doc(hidden)]
-    pub saturated: u32,
-    /// The other points (indices at level 0), those whose term was largest here first: a box
-    /// inside whose bound passes the best cost so far is then cut short after fewer points.
-    /// On the bench pairs the boxes cut short had summed 80 % of their points with the points
-    /// in a scrambled order.
-    #[doc(hidden)]
-    pub order: Vec<u32>,
-}
 
 impl<'a> BranchAndBound<'a> {
     /// A lower bound on the cost of every candidate in `node`, and an estimate of the cost at

@@ -42,9 +42,8 @@ mod queue;
 mod search;
 mod tables;
 
-pub use bound::PointHint;
 pub use groups::QueryGroups;
-pub use queue::{Node, Reserve};
+pub use queue::{Node, PointHint, Reserve};
 pub use search::{BranchAndBound, Prepared};
 pub use tables::RangeTables;
 

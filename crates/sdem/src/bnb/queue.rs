@@ -1,9 +1,23 @@
 //! Boxes of candidates and the best-first queue: how a box splits, what waits in the queue, and
 //! what a search has found so far and set aside for a second one.
 
-use super::bound::PointHint;
 use super::BranchAndBoundStats;
 use crate::search::{better, CandidateGrid, Index, Scored};
+
+/// What a box's bound, taken point by point (grouping level 0), learned for the boxes inside it.
+#[doc(hidden)]
+pub struct PointHint {
+    /// The points whose term is `τ²` at every candidate of the box: they are `τ²` in every box
+    /// inside it too, and are counted without being bounded again.
+    #[doc(hidden)]
+    pub saturated: u32,
+    /// The other points (indices at level 0), those whose term was largest here first: a box
+    /// inside whose bound passes the best cost so far is then cut short after fewer points.
+    /// On the bench pairs the boxes cut short had summed 80 % of their points with the points
+    /// in a scrambled order.
+    #[doc(hidden)]
+    pub order: Vec<u32>,
+}
 
 /// A box of candidates: inclusive index intervals per axis (x, y, z, heading), halved at powers
 /// of two (see [`Node::children`]).

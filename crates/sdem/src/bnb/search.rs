@@ -1,9 +1,8 @@
 //! The search itself: what it prepares once per reference/query pair, and the best-first loop
 //! over boxes (a first dive, then one worker per thread on a shared queue).
 
-use super::bound::PointHint;
 use super::groups::QueryGroups;
-use super::queue::{with_margin, Node, Outcome, Pending, Progress, Reserve};
+use super::queue::{with_margin, Node, Outcome, Pending, PointHint, Progress, Reserve};
 use super::tables::RangeTables;
 use super::BranchAndBoundStats;
 use crate::cost::{Capped, Correlator};
