@@ -15,7 +15,7 @@ use crate::bench_tally::Tally;
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{Context, Result};
 use sdem::geometry::Vec3;
-use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow};
+use sdem::localize::{localize, HeadingWindow, LocalizeOptions, SearchMode, SearchWindow};
 use sdem::sdem::SdemConfig;
 use sdem_sim::benchmark::{
     bench_pairs, localize_config, localize_pair, paper_pair, summarize, BenchPair, PairConfig,
@@ -123,7 +123,7 @@ struct PoseGraphReport {
 /// The exact search against the exhaustive oracle on the paper's pair at 1 cm: the paper's
 /// window (a smaller one with `quick`), heading searched within `±heading_deg` of the compass.
 fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Result<ExactReport> {
-    let (r, ra, q, qa) = paper_pair()?;
+    let (r, q) = paper_pair()?;
     let window = if quick {
         SearchWindow::around(&Vec3::from(PAPER_MOVE_M), [0.15, 0.15, 0.05])
     } else {
@@ -133,7 +133,7 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
         half_range_deg: heading_deg,
         step_deg: None,
     };
-    let base = LocalizeConfig {
+    let base = LocalizeOptions {
         window,
         step_m: 0.01,
         heading,
@@ -141,7 +141,7 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
         runner_up: false,
         ..Default::default()
     };
-    let exhaustive_config = LocalizeConfig {
+    let exhaustive_config = LocalizeOptions {
         mode: SearchMode::Exhaustive,
         ..base.clone()
     };
@@ -149,7 +149,7 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
         "exact search, heading ±{heading_deg}°: the exhaustive oracle over the window ..."
     ));
     let start = Instant::now();
-    let oracle = localize(&r, &ra, &q, &qa, &exhaustive_config).context("exhaustive search")?;
+    let oracle = localize(&r, &q, &exhaustive_config).context("exhaustive search")?;
     let exhaustive_ms = elapsed_ms(start);
     let repeats = if quick { 3 } else { 5 };
     let mut times = Vec::new();
@@ -160,7 +160,7 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
             i + 1
         ));
         let start = Instant::now();
-        let found = localize(&r, &ra, &q, &qa, &base).context("branch-and-bound search")?;
+        let found = localize(&r, &q, &base).context("branch-and-bound search")?;
         times.push(elapsed_ms(start));
         fast = Some(found);
     }
@@ -200,7 +200,7 @@ fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
 /// `pairs` localized with the heading searched within `±heading_deg` of the compass.
 fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
     let count = pairs.len();
-    let mut config = LocalizeConfig {
+    let mut config = LocalizeOptions {
         step_m: args.step,
         ..localize_config(&PairConfig::default())
     };

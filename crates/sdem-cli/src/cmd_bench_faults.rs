@@ -10,6 +10,7 @@
 use crate::bench_tally::Tally;
 use crate::output::print_json;
 use anyhow::{bail, Result};
+use sdem::doubt::Doubt;
 use sdem::sdem::SdemConfig;
 use sdem_sim::benchmark::Stats;
 use sdem_sim::faults::{fault_pairs, localize_fault_pair, Fault, FaultConfig};
@@ -103,6 +104,13 @@ fn run_case(
         match localize_fault_pair(pair, &sdem_config, config) {
             Ok(result) => {
                 let d = &result.localization.diagnostics;
+                let doubts = || {
+                    result
+                        .localization
+                        .doubts
+                        .iter()
+                        .filter(|d| d.is_ambiguity())
+                };
                 if tally.record(Some(&result)) {
                     failures_flagged += usize::from(d.ambiguous);
                     failures.push(format!(
@@ -111,7 +119,8 @@ fn run_case(
                         result.rotation_error_deg,
                         d.inlier_fraction * 100.0,
                         if d.ambiguous {
-                            format!("flagged: {}", d.ambiguity.join("; "))
+                            let why: Vec<String> = doubts().map(ToString::to_string).collect();
+                            format!("flagged: {}", why.join("; "))
                         } else {
                             "not flagged".to_string()
                         },
@@ -119,8 +128,8 @@ fn run_case(
                     ));
                 } else if d.ambiguous {
                     successes_flagged += 1;
-                    for reason in &d.ambiguity {
-                        *false_alarm_reasons.entry(reason_kind(reason)).or_insert(0) += 1;
+                    for doubt in doubts() {
+                        *false_alarm_reasons.entry(reason_kind(doubt)).or_insert(0) += 1;
                     }
                 }
             }
@@ -162,18 +171,14 @@ fn describe(faults: &[Fault], config: &FaultConfig) -> String {
     }
 }
 
-/// A short name for one of [`sdem::localize::Diagnostics::ambiguity`]'s reasons.
-fn reason_kind(reason: &str) -> &'static str {
-    if reason.starts_with("a candidate") {
-        "runner-up close"
-    } else if reason.contains("refinement failed") {
-        "refinement failed"
-    } else if reason.contains("flat along") {
-        "flat cost"
-    } else if reason.starts_with("only") {
-        "thin match"
-    } else {
-        "other"
+/// A short name for a kind of doubt about a match, for the false alarms' tally.
+fn reason_kind(doubt: &Doubt) -> &'static str {
+    match doubt {
+        Doubt::RunnerUp { .. } => "runner-up close",
+        Doubt::RefinementFailed { .. } => "refinement failed",
+        Doubt::FlatCovariance { .. } | Doubt::FlatCost { .. } => "flat cost",
+        Doubt::FewInliers { .. } => "thin match",
+        Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. } => "other",
     }
 }
 

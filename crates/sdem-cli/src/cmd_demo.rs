@@ -136,7 +136,7 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
         &crate::cmd_view::map_name(None, out),
         &sdem::map::Map { nodes },
         &[],
-        &sdem::slam::SlamConfig::default(),
+        &sdem::slam::SlamOptions::default(),
         &map,
     )?;
     let text = serde_json::to_string_pretty(report)?;

@@ -5,8 +5,8 @@ use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, Pose, PoseRecord};
 use sdem::localize::{
-    localize, Diagnostics, HeadingWindow, Localization, LocalizeConfig, OffsetPrior, RefineOutcome,
-    RefinementSummary, SearchMode, SearchWindow,
+    localize, Diagnostics, HeadingWindow, Localization, LocalizeOptions, OffsetPrior,
+    RefineOutcome, RefinementSummary, SearchMode, SearchWindow,
 };
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::slam::Near;
@@ -245,7 +245,7 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
         println!("  node {node} did not match: {why}");
     }
     if found.diagnostics.ambiguous {
-        for why in &found.diagnostics.ambiguity {
+        for why in found.doubts.iter().filter(|d| d.is_ambiguity()) {
             println!("  AMBIGUOUS: {why}");
         }
     }
@@ -297,7 +297,7 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// The search's settings from the arguments, checked.
-fn localize_config(args: &Args) -> Result<LocalizeConfig> {
+fn localize_config(args: &Args) -> Result<LocalizeOptions> {
     if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
         bail!(
             "--heading-window {} must lie in 0..=180 degrees (0 trusts the compass)",
@@ -328,7 +328,7 @@ fn localize_config(args: &Args) -> Result<LocalizeConfig> {
         Some(text) => Some(parse_prior(text)?),
         None => None,
     };
-    Ok(LocalizeConfig {
+    Ok(LocalizeOptions {
         window: args.window.unwrap_or_else(SearchWindow::paper),
         step_m: args.step,
         heading: HeadingWindow {
@@ -352,7 +352,7 @@ fn localize_scans(
     dataset: &Dataset,
     (reference_index, query_index): (usize, usize),
     sdem_config: &SdemConfig,
-    config: &LocalizeConfig,
+    config: &LocalizeOptions,
 ) -> Result<(Localization, f64)> {
     // Without attitude.csv: the level attitude (checked in range above).
     let reference_attitude = dataset
@@ -364,18 +364,12 @@ fn localize_scans(
     let start = Instant::now();
     // The two S-DEMs side by side, as `sdem bench` builds a pair's.
     let (reference, query) = Sdem::pair_from_points(
-        (&reference_points, &reference_attitude.rotation()),
-        (&query_points, &query_attitude.rotation()),
+        (&reference_points, &reference_attitude),
+        (&query_points, &query_attitude),
         sdem_config,
     )?;
-    let found = localize(
-        &reference,
-        &reference_attitude,
-        &query,
-        &query_attitude,
-        config,
-    )
-    .with_context(|| format!("scan {query_index} against scan {reference_index}"))?;
+    let found = localize(&reference, &query, config)
+        .with_context(|| format!("scan {query_index} against scan {reference_index}"))?;
     Ok((found, elapsed_ms(start)))
 }
 
@@ -384,7 +378,7 @@ fn localize_scans(
 fn make_report(
     (reference, query): (usize, usize),
     found: &Localization,
-    config: &LocalizeConfig,
+    config: &LocalizeOptions,
     time_ms: f64,
     truth: Option<&Pose>,
 ) -> Report {
@@ -441,7 +435,7 @@ fn print_estimate(report: &Report, found: &Localization, truth: Option<&Pose>) {
 }
 
 /// Prints how well the scans fit: the cost and overlap, the runner-up, the weakest direction.
-fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeConfig) {
+fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
     println!(
         "  cost {:.3e} m² (rms {:.2} cm) over {} cells ({:.0} % of the query, {:.0} % within \
          {} cm)",
@@ -482,7 +476,7 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeConfig) {
 }
 
 /// Prints the search's effort and its warnings: ambiguity, an optimum on the window's edge.
-fn print_search(report: &Report, found: &Localization, config: &LocalizeConfig) {
+fn print_search(report: &Report, found: &Localization, config: &LocalizeOptions) {
     println!(
         "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({:?})",
         report.candidates_evaluated,
@@ -493,7 +487,7 @@ fn print_search(report: &Report, found: &Localization, config: &LocalizeConfig) 
     );
     let d = &found.diagnostics;
     if d.ambiguous {
-        for why in &d.ambiguity {
+        for why in found.doubts.iter().filter(|d| d.is_ambiguity()) {
             println!("  AMBIGUOUS: {why}");
         }
     }

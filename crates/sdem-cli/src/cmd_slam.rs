@@ -3,7 +3,7 @@
 use crate::output::{elapsed_ms, pose_line, print_json};
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
-use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamConfig, StepReport, TrajectoryErrors};
+use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamOptions, StepReport, TrajectoryErrors};
 use sdem_io::{
     load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
     write_voxel_map, Dataset, NodeFiles,
@@ -168,7 +168,7 @@ fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
     let mut config = match &args.config {
         Some(path) => sdem_io::read_slam_config(path)?,
         None => {
-            let mut config = SlamConfig::default();
+            let mut config = SlamOptions::default();
             if let Some(sensor) = &dataset.sensor {
                 config.sdem.resolution_deg = sensor.matched_sdem_resolution_deg();
             }
@@ -193,7 +193,7 @@ fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
 }
 
 /// Writes `config.toml`: the configuration the run uses, for `--config` and for the record.
-fn write_config(out: &Path, config: &SlamConfig) -> Result<()> {
+fn write_config(out: &Path, config: &SlamOptions) -> Result<()> {
     let config_text = toml::to_string_pretty(config).context("cannot encode the configuration")?;
     write_atomic(&out.join("config.toml"), |w| {
         w.write_all(config_text.as_bytes())
@@ -293,7 +293,7 @@ fn step_line(index: usize, total: usize, step: &StepReport) -> String {
         } else {
             format!("  {}", closures.join(", "))
         },
-        if step.ambiguity.is_empty() {
+        if step.doubts.is_empty() {
             String::new()
         } else {
             "  AMBIGUOUS".into()

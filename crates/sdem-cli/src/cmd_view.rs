@@ -5,10 +5,10 @@ use crate::cmd_localize::parse_window;
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
-use sdem::localize::{localize, LocalizeConfig, SearchWindow};
+use sdem::localize::{localize, LocalizeOptions, SearchWindow};
 use sdem::map::{LoopClosure, Map};
 use sdem::sdem::{Sdem, SdemConfig};
-use sdem::slam::SlamConfig;
+use sdem::slam::SlamOptions;
 use sdem_io::{load_map, read_points, write_atomic, Dataset};
 use sdem_viz::{
     cost_surface, encode_png, map_plan, map_section, sample_cost_slice, sdem_panorama,
@@ -216,7 +216,7 @@ pub fn write_map_pictures(
     name: &str,
     map: &Map,
     loop_closures: &[LoopClosure],
-    config: &SlamConfig,
+    config: &SlamOptions,
     cloud: &[Vec3],
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out_dir)
@@ -259,7 +259,7 @@ pub fn write_map_pictures(
 fn write_last_node_pictures(
     name: &str,
     map: &Map,
-    config: &SlamConfig,
+    config: &SlamOptions,
     png: &mut dyn FnMut(&str, RgbImage) -> Result<()>,
 ) -> Result<()> {
     let nodes = &map.nodes;
@@ -267,10 +267,10 @@ fn write_last_node_pictures(
     let node_sdem = |i: usize| -> Result<Sdem> {
         let node = &nodes[i];
         // Levelled by the map's estimate: the S-DEM's axes are the world's.
-        let level_from_sensor = node.world_from_sensor.rotation.to_rotation_matrix();
+        let attitude = sdem::geometry::attitude_of(&node.world_from_sensor);
         Ok(Sdem::from_points(
             &node.sensor_points(),
-            &level_from_sensor,
+            &attitude,
             sdem_config,
         )?)
     };
@@ -360,7 +360,7 @@ fn scan_sdem(args: &ScanArgs) -> Result<(Sdem, String)> {
     } else {
         bail!("{}: no such file or dataset folder", input.display());
     };
-    let sdem = Sdem::from_points(&points, &attitude.rotation(), &config)
+    let sdem = Sdem::from_points(&points, &attitude, &config)
         .with_context(|| format!("cannot build the S-DEM of {}", input.display()))?;
     if sdem.known_cells() == 0 {
         bail!("{}: the scan holds no usable point", input.display());
@@ -385,24 +385,14 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
         ..Default::default()
     };
     let config = cost_localize_config(args)?;
-    let build = |index: usize| -> Result<(Sdem, sdem::geometry::Attitude)> {
+    let build = |index: usize| -> Result<Sdem> {
         let attitude = dataset.attitude_or_level(index).unwrap_or_default();
         let points = dataset.load_scan(index)?;
-        Ok((
-            Sdem::from_points(&points, &attitude.rotation(), &sdem_config)?,
-            attitude,
-        ))
+        Ok(Sdem::from_points(&points, &attitude, &sdem_config)?)
     };
-    let (reference, reference_attitude) = build(args.reference)?;
-    let (query, query_attitude) = build(args.query)?;
-    let found = localize(
-        &reference,
-        &reference_attitude,
-        &query,
-        &query_attitude,
-        &config,
-    )
-    .with_context(|| format!("scan {} against scan {}", args.query, args.reference))?;
+    let (reference, query) = (build(args.reference)?, build(args.query)?);
+    let found = localize(&reference, &query, &config)
+        .with_context(|| format!("scan {} against scan {}", args.query, args.reference))?;
     let slice = sample_cost_slice(
         &reference,
         &query,
@@ -431,14 +421,14 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
 }
 
 /// The localization `sdem view cost` runs to find the optimum, from the arguments, checked.
-fn cost_localize_config(args: &CostArgs) -> Result<LocalizeConfig> {
+fn cost_localize_config(args: &CostArgs) -> Result<LocalizeOptions> {
     if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
         bail!(
             "--heading-window {} must lie in 0..=180 degrees",
             args.heading_window
         );
     }
-    let mut config = LocalizeConfig::default();
+    let mut config = LocalizeOptions::default();
     if let Some(window) = args.window {
         config.window = window;
     }

@@ -180,7 +180,7 @@ fn localize_map_names_a_damaged_node_file() {
     sdem_io::save_map(
         &map_dir,
         &mut sdem_io::NodeFiles::default(),
-        &sdem::slam::SlamConfig::default(),
+        &sdem::slam::SlamOptions::default(),
         &Map { nodes },
         &[],
         &[],

@@ -483,13 +483,13 @@ pub fn read_sensor_toml(path: &Path) -> Result<SensorConfig> {
 }
 
 /// Reads the configuration file of `sdem slam --config FILE`: the fields of
-/// [`sdem::slam::SlamConfig`] as `sdem slam` writes them into `config.toml` (unknown keys are
-/// errors, missing keys take the defaults), then [`sdem::slam::SlamConfig::validate`]. Errors
+/// [`sdem::slam::SlamOptions`] as `sdem slam` writes them into `config.toml` (unknown keys are
+/// errors, missing keys take the defaults), then [`sdem::slam::SlamOptions::validate`]. Errors
 /// name the file and the line (for an invalid value, the line of the key the message names,
 /// where the file sets it), on one line.
-pub fn read_slam_config(path: &Path) -> Result<sdem::slam::SlamConfig> {
+pub fn read_slam_config(path: &Path) -> Result<sdem::slam::SlamOptions> {
     let text = read_text(path)?;
-    let config: sdem::slam::SlamConfig = parse_toml(
+    let config: sdem::slam::SlamOptions = parse_toml(
         path,
         &text,
         "the keys are those of the config.toml that sdem slam writes",

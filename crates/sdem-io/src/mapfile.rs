@@ -28,7 +28,7 @@ use sdem::error::{Error, Result};
 use sdem::geometry::{Attitude, Pose};
 use sdem::map::{LoopClosure, Map, Node};
 use sdem::posegraph::{Edge, EdgeKind};
-use sdem::slam::SlamConfig;
+use sdem::slam::SlamOptions;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -52,7 +52,7 @@ pub struct NodeFiles {
 #[derive(Debug, Clone)]
 pub struct SavedMap {
     /// The configuration the map was made with.
-    pub config: SlamConfig,
+    pub config: SlamOptions,
     /// The nodes.
     pub map: Map,
     /// The pose-graph edges.
@@ -86,7 +86,7 @@ struct BodyOnly {
 #[serde(deny_unknown_fields)]
 struct Body {
     dataset: Option<PathBuf>,
-    config: SlamConfig,
+    config: SlamOptions,
     nodes: Vec<NodeRecord>,
     edges: Vec<EdgeRecord>,
     loop_closures: Vec<ClosureRecord>,
@@ -238,7 +238,7 @@ fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f3
 pub fn save_map(
     folder: &Path,
     node_files: &mut NodeFiles,
-    config: &SlamConfig,
+    config: &SlamOptions,
     map: &Map,
     edges: &[Edge],
     loop_closures: &[LoopClosure],
@@ -492,7 +492,7 @@ mod tests {
     use sdem::geometry::{pose_from_parts, Vec3};
     use sdem::posegraph::diagonal_information;
 
-    fn small_map() -> (SlamConfig, Map, Vec<Edge>, Vec<LoopClosure>) {
+    fn small_map() -> (SlamOptions, Map, Vec<Edge>, Vec<LoopClosure>) {
         let nodes: Vec<Node> = (0..3)
             .map(|i| Node {
                 node_id: i,
@@ -526,7 +526,7 @@ mod tests {
             from_from_to: Some(edges[0].from_from_to),
             covariance: None,
         }];
-        (SlamConfig::default(), Map { nodes }, edges, closures)
+        (SlamOptions::default(), Map { nodes }, edges, closures)
     }
 
     #[test]

@@ -40,7 +40,7 @@ use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
 
 use sdem::map::{LoopClosure, Map, Node};
 use sdem::posegraph::{diagonal_information, Edge, EdgeKind};
-use sdem::slam::SlamConfig;
+use sdem::slam::SlamOptions;
 use sdem::voxel::{VoxelConfig, VoxelMap};
 use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -81,7 +81,7 @@ enum Reader {
     KittiCalib,
     SensorToml,
     /// `sdem_io::read_slam_config`, the file of `sdem slam --config`.
-    SlamConfig,
+    SlamOptions,
     VoxelMap,
     /// `sdem_io::load_map` on a saved map folder.
     Map,
@@ -168,7 +168,7 @@ fn read(reader: Reader, path: &Path) -> sdem::Result<()> {
         Reader::UosFrames => sdem_io::read_uos_frames_last(path).map(drop),
         Reader::KittiCalib => sdem_io::read_kitti_calib_tr(path).map(drop),
         Reader::SensorToml => sdem_io::read_sensor_toml(path).map(drop),
-        Reader::SlamConfig => sdem_io::read_slam_config(path).map(drop),
+        Reader::SlamOptions => sdem_io::read_slam_config(path).map(drop),
         Reader::VoxelMap => sdem_io::read_voxel_map(path).map(drop),
         Reader::Map => sdem_io::load_map(path).map(drop),
         Reader::Dataset => {
@@ -388,7 +388,7 @@ fn save_small_map(root: &Path) {
     sdem_io::save_map(
         root,
         &mut sdem_io::NodeFiles::default(),
-        &SlamConfig::default(),
+        &SlamOptions::default(),
         &Map { nodes },
         &edges,
         &closures,
@@ -702,7 +702,7 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Range, n, "[lift]\nlink_length_m = -0.4\n", &[Line(2)]));
 
     // --- the configuration of `sdem slam --config` (an empty file is all defaults) -------------
-    let (r, f, n) = (SlamConfig, "slam config.toml", "config.toml");
+    let (r, f, n) = (SlamOptions, "slam config.toml", "config.toml");
     c.push(file(r, f, Truncated, n, "heading_half_deg = 3.0\n[localize]\nstep_m = ", &[Line(3)]));
     c.push(file(r, f, Truncated, n, "heading_half_deg = 3.0\n[locali", &[Line(2)]));
     c.push(file(r, f, Nan, n, "reference_radius_m = 4.0\nheading_half_deg = nan\n", &[Line(2), Has("heading_half_deg")]));
@@ -1220,11 +1220,11 @@ fn the_valid_inputs_the_table_starts_from_are_read() {
             b"tilt_min_deg = -45.0\nmax_range_m = 8.0\n[lift]\nlink_length_m = 0.4\n".to_vec(),
         ),
         (Reader::VoxelMap, "m.sdemvox", voxel_bytes()),
-        (Reader::SlamConfig, "empty.toml", Vec::new()),
+        (Reader::SlamOptions, "empty.toml", Vec::new()),
         (
-            Reader::SlamConfig,
+            Reader::SlamOptions,
             "config.toml",
-            toml::to_string_pretty(&SlamConfig::default())
+            toml::to_string_pretty(&SlamOptions::default())
                 .unwrap()
                 .into_bytes(),
         ),

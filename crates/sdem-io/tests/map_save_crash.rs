@@ -11,7 +11,7 @@
 use sdem::geometry::{pose_from_parts, Attitude, Vec3};
 use sdem::map::{Map, Node};
 use sdem::posegraph::{diagonal_information, Edge, EdgeKind};
-use sdem::slam::SlamConfig;
+use sdem::slam::SlamOptions;
 use sdem_io::{load_map, save_map, NodeFiles};
 use std::io::{BufRead, BufReader, Write};
 use std::path::Path;
@@ -62,7 +62,7 @@ fn save(folder: &Path, files: &mut NodeFiles, map: &Map) {
     save_map(
         folder,
         files,
-        &SlamConfig::default(),
+        &SlamOptions::default(),
         map,
         &edges,
         &[],

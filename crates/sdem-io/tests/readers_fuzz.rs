@@ -38,7 +38,7 @@ use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
 
 use sdem::map::{Map, Node};
 use sdem::posegraph::{diagonal_information, Edge, EdgeKind};
-use sdem::slam::SlamConfig;
+use sdem::slam::SlamOptions;
 use sdem::voxel::{VoxelConfig, VoxelMap};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -81,7 +81,7 @@ enum Target {
     UosFrames,
     KittiCalib,
     SensorToml,
-    SlamConfig,
+    SlamOptions,
     VoxelMap,
     /// A saved map whose `map.json` is the input.
     MapManifest,
@@ -104,7 +104,7 @@ impl Target {
             Target::UosFrames => "scan000.frames",
             Target::KittiCalib => "calib.txt",
             Target::SensorToml => "sensor.toml",
-            Target::SlamConfig => "config.toml",
+            Target::SlamOptions => "config.toml",
             Target::VoxelMap => "map.sdemvox",
             Target::MapManifest => "map.json",
             Target::MapNode => "000001.pts",
@@ -222,7 +222,7 @@ fn read_and_check(target: Target, path: &Path) -> Result<Result<(), String>, Str
                 .map_err(|e| format!("Ok but invalid: {e}")),
             Err(err) => return e(err),
         },
-        Target::SlamConfig => match sdem_io::read_slam_config(path) {
+        Target::SlamOptions => match sdem_io::read_slam_config(path) {
             Ok(config) => config
                 .validate()
                 .map_err(|e| format!("Ok but invalid: {e}")),
@@ -778,7 +778,7 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
             "# sdem sensor model\ntilt_min_deg = -45.0\ntilt_max_deg = 40.0\npan_step_deg = 1.0\n\
              max_range_m = 8.0\ntrusted_range_m = 3.0\n\n[lift]\nlink_length_m = 0.4\n",
         ),
-        Target::SlamConfig => vec![toml::to_string_pretty(&SlamConfig::default())
+        Target::SlamOptions => vec![toml::to_string_pretty(&SlamOptions::default())
             .unwrap()
             .into_bytes()],
         Target::VoxelMap => vec![voxel_bytes()],
@@ -855,7 +855,7 @@ fn save_small_map(root: &Path) {
     sdem_io::save_map(
         root,
         &mut sdem_io::NodeFiles::default(),
-        &SlamConfig::default(),
+        &SlamOptions::default(),
         &Map { nodes },
         &edges,
         &[],
@@ -935,7 +935,7 @@ fuzz_targets! {
     uos_frames => Target::UosFrames,
     kitti_calib => Target::KittiCalib,
     sensor_toml => Target::SensorToml,
-    slam_config => Target::SlamConfig,
+    slam_config => Target::SlamOptions,
     voxel_map => Target::VoxelMap,
     map_manifest => Target::MapManifest,
     map_node_file => Target::MapNode,

@@ -7,13 +7,13 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use sdem::cost::{Correlator, CostModel};
 use sdem::geometry::Vec3;
 use sdem::localize::{
-    localize, CostConfig, HeadingWindow, LocalizeConfig, SearchMode, SearchWindow,
+    localize, CostConfig, HeadingWindow, LocalizeOptions, SearchMode, SearchWindow,
 };
 use sdem_sim::benchmark::{paper_pair, PAPER_MOVE_M};
 use std::hint::black_box;
 
 fn benches(c: &mut Criterion) {
-    let (reference, ra, query, qa) = paper_pair().expect("the paper's pair");
+    let (reference, query) = paper_pair().expect("the paper's pair");
     let origin = Vec3::from(PAPER_MOVE_M);
     // One candidate scored in each form of eq. (1): the projective one every search uses by
     // default, and the paper's virtual S-DEM (what its brute force pays per candidate).
@@ -33,39 +33,39 @@ fn benches(c: &mut Criterion) {
     let mut group = c.benchmark_group("search");
     group.sample_size(10);
     group.bench_function("branch_and_bound_paper_window_1cm", |b| {
-        let config = LocalizeConfig {
+        let config = LocalizeOptions {
             heading: HeadingWindow::none(),
             refine: false,
             runner_up: false,
             ..Default::default()
         };
-        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+        b.iter(|| black_box(localize(&reference, &query, &config).expect("localizes")))
     });
     // ±10° of heading over the paper's whole window takes tens of seconds (see `sdem bench`);
     // here a ±10 cm window around the truth.
     group.bench_function("branch_and_bound_10cm_window_1cm_heading_10deg", |b| {
-        let config = LocalizeConfig {
+        let config = LocalizeOptions {
             window: SearchWindow::around(&origin, [0.1, 0.1, 0.05]),
             refine: false,
             runner_up: false,
             ..Default::default()
         };
-        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+        b.iter(|| black_box(localize(&reference, &query, &config).expect("localizes")))
     });
     group.bench_function("coarse_to_fine_paper_window_1cm", |b| {
-        let config = LocalizeConfig {
+        let config = LocalizeOptions {
             heading: HeadingWindow::none(),
             mode: SearchMode::CoarseToFine,
             refine: false,
             runner_up: false,
             ..Default::default()
         };
-        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+        b.iter(|| black_box(localize(&reference, &query, &config).expect("localizes")))
     });
     // The exhaustive search over the paper's whole window takes minutes; measure it on a
     // 21 x 21 x 21 cube (9,261 candidates) and scale by candidates in the README.
     group.bench_function("exhaustive_21cube_1cm", |b| {
-        let config = LocalizeConfig {
+        let config = LocalizeOptions {
             window: SearchWindow::around(&origin, [0.1, 0.1, 0.1]),
             heading: HeadingWindow::none(),
             mode: SearchMode::Exhaustive,
@@ -73,7 +73,7 @@ fn benches(c: &mut Criterion) {
             runner_up: false,
             ..Default::default()
         };
-        b.iter(|| black_box(localize(&reference, &ra, &query, &qa, &config).expect("localizes")))
+        b.iter(|| black_box(localize(&reference, &query, &config).expect("localizes")))
     });
     group.finish();
 }

@@ -33,7 +33,7 @@ use rand_distr::StandardNormal;
 use rayon::prelude::*;
 use sdem::error::{Error, Result};
 use sdem::geometry::{attitude_of, pose_error, pose_from_parts, Attitude, Pose, Vec3};
-use sdem::localize::{localize, Localization, LocalizeConfig, SearchWindow};
+use sdem::localize::{localize, Localization, LocalizeOptions, SearchWindow};
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::sensor::SensorConfig;
 use std::time::Instant;
@@ -48,29 +48,27 @@ const CLEARANCE_DIRECTIONS: usize = 200;
 /// Where the query of [`paper_pair`] stands: the paper's move of (22, 36, 5) cm.
 pub const PAPER_MOVE_M: [f64; 3] = [0.22, 0.36, 0.05];
 
-/// The paper's pair (Sec. V), as S-DEMs with their attitude readings: a scan at the origin of
+/// The paper's pair (Sec. V), as S-DEMs (each keeps its attitude reading): a scan at the origin of
 /// [`sim::paper_room`] and one after moving [`PAPER_MOVE_M`] with the same attitude, default
 /// sensor and grid, seed 1. The problem `sdem bench` and the criterion benchmark time.
 ///
 /// # Errors
 /// None in practice (the default grid is valid); [`Sdem::from_points`]'s errors are passed on.
-pub fn paper_pair() -> Result<(Sdem, Attitude, Sdem, Attitude)> {
+pub fn paper_pair() -> Result<(Sdem, Sdem)> {
     let scene = sim::paper_room();
     let sensor = SensorConfig::default();
     let grid = SdemConfig::default();
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let mut sdem_at = |pose: &Pose| -> Result<(Sdem, Attitude)> {
+    let mut sdem_at = |pose: &Pose| -> Result<Sdem> {
         let sweep = sim::scan(&scene, &sensor, pose, 0.0, &mut rng);
-        let attitude = sweep.mean_attitude();
-        let s = Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), &grid)?;
-        Ok((s, attitude))
+        Sdem::from_points(&sweep.points_in_sensor(), &sweep.mean_attitude(), &grid)
     };
-    let (reference, ra) = sdem_at(&Pose::identity())?;
-    let (query, qa) = sdem_at(&pose_from_parts(
+    let reference = sdem_at(&Pose::identity())?;
+    let query = sdem_at(&pose_from_parts(
         Vec3::from(PAPER_MOVE_M),
         Attitude::default(),
     ))?;
-    Ok((reference, ra, query, qa))
+    Ok((reference, query))
 }
 
 /// How [`bench_pairs`] draws its pairs.
@@ -431,9 +429,9 @@ pub const PAIRS_STEP_M: f64 = 0.02;
 
 /// The localization settings the benchmark runs sdem with: the default search over the pairs'
 /// displacement window on a [`PAIRS_STEP_M`] grid. The one place this module builds a
-/// [`LocalizeConfig`]; `sdem bench` and the pairs exported for the peers both use it.
-pub fn localize_config(pairs: &PairConfig) -> LocalizeConfig {
-    LocalizeConfig {
+/// [`LocalizeOptions`]; `sdem bench` and the pairs exported for the peers both use it.
+pub fn localize_config(pairs: &PairConfig) -> LocalizeOptions {
+    LocalizeOptions {
         window: pairs.search_window(),
         step_m: PAIRS_STEP_M,
         ..Default::default()
@@ -464,21 +462,15 @@ pub struct PairResult {
 pub fn localize_pair(
     pair: &BenchPair,
     sdem: &SdemConfig,
-    config: &LocalizeConfig,
+    config: &LocalizeOptions,
 ) -> Result<PairResult> {
     let start = Instant::now();
     let (reference, query) = Sdem::pair_from_points(
-        (&pair.reference_points, &pair.reference_attitude.rotation()),
-        (&pair.query_points, &pair.query_attitude.rotation()),
+        (&pair.reference_points, &pair.reference_attitude),
+        (&pair.query_points, &pair.query_attitude),
         sdem,
     )?;
-    let localization = localize(
-        &reference,
-        &pair.reference_attitude,
-        &query,
-        &pair.query_attitude,
-        config,
-    )?;
+    let localization = localize(&reference, &query, config)?;
     let time_ms = start.elapsed().as_secs_f64() * 1e3;
     let estimate = localization.reference_from_query;
     let (translation_error_m, rotation_error) = pose_error(&pair.truth, &estimate);

@@ -8,7 +8,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use sdem::error::Result;
 use sdem::geometry::{pose_error, pose_from_parts, Attitude, Pose, Vec3};
-use sdem::localize::{localize, HeadingWindow, Localization, LocalizeConfig, SearchWindow};
+use sdem::localize::{localize, HeadingWindow, Localization, LocalizeOptions, SearchWindow};
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::sensor::{SensorConfig, Sweep};
 use std::time::Instant;
@@ -23,7 +23,7 @@ pub struct ExperimentConfig {
     /// The S-DEM grid.
     pub sdem: SdemConfig,
     /// The search (its window is replaced per experiment).
-    pub localize: LocalizeConfig,
+    pub localize: LocalizeOptions,
     /// Stops of the stop-and-go run.
     pub stops: usize,
     /// Standard deviation of the odometry's horizontal error per step, metres.
@@ -40,7 +40,7 @@ impl Default for ExperimentConfig {
             sdem: SdemConfig::default(),
             // The run searches heading ±2° around the compass (its noise is 1°); the paper's
             // experiment trusts the compass, as the paper did.
-            localize: LocalizeConfig {
+            localize: LocalizeOptions {
                 heading: HeadingWindow {
                     half_range_deg: 2.0,
                     step_deg: None,
@@ -98,15 +98,15 @@ fn trial(
     query: &SensedScan,
     truth: Pose,
     sdem: &SdemConfig,
-    config: &LocalizeConfig,
+    config: &LocalizeOptions,
 ) -> Result<Trial> {
     let start = Instant::now();
     let (r, q) = Sdem::pair_from_points(
-        (&reference.points, &reference.attitude.rotation()),
-        (&query.points, &query.attitude.rotation()),
+        (&reference.points, &reference.attitude),
+        (&query.points, &query.attitude),
         sdem,
     )?;
-    let localization = localize(&r, &reference.attitude, &q, &query.attitude, config)?;
+    let localization = localize(&r, &q, config)?;
     let time_ms = start.elapsed().as_secs_f64() * 1e3;
     let estimate = localization.reference_from_query;
     let (error_m, error_rad) = pose_error(&truth, &estimate);
@@ -136,7 +136,7 @@ pub fn paper_experiment(config: &ExperimentConfig) -> Result<Vec<Trial>> {
         Attitude::from_degrees(0.0, 8.0, 0.0),
     );
     let reference = sense(&scene, &config.sensor, &origin, &mut rng);
-    let localize_config = LocalizeConfig {
+    let localize_config = LocalizeOptions {
         window: SearchWindow::paper(),
         heading: HeadingWindow::none(),
         ..config.localize.clone()
@@ -205,7 +205,7 @@ pub fn stop_and_go_run(config: &ExperimentConfig) -> Result<Vec<RunStop>> {
                         odometry_noise.sample(&mut rng),
                         0.25 * odometry_noise.sample(&mut rng),
                     );
-                let localize_config = LocalizeConfig {
+                let localize_config = LocalizeOptions {
                     window: SearchWindow::around(&predicted, config.run_window_half_m),
                     ..config.localize.clone()
                 };

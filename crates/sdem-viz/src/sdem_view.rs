@@ -33,14 +33,13 @@ fn nice_max(values: &mut [f64]) -> f64 {
 ///
 /// # Example
 /// ```
-/// use sdem::geometry::Vec3;
+/// use sdem::geometry::{Attitude, Vec3};
 /// use sdem::sdem::{Sdem, SdemConfig};
-/// use nalgebra::Rotation3;
 /// let points: Vec<Vec3> = (0..360).map(|i| {
 ///     let a = (i as f64).to_radians();
 ///     Vec3::new(3.0 * a.cos(), 3.0 * a.sin(), -0.5)
 /// }).collect();
-/// let sdem = Sdem::from_points(&points, &Rotation3::identity(), &SdemConfig::default()).unwrap();
+/// let sdem = Sdem::from_points(&points, &Attitude::default(), &SdemConfig::default()).unwrap();
 /// let picture = sdem_viz::sdem_panorama(&sdem, "a ring of points");
 /// assert!(picture.width() > 1000);
 /// ```

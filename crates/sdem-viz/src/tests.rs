@@ -2,9 +2,8 @@
 
 use super::draw::{UNKNOWN, WHITE};
 use super::*;
-use nalgebra::Rotation3;
 use sdem::cost::CostConfig;
-use sdem::geometry::{Pose, Vec3};
+use sdem::geometry::{Attitude, Pose, Vec3};
 use sdem::sdem::{Sdem, SdemConfig};
 use std::collections::HashSet;
 
@@ -40,7 +39,7 @@ fn room_scan(origin: &Vec3) -> Vec<Vec3> {
 fn room_sdem(origin: &Vec3) -> Sdem {
     Sdem::from_points(
         &room_scan(origin),
-        &Rotation3::identity(),
+        &Attitude::default(),
         &SdemConfig::default(),
     )
     .unwrap()

@@ -19,7 +19,7 @@
 //! simulated collapsed buildings, with truth, come from `sdem-sim`.
 //! ```
 //! use sdem::geometry::{Attitude, Vec3};
-//! use sdem::localize::{localize, HeadingWindow, LocalizeConfig};
+//! use sdem::localize::{localize, HeadingWindow, LocalizeOptions};
 //! use sdem::sdem::{Sdem, SdemConfig};
 //! // Points on the walls, floor and ceiling, in the sensor frame, metres.
 //! let mut room = Vec::new();
@@ -35,10 +35,10 @@
 //! let seen_after_moving: Vec<Vec3> = room.iter().map(|p| p - moved).collect();
 //! let level = Attitude::default();
 //! let grid = SdemConfig::default();
-//! let reference = Sdem::from_points(&room, &level.rotation(), &grid)?;
-//! let query = Sdem::from_points(&seen_after_moving, &level.rotation(), &grid)?;
-//! let config = LocalizeConfig { heading: HeadingWindow::none(), ..Default::default() };
-//! let found = localize(&reference, &level, &query, &level, &config)?;
+//! let reference = Sdem::from_points(&room, &level, &grid)?;
+//! let query = Sdem::from_points(&seen_after_moving, &level, &grid)?;
+//! let config = LocalizeOptions { heading: HeadingWindow::none(), ..Default::default() };
+//! let found = localize(&reference, &query, &config)?;
 //! assert!((found.reference_from_query.translation.vector - moved).norm() < 0.005);
 //! # Ok::<(), sdem::Error>(())
 //! ```
@@ -46,6 +46,7 @@
 
 pub mod bnb;
 pub mod cost;
+pub mod doubt;
 pub mod error;
 pub mod geometry;
 pub mod localize;

@@ -13,6 +13,7 @@
 
 use crate::bnb::{self, BranchAndBoundStats};
 use crate::cost::{Correlator, CostModel};
+use crate::doubt::Doubt;
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Pose, Vec3};
 use crate::refine::{refine, RefineConfig, Refinement, SurfaceNormals};
@@ -40,7 +41,7 @@ pub enum SearchMode {
 /// Everything a localization needs besides the two S-DEMs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct LocalizeConfig {
+pub struct LocalizeOptions {
     /// The candidate translations.
     pub window: SearchWindow,
     /// Grid step, metres (paper: 1 cm).
@@ -79,7 +80,7 @@ pub struct LocalizeConfig {
     pub min_trusted_inlier_fraction: f64,
 }
 
-impl Default for LocalizeConfig {
+impl Default for LocalizeOptions {
     fn default() -> Self {
         Self {
             window: SearchWindow::paper(),
@@ -133,8 +134,16 @@ pub struct Localization {
     pub refined: RefineOutcome,
     /// The 6-DoF refinement's result, when it succeeded.
     pub refinement: Option<Refinement>,
-    /// How far the result can be trusted.
+    /// The figures that say how far the result can be trusted.
     pub diagnostics: Diagnostics,
+    /// Every reason not to trust the pose: the match's shape (see
+    /// [`Diagnostics::ambiguous`]), and an optimum on the window's edge.
+    pub doubts: Vec<Doubt>,
+    /// `doubts` is empty: the pose can be used as it is. A result with doubts is still the best
+    /// candidate the search found, to be used only as a guess.
+    pub trusted: bool,
+    /// Wall time of the localization.
+    pub time: std::time::Duration,
 }
 
 /// How far a localization can be trusted.
@@ -146,7 +155,7 @@ pub struct Diagnostics {
     /// Cells within the truncation at the best candidate over the query points compared.
     pub inlier_fraction: f64,
     /// The smallest cost outside the peak's neighbourhood, when it lies below
-    /// [`LocalizeConfig::ambiguous_cost_ratio`] × the best (the runner-up search looks no
+    /// [`LocalizeOptions::ambiguous_cost_ratio`] × the best (the runner-up search looks no
     /// higher); `None` otherwise.
     pub runner_up_cost: Option<f64>,
     /// Every candidate outside the peak's neighbourhood costs at least this (the cap of the
@@ -169,8 +178,8 @@ pub struct Diagnostics {
     pub strongest_sigma_m: Option<f64>,
     /// The translational direction along which the pose is free (a corridor's axis; unit
     /// vector, levelled reference axes), when it is: the refinement's weakest direction when its
-    /// σ exceeds [`LocalizeConfig::ambiguous_sigma_ratio`] × the strongest; else the direction
-    /// along which the grid's cost rises less than [`LocalizeConfig::ambiguous_rise_ratio`] ×
+    /// σ exceeds [`LocalizeOptions::ambiguous_sigma_ratio`] × the strongest; else the direction
+    /// along which the grid's cost rises less than [`LocalizeOptions::ambiguous_rise_ratio`] ×
     /// the steepest, when the refinement's weakest direction lies within about 25° of it (or
     /// there is no refinement). Along it the scans do not fix the pose (what curvature there is
     /// comes from the sampling, not the scene): `sdem slam` takes the prediction's position
@@ -179,10 +188,9 @@ pub struct Diagnostics {
     /// True when another, distant candidate scores almost as well or the cost is flat along
     /// some direction (the pose along [`Self::weakest_direction`] should not be trusted), when
     /// the 6-DoF refinement failed (the pose is the grid's, unconfirmed), or when too few of the
-    /// query's points matched. The reasons are in [`Self::ambiguity`].
+    /// query's points matched: when [`Localization::doubts`] holds a doubt about the match's
+    /// shape ([`Doubt::is_ambiguity`]).
     pub ambiguous: bool,
-    /// Why the match is ambiguous, in words.
-    pub ambiguity: Vec<String>,
 }
 
 /// Which refinement produced the final estimate.
@@ -229,8 +237,8 @@ impl RefinementSummary {
 /// Localizes `query` against `reference`.
 ///
 /// # Arguments
-/// * `reference`, `query` — S-DEMs on one grid, each levelled by its own attitude reading.
-/// * `reference_attitude`, `query_attitude` — those readings (they set the relative rotation).
+/// * `reference`, `query` — S-DEMs on one grid, each levelled by its own attitude reading,
+///   which it keeps ([`Sdem::attitude`]): the readings set the relative rotation.
 /// * `config` — window, step, heading window, search mode, cost.
 ///
 /// # Returns
@@ -240,7 +248,7 @@ impl RefinementSummary {
 /// # Example
 /// ```
 /// use sdem::geometry::{Attitude, Vec3};
-/// use sdem::localize::{localize, HeadingWindow, LocalizeConfig, SearchWindow};
+/// use sdem::localize::{localize, HeadingWindow, LocalizeOptions, SearchWindow};
 /// use sdem::sdem::{Sdem, SdemConfig};
 /// // A box-shaped room sampled densely; the query stands 10 cm further along x.
 /// let mut room = Vec::new();
@@ -254,24 +262,20 @@ impl RefinementSummary {
 /// }
 /// let level = Attitude::default();
 /// let cfg = SdemConfig::default();
-/// let reference = Sdem::from_points(&room, &level.rotation(), &cfg).unwrap();
+/// let reference = Sdem::from_points(&room, &level, &cfg).unwrap();
 /// let moved: Vec<Vec3> = room.iter().map(|p| p - Vec3::new(0.1, 0.0, 0.0)).collect();
-/// let query = Sdem::from_points(&moved, &level.rotation(), &cfg).unwrap();
-/// let config = LocalizeConfig {
+/// let query = Sdem::from_points(&moved, &level, &cfg).unwrap();
+/// let config = LocalizeOptions {
 ///     window: SearchWindow { min: [-0.2, -0.1, -0.05], max: [0.2, 0.1, 0.05] },
 ///     heading: HeadingWindow::none(),
 ///     ..Default::default()
 /// };
-/// let found = localize(&reference, &level, &query, &level, &config).unwrap();
+/// let found = localize(&reference, &query, &config).unwrap();
 /// assert!((found.offset - Vec3::new(0.1, 0.0, 0.0)).norm() < 0.01);
 /// ```
-pub fn localize(
-    reference: &Sdem,
-    reference_attitude: &Attitude,
-    query: &Sdem,
-    query_attitude: &Attitude,
-    config: &LocalizeConfig,
-) -> Result<Localization> {
+pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Result<Localization> {
+    let start = std::time::Instant::now();
+    let (reference_attitude, query_attitude) = (reference.attitude(), query.attitude());
     config.cost.validate()?;
     config.refinement.validate()?;
     config.heading.validate()?;
@@ -419,7 +423,7 @@ pub fn localize(
             .evaluate(&offset, grid_heading)
             .map_or(f64::INFINITY, |c| c.cost)
     };
-    let diagnostics = diagnose(
+    let (diagnostics, mut doubts) = diagnose(
         config,
         compared,
         &at_best,
@@ -429,6 +433,10 @@ pub fn localize(
         refine_error.as_deref(),
         &mut cost_at,
     );
+    let on_window_edge = grid.on_edge(grid_index, full_turn);
+    if on_window_edge {
+        doubts.push(Doubt::OnWindowEdge);
+    }
     Ok(Localization {
         reference_from_query: world_from_reference.inverse() * world_from_query,
         offset,
@@ -441,19 +449,22 @@ pub fn localize(
         candidates_total: grid.len(),
         candidates_evaluated: evaluator.evaluated,
         nodes_bounded: stats.nodes_bounded,
-        on_window_edge: grid.on_edge(grid_index, full_turn),
+        on_window_edge,
         refined,
         refinement,
         diagnostics,
+        trusted: doubts.is_empty(),
+        doubts,
+        time: start.elapsed(),
     })
 }
 
-/// The diagnostics of a match: overlap, runner-up, covariance and ambiguity. `refinement` is
+/// The diagnostics of a match (overlap, runner-up, covariance) and its doubts. `refinement` is
 /// the 6-DoF refinement's result when it converged; `refine_error` says why it failed, when it
 /// was asked for and did.
 #[allow(clippy::too_many_arguments)]
 fn diagnose(
-    config: &LocalizeConfig,
+    config: &LocalizeOptions,
     query_known: usize,
     best: &crate::cost::Correlation,
     best_offset: Vec3,
@@ -461,18 +472,17 @@ fn diagnose(
     refinement: Option<&Refinement>,
     refine_error: Option<&str>,
     cost_at: &mut dyn FnMut(Vec3) -> f64,
-) -> Diagnostics {
+) -> (Diagnostics, Vec<Doubt>) {
     let known = query_known.max(1) as f64;
     let inlier_fraction = best.inliers as f64 / known;
-    let mut ambiguity = Vec::new();
+    let mut doubts = Vec::new();
     if let Some((c, at, _)) = runner_up {
         if c < config.ambiguous_cost_ratio * best.cost {
-            ambiguity.push(format!(
-                "a candidate {:.0} cm away scores {:.3e} m² against the best {:.3e} m²",
-                (at - best_offset).norm() * 100.0,
-                c,
-                best.cost
-            ));
+            doubts.push(Doubt::RunnerUp {
+                distance_m: (at - best_offset).norm(),
+                cost: c,
+                best_cost: best.cost,
+            });
         }
     }
     let covariance = refinement.and_then(|r| r.information.try_inverse());
@@ -498,15 +508,11 @@ fn diagnose(
         let sigma_min = eigen.eigenvalues[i_min].max(0.0).sqrt();
         if sigma_max > config.ambiguous_sigma_ratio * sigma_min {
             flat = Some([v.x, v.y, v.z]);
-            ambiguity.push(format!(
-                "the cost is flat along ({:.2}, {:.2}, {:.2}): σ {:.2} mm there against {:.2} mm \
-                 across",
-                v.x,
-                v.y,
-                v.z,
-                sigma_max * 1e3,
-                sigma_min * 1e3
-            ));
+            doubts.push(Doubt::FlatCovariance {
+                direction: [v.x, v.y, v.z],
+                sigma_m: sigma_max,
+                across_sigma_m: sigma_min,
+            });
         }
         weakest = Some(([v.x, v.y, v.z], sigma_max, sigma_min));
     }
@@ -539,16 +545,12 @@ fn diagnose(
     let steepest = rises.iter().map(|r| r.0).fold(0.0, f64::max);
     if flattest.0 < config.ambiguous_rise_ratio * steepest {
         let v = flattest.1;
-        ambiguity.push(format!(
-            "the cost is flat along ({:.2}, {:.2}, {:.2}): {:.0} cm away it rises {:.2e} m², \
-             against {:.2e} m² across",
-            v.x,
-            v.y,
-            v.z,
-            d * 100.0,
-            flattest.0.max(0.0),
-            steepest
-        ));
+        doubts.push(Doubt::FlatCost {
+            direction: [v.x, v.y, v.z],
+            distance_m: d,
+            rise: flattest.0.max(0.0),
+            across_rise: steepest,
+        });
         if weakest.is_none() {
             weakest = Some(([v.x, v.y, v.z], f64::NAN, f64::NAN));
         }
@@ -567,19 +569,17 @@ fn diagnose(
     // the points matched, or the grid optimum was 10 cm off and the refinement refused to follow
     // it. Say so rather than return such a pose as if it were as good as the others.
     if refinement.is_some() && inlier_fraction < config.min_trusted_inlier_fraction {
-        ambiguity.push(format!(
-            "only {:.0} % of the query's points matched the reference (trusted from {:.0} %): \
-             too little in common",
-            inlier_fraction * 100.0,
-            config.min_trusted_inlier_fraction * 100.0
-        ));
+        doubts.push(Doubt::FewInliers {
+            fraction: inlier_fraction,
+            trusted_from: config.min_trusted_inlier_fraction,
+        });
     }
     if let Some(e) = refine_error {
-        ambiguity.push(format!(
-            "the 6-DoF refinement failed ({e}); the pose is the grid's, unconfirmed by the points"
-        ));
+        doubts.push(Doubt::RefinementFailed {
+            reason: e.to_string(),
+        });
     }
-    Diagnostics {
+    let diagnostics = Diagnostics {
         overlap_fraction: best.overlap as f64 / known,
         inlier_fraction,
         runner_up_cost: runner_up.map(|r| r.0),
@@ -593,16 +593,16 @@ fn diagnose(
         weakest_sigma_m: weakest.map(|w| w.1),
         strongest_sigma_m: weakest.map(|w| w.2),
         flat_direction: flat,
-        ambiguous: !ambiguity.is_empty(),
-        ambiguity,
-    }
+        ambiguous: doubts.iter().any(Doubt::is_ambiguity),
+    };
+    (diagnostics, doubts)
 }
 
 /// Runs the configured search over the evaluator's grid.
 fn run_search(
     evaluator: &mut Evaluator,
     prepared: Option<&bnb::Prepared>,
-    config: &LocalizeConfig,
+    config: &LocalizeOptions,
     full_turn: bool,
     cap: f64,
     reserve_ratio: Option<f64>,

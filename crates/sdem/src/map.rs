@@ -13,7 +13,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::{attitude_of, Attitude, Pose, Vec3};
-use crate::localize::{localize, Localization, LocalizeConfig, SearchWindow};
+use crate::localize::{localize, Localization, LocalizeOptions, SearchWindow};
 use crate::sdem::{Sdem, SdemConfig};
 use crate::search::HeadingWindow;
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion};
@@ -49,7 +49,7 @@ impl Node {
         sdem: &SdemConfig,
     ) -> Result<Self> {
         let rotation = world_from_sensor.rotation.to_rotation_matrix();
-        let levelled = Sdem::from_points(points_in_sensor, &rotation, sdem)?;
+        let levelled = Sdem::from_points(points_in_sensor, &attitude_of(&world_from_sensor), sdem)?;
         if levelled.known_cells() == 0 {
             return Err(Error::Invalid(format!(
                 "scan {scan_index} has no point between {} m and the sensor's range",
@@ -267,7 +267,7 @@ impl Map {
             })?;
             points.extend(node.points_in_world().into_iter().map(|p| p - origin));
         }
-        Sdem::from_points(&points, &nalgebra::Rotation3::identity(), sdem)
+        Sdem::from_points(&points, &crate::geometry::Attitude::default(), sdem)
     }
 }
 
@@ -356,7 +356,7 @@ pub fn verify_loop_closure(
     to: usize,
     world_from_to_prior: &Pose,
     sdem: &SdemConfig,
-    localize_base: &LocalizeConfig,
+    localize_base: &LocalizeOptions,
     config: &LoopClosureConfig,
 ) -> Result<LoopClosure> {
     let (Some(from_node), Some(to_node)) = (map.nodes.get(from), map.nodes.get(to)) else {
@@ -367,10 +367,13 @@ pub fn verify_loop_closure(
     };
     let origin = from_node.position();
     let reference = map.merged_reference(&[from], &origin, sdem)?;
-    let prior_rotation = world_from_to_prior.rotation.to_rotation_matrix();
-    let query = Sdem::from_points(&to_node.sensor_points(), &prior_rotation, sdem)?;
+    let query = Sdem::from_points(
+        &to_node.sensor_points(),
+        &attitude_of(world_from_to_prior),
+        sdem,
+    )?;
     let prior_offset = world_from_to_prior.translation.vector - origin;
-    let localize_config = LocalizeConfig {
+    let localize_config = LocalizeOptions {
         window: SearchWindow::around(&prior_offset, config.window_half_m),
         step_m: config.step_m,
         heading: HeadingWindow {
@@ -391,13 +394,7 @@ pub fn verify_loop_closure(
         from_from_to: None,
         covariance: None,
     };
-    let found = match localize(
-        &reference,
-        &Attitude::default(),
-        &query,
-        &attitude_of(world_from_to_prior),
-        &localize_config,
-    ) {
+    let found = match localize(&reference, &query, &localize_config) {
         Ok(found) => found,
         Err(Error::Localize(why)) => {
             closure.reason = why;
@@ -413,7 +410,11 @@ pub fn verify_loop_closure(
     closure.correction_m = Some(correction);
     let d = &found.diagnostics;
     closure.reason = if d.ambiguous {
-        format!("ambiguous: {}", d.ambiguity.join("; "))
+        let why: Vec<String> = (found.doubts.iter())
+            .filter(|d| d.is_ambiguity())
+            .map(ToString::to_string)
+            .collect();
+        format!("ambiguous: {}", why.join("; "))
     } else if found.on_window_edge {
         "the best match lies on the search window's edge".into()
     } else if d.inlier_fraction < config.min_inlier_fraction {

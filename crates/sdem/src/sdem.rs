@@ -7,8 +7,7 @@
 //! horizontal plane, whatever the robot's tilt. Cells with no return are *unknown*, never zero.
 
 use crate::error::{Error, Result};
-use crate::geometry::{fast_atan2, floor_i64, Vec3};
-use nalgebra::Rotation3;
+use crate::geometry::{fast_atan2, floor_i64, Attitude, Vec3};
 use serde::{Deserialize, Serialize};
 
 /// The angular grid of an S-DEM: resolution and extent, in degrees.
@@ -269,12 +268,15 @@ pub struct Sdem {
     cells: Vec<u32>,
     /// The surface model, made on first use (a function of the fields above).
     surface: std::sync::OnceLock<CellSurfaces>,
+    /// The attitude reading the points were levelled with (`world_from_sensor`'s rotation).
+    attitude: Attitude,
 }
 
 impl PartialEq for Sdem {
     fn eq(&self, other: &Self) -> bool {
         self.spec == other.spec
             && self.config == other.config
+            && self.attitude == other.attitude
             && self.cells == other.cells
             && self.points == other.points
             && self
@@ -432,12 +434,14 @@ impl CellSurfaces {
 }
 
 impl Sdem {
-    /// Builds an S-DEM from points in the sensor frame and the sensor's attitude
-    /// (`level_from_sensor`, the gyro/compass rotation), keeping the nearest return per cell.
+    /// Builds an S-DEM from points in the sensor frame and the sensor's attitude reading,
+    /// keeping the nearest return per cell. The S-DEM keeps the attitude ([`Self::attitude`]):
+    /// a localization reads it from there, so the levelling and the pose cannot disagree.
     ///
     /// # Arguments
     /// * `points_in_sensor` — the scan, sensor frame, metres. Non-finite points are skipped.
-    /// * `level_from_sensor` — rotation from the sensor frame to the levelled frame.
+    /// * `attitude` — the gyro/compass reading; its rotation takes the sensor frame to the
+    ///   levelled frame (`Attitude::default()` for points already levelled).
     /// * `config` — grid resolution and extent.
     ///
     /// # Example
@@ -445,18 +449,19 @@ impl Sdem {
     /// use sdem::geometry::{Attitude, Vec3};
     /// use sdem::sdem::{Sdem, SdemConfig};
     /// let points = vec![Vec3::new(2.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0)];
-    /// let level_from_sensor = Attitude::from_degrees(0.0, 0.0, 90.0).rotation();
-    /// let s = Sdem::from_points(&points, &level_from_sensor, &SdemConfig::default()).unwrap();
+    /// let attitude = Attitude::from_degrees(0.0, 0.0, 90.0);
+    /// let s = Sdem::from_points(&points, &attitude, &SdemConfig::default()).unwrap();
     /// assert_eq!(s.known_cells(), 1); // both points fall into the same cell: the nearest stays
     /// let (az, _el) = s.grid().cell_center(s.cells()[0] as usize);
     /// assert!((az.to_degrees() - 90.5).abs() < 1e-3); // levelled: the compass turned it to +y
     /// ```
     pub fn from_points(
         points_in_sensor: &[Vec3],
-        level_from_sensor: &Rotation3<f64>,
+        attitude: &Attitude,
         config: &SdemConfig,
     ) -> Result<Self> {
         let spec = GridSpec::new(config)?;
+        let level_from_sensor = attitude.rotation();
         let levelled: Vec<[f32; 3]> = points_in_sensor
             .iter()
             .filter(|p| p.iter().all(|v| v.is_finite()))
@@ -465,7 +470,12 @@ impl Sdem {
                 [q.x as f32, q.y as f32, q.z as f32]
             })
             .collect();
-        Ok(Self::from_levelled(spec, config.clone(), &levelled))
+        Ok(Self::from_levelled(
+            spec,
+            config.clone(),
+            &levelled,
+            *attitude,
+        ))
     }
 
     /// Builds the S-DEMs of two scans side by side ([`Self::from_points`] for each, on two
@@ -474,8 +484,8 @@ impl Sdem {
     /// # Errors
     /// The first of the two builds' errors (an invalid configuration).
     pub fn pair_from_points(
-        reference: (&[Vec3], &Rotation3<f64>),
-        query: (&[Vec3], &Rotation3<f64>),
+        reference: (&[Vec3], &Attitude),
+        query: (&[Vec3], &Attitude),
         config: &SdemConfig,
     ) -> Result<(Self, Self)> {
         let (r, q) = rayon::join(
@@ -486,7 +496,12 @@ impl Sdem {
     }
 
     /// Builds an S-DEM on `spec` from points already in the levelled frame, nearest per cell.
-    fn from_levelled(spec: GridSpec, config: SdemConfig, points: &[[f32; 3]]) -> Self {
+    fn from_levelled(
+        spec: GridSpec,
+        config: SdemConfig,
+        points: &[[f32; 3]],
+        attitude: Attitude,
+    ) -> Self {
         let mut ranges = vec![f32::NAN; spec.len()];
         let mut best: Vec<u32> = vec![u32::MAX; spec.len()];
         let min_range = config.min_range_m as f32;
@@ -514,6 +529,7 @@ impl Sdem {
             points: kept_points,
             cells,
             surface: std::sync::OnceLock::new(),
+            attitude,
         }
     }
 
@@ -527,7 +543,12 @@ impl Sdem {
             .iter()
             .map(|p| [p[0] - o[0], p[1] - o[1], p[2] - o[2]])
             .collect();
-        Self::from_levelled(self.spec, self.config.clone(), &moved)
+        Self::from_levelled(self.spec, self.config.clone(), &moved, self.attitude)
+    }
+
+    /// The attitude reading this S-DEM was levelled with.
+    pub fn attitude(&self) -> &Attitude {
+        &self.attitude
     }
 
     /// The grid geometry.
@@ -684,7 +705,7 @@ mod tests {
     #[test]
     fn nearest_return_wins_and_unknown_is_nan() {
         let pts = vec![Vec3::new(3.0, 0.01, 0.01), Vec3::new(1.5, 0.005, 0.005)];
-        let s = Sdem::from_points(&pts, &Rotation3::identity(), &SdemConfig::default()).unwrap();
+        let s = Sdem::from_points(&pts, &Attitude::default(), &SdemConfig::default()).unwrap();
         assert_eq!(s.known_cells(), 1);
         let c = s.cells()[0] as usize;
         assert!((s.range(c).unwrap() as f64 - pts[1].norm()).abs() < 1e-6);
@@ -697,7 +718,7 @@ mod tests {
     fn grid_covers_the_whole_sphere() {
         let s = Sdem::from_points(
             &sphere_points(2.0, 1.0),
-            &Rotation3::identity(),
+            &Attitude::default(),
             &SdemConfig::default(),
         )
         .unwrap();
@@ -709,7 +730,7 @@ mod tests {
     fn levelling_uses_the_attitude() {
         // A point straight ahead of a sensor pitched 10° nose-down lies 10° below the horizon.
         let pts = vec![Vec3::new(2.0, 0.0, 0.0)];
-        let pitch_down = Attitude::from_degrees(0.0, 10.0, 0.0).rotation();
+        let pitch_down = Attitude::from_degrees(0.0, 10.0, 0.0);
         let s = Sdem::from_points(&pts, &pitch_down, &SdemConfig::default()).unwrap();
         let (_, el) = s.grid().cell_center(s.cells()[0] as usize);
         assert!(
@@ -727,8 +748,8 @@ mod tests {
             .map(|p| p * 0.5)
             .collect();
         let (ra, rb) = (
-            Attitude::from_degrees(2.0, -4.0, 30.0).rotation(),
-            Attitude::from_degrees(-1.0, 3.0, -75.0).rotation(),
+            Attitude::from_degrees(2.0, -4.0, 30.0),
+            Attitude::from_degrees(-1.0, 3.0, -75.0),
         );
         let config = SdemConfig::default();
         let (sa, sb) = Sdem::pair_from_points((&a, &ra), (&b, &rb), &config).unwrap();
@@ -751,7 +772,7 @@ mod tests {
             .collect();
         let s = Sdem::from_points(
             &pts,
-            &Attitude::from_degrees(3.0, -2.0, 40.0).rotation(),
+            &Attitude::from_degrees(3.0, -2.0, 40.0),
             &SdemConfig::default(),
         )
         .unwrap();
@@ -770,7 +791,7 @@ mod tests {
     fn virtual_sdem_occludes() {
         // A near point and a far point along the same ray from the new origin: the near one wins.
         let pts = vec![Vec3::new(1.0, 1.0, 0.0), Vec3::new(1.0, 2.0, 0.0)];
-        let s = Sdem::from_points(&pts, &Rotation3::identity(), &SdemConfig::default()).unwrap();
+        let s = Sdem::from_points(&pts, &Attitude::default(), &SdemConfig::default()).unwrap();
         let v = s.virtual_at(&Vec3::new(1.0, 0.0, 0.0));
         assert_eq!(v.known_cells(), 1);
         assert!((v.range(v.cells()[0] as usize).unwrap() - 1.0).abs() < 1e-6);
@@ -786,7 +807,7 @@ mod tests {
             resolution_deg: 2.0,
             ..Default::default()
         };
-        let s = Sdem::from_points(&sphere_points(1.0, 1.0), &Rotation3::identity(), &cfg).unwrap();
+        let s = Sdem::from_points(&sphere_points(1.0, 1.0), &Attitude::default(), &cfg).unwrap();
         assert_eq!(s.grid().len(), 90 * 45);
         assert_eq!(s.known_cells(), 90 * 45);
         for bad in [

@@ -27,7 +27,7 @@ fn coarse_pair(seed: u64, truth: Vec3, yaw_deg: f64) -> (Sdem, Sdem) {
     let mut at = |p: &Pose| {
         let s = sim::scan(&scene, &sensor, p, 0.0, &mut rng);
         let a = s.mean_attitude();
-        Sdem::from_points(&s.points_in_sensor(), &a.rotation(), &grid_cfg).unwrap()
+        Sdem::from_points(&s.points_in_sensor(), &a, &grid_cfg).unwrap()
     };
     let r = at(&Pose::identity());
     let q = at(&pose_from_parts(

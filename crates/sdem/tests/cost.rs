@@ -6,7 +6,7 @@ use sdem::sdem::Sdem;
 /// lifts it; every chosen point is one of the scan's.
 #[test]
 fn search_points_respect_the_cap() {
-    let (_, _, query, _) = sdem_sim::benchmark::paper_pair().unwrap();
+    let (_, query) = sdem_sim::benchmark::paper_pair().unwrap();
     let base = CostConfig {
         max_search_points: 0,
         ..CostConfig::default()
@@ -57,7 +57,7 @@ fn search_points_keep_the_first_nearest_point_of_each_cube() {
         kept.sort_unstable();
         kept.iter().map(|&i| query.points()[i]).collect()
     };
-    let (_, _, paper, _) = sdem_sim::benchmark::paper_pair().unwrap();
+    let (_, paper) = sdem_sim::benchmark::paper_pair().unwrap();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
     // Points on a lattice of 1/32 m: with cubes of 1/16, 1/8 and 1/4 m every distance is
     // exact in f32, so many points tie for their cube.
@@ -69,7 +69,7 @@ fn search_points_keep_the_first_nearest_point_of_each_cube() {
         .collect();
     let lattice = Sdem::from_points(
         &lattice,
-        &nalgebra::Rotation3::identity(),
+        &sdem::geometry::Attitude::default(),
         &sdem::sdem::SdemConfig::default(),
     )
     .unwrap();

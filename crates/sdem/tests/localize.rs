@@ -2,6 +2,7 @@ use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use sdem::cost::{Correlator, CostModel};
+use sdem::doubt::Doubt;
 use sdem::error::Error;
 use sdem::geometry::pose_from_parts;
 use sdem::geometry::{Attitude, Pose, Vec3};
@@ -18,32 +19,26 @@ fn sdem_at(
     sensor: &SensorConfig,
     grid: &SdemConfig,
     seed: u64,
-) -> (Sdem, Attitude) {
+) -> Sdem {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let sweep = sim::scan(scene, sensor, world_from_sensor, 0.0, &mut rng);
-    let attitude = sweep.mean_attitude();
-    let s = Sdem::from_points(&sweep.points_in_sensor(), &attitude.rotation(), grid).unwrap();
-    (s, attitude)
+    Sdem::from_points(&sweep.points_in_sensor(), &sweep.mean_attitude(), grid).unwrap()
 }
 
 /// The paper room scanned at the origin (seed `seeds.0`) and at `truth` (seed `seeds.1`), the
-/// second scan's compass reading `compass_off_deg` off (steel nearby): reference, its reading,
-/// query, its reading.
-fn pair_with_compass_off(
-    truth: &Pose,
-    compass_off_deg: f64,
-    seeds: (u64, u64),
-) -> (Sdem, Attitude, Sdem, Attitude) {
+/// second scan's compass reading `compass_off_deg` off (steel nearby), each S-DEM levelled by
+/// its reading: reference, query.
+fn pair_with_compass_off(truth: &Pose, compass_off_deg: f64, seeds: (u64, u64)) -> (Sdem, Sdem) {
     let scene = sim::paper_room();
     let grid = SdemConfig::default();
     let sensor = SensorConfig::default();
-    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seeds.0);
+    let reference = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seeds.0);
     let mut rng = ChaCha8Rng::seed_from_u64(seeds.1);
     let sweep = sim::scan(&scene, &sensor, truth, 0.0, &mut rng);
     let mut qa = sweep.mean_attitude();
     qa.yaw += compass_off_deg.to_radians();
-    let query = Sdem::from_points(&sweep.points_in_sensor(), &qa.rotation(), &grid).unwrap();
-    (reference, ra, query, qa)
+    let query = Sdem::from_points(&sweep.points_in_sensor(), &qa, &grid).unwrap();
+    (reference, query)
 }
 
 /// The localization's pose lies within 5 mm and 0.1° of the truth.
@@ -79,9 +74,9 @@ fn correlator_equals_the_virtual_sdem_correlation() {
     let scene = sim::paper_room();
     let grid = SdemConfig::default();
     let sensor = SensorConfig::default();
-    let (reference, _) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 1);
+    let reference = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 1);
     let moved = pose_from_parts(Vec3::new(0.1, 0.05, 0.02), Attitude::default());
-    let (local, _) = sdem_at(&scene, &moved, &sensor, &grid, 2);
+    let local = sdem_at(&scene, &moved, &sensor, &grid, 2);
     let cost = virtual_cost();
     let mut correlator = Correlator::new(&reference, &local, &cost).unwrap();
     for o in [
@@ -114,8 +109,8 @@ fn exhaustive_finds_on_grid_truth_without_noise() {
     let grid = SdemConfig::default();
     let sensor = noise_free(1.0);
     let truth = Vec3::new(0.06, -0.04, 0.02);
-    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 3);
-    let (query, qa) = sdem_at(
+    let reference = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 3);
+    let query = sdem_at(
         &scene,
         &pose_from_parts(truth, Attitude::default()),
         &sensor,
@@ -123,7 +118,7 @@ fn exhaustive_finds_on_grid_truth_without_noise() {
         4,
     );
     for cost in [virtual_cost(), CostConfig::default()] {
-        let config = LocalizeConfig {
+        let config = LocalizeOptions {
             window: SearchWindow {
                 min: [-0.1, -0.1, -0.1],
                 max: [0.1, 0.1, 0.1],
@@ -135,7 +130,7 @@ fn exhaustive_finds_on_grid_truth_without_noise() {
             refine: false,
             ..Default::default()
         };
-        let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+        let found = localize(&reference, &query, &config).unwrap();
         assert_eq!(found.candidates_evaluated, 11 * 11 * 11);
         assert!(
             (found.grid_offset - truth).norm() < 1e-9,
@@ -158,10 +153,10 @@ fn tilted_query_is_localized() {
         Vec3::new(0.22, 0.36, 0.05),
         Attitude::from_degrees(3.0, 8.0, 0.0),
     );
-    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 5);
-    let (query, qa) = sdem_at(&scene, &truth, &sensor, &grid, 6);
+    let reference = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 5);
+    let query = sdem_at(&scene, &truth, &sensor, &grid, 6);
     // A window of ±8 cm around the truth keeps the test quick; the benchmarks run the paper's.
-    let config = LocalizeConfig {
+    let config = LocalizeOptions {
         window: SearchWindow::around(&truth.translation.vector, [0.08, 0.08, 0.05]),
         heading: HeadingWindow {
             half_range_deg: 3.0,
@@ -169,7 +164,7 @@ fn tilted_query_is_localized() {
         },
         ..Default::default()
     };
-    let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+    let found = localize(&reference, &query, &config).unwrap();
     assert_within_5mm_and_a_tenth_degree(&truth, &found);
     assert_eq!(found.refined, RefineOutcome::SixDof);
 }
@@ -181,23 +176,23 @@ fn compass_error_is_found_by_the_heading_search() {
         Attitude::from_degrees(0.0, 0.0, 25.0),
     );
     // The compass reads 8° off (steel nearby).
-    let (reference, ra, query, qa) = pair_with_compass_off(&truth, 8.0, (9, 10));
+    let (reference, query) = pair_with_compass_off(&truth, 8.0, (9, 10));
     // The default ±10° heading window; a translation window of ±5 cm around the truth keeps
     // the test quick (the benchmarks run the paper's window).
-    let config = LocalizeConfig {
+    let config = LocalizeOptions {
         window: SearchWindow::around(&truth.translation.vector, [0.05, 0.05, 0.03]),
         ..Default::default()
     };
-    let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+    let found = localize(&reference, &query, &config).unwrap();
     assert_within_5mm_and_a_tenth_degree(&truth, &found);
     assert!((found.heading_correction.to_degrees() + 8.0).abs() < 0.2);
     // Trusting the compass, the same pair localizes badly or not at all.
-    let trusting = LocalizeConfig {
+    let trusting = LocalizeOptions {
         heading: HeadingWindow::none(),
         refine: false,
         ..config
     };
-    if let Ok(f) = localize(&reference, &ra, &query, &qa, &trusting) {
+    if let Ok(f) = localize(&reference, &query, &trusting) {
         let (dt, _) = sdem::geometry::pose_error(&truth, &f.reference_from_query);
         assert!(dt > 0.01, "a wrong compass should hurt: {dt}");
     }
@@ -211,8 +206,8 @@ fn a_full_turn_of_heading_finds_a_compass_half_a_turn_off() {
         Vec3::new(0.2, 0.1, 0.0),
         Attitude::from_degrees(0.0, 0.0, -40.0),
     );
-    let (reference, ra, query, qa) = pair_with_compass_off(&truth, 150.0, (11, 12));
-    let config = LocalizeConfig {
+    let (reference, query) = pair_with_compass_off(&truth, 150.0, (11, 12));
+    let config = LocalizeOptions {
         window: SearchWindow::around(&truth.translation.vector, [0.05, 0.05, 0.03]),
         heading: HeadingWindow {
             half_range_deg: 180.0,
@@ -220,7 +215,7 @@ fn a_full_turn_of_heading_finds_a_compass_half_a_turn_off() {
         },
         ..Default::default()
     };
-    let found = localize(&reference, &ra, &query, &qa, &config).unwrap();
+    let found = localize(&reference, &query, &config).unwrap();
     assert_within_5mm_and_a_tenth_degree(&truth, &found);
     assert!(
         (found.heading_correction.to_degrees() + 150.0).abs() < 0.2,
@@ -229,12 +224,12 @@ fn a_full_turn_of_heading_finds_a_compass_half_a_turn_off() {
     );
     assert!(!found.diagnostics.ambiguous, "{:?}", found.diagnostics);
     // The ±10° default cannot reach it: the best it finds is far off, or nothing matches.
-    let narrow = LocalizeConfig {
+    let narrow = LocalizeOptions {
         heading: HeadingWindow::default(),
         refine: false,
         ..config
     };
-    if let Ok(f) = localize(&reference, &ra, &query, &qa, &narrow) {
+    if let Ok(f) = localize(&reference, &query, &narrow) {
         let (dt, dr) = sdem::geometry::pose_error(&truth, &f.reference_from_query);
         assert!(
             dt > 0.02 || dr.to_degrees() > 10.0,
@@ -249,16 +244,16 @@ fn a_corridor_is_ambiguous_along_its_axis_and_a_room_is_not() {
     let grid = SdemConfig::default();
     let sensor = SensorConfig::default();
     let truth = Vec3::new(0.2, 0.05, 0.0);
-    let config = LocalizeConfig {
+    let config = LocalizeOptions {
         window: SearchWindow::around(&truth, [0.15, 0.06, 0.03]),
         heading: HeadingWindow::none(),
         ..Default::default()
     };
     let localize_in = |scene: &sim::Scene, seed: u64| {
-        let (r, ra) = sdem_at(scene, &Pose::identity(), &sensor, &grid, seed);
+        let r = sdem_at(scene, &Pose::identity(), &sensor, &grid, seed);
         let moved = pose_from_parts(truth, Attitude::default());
-        let (q, qa) = sdem_at(scene, &moved, &sensor, &grid, seed + 1);
-        localize(&r, &ra, &q, &qa, &config).unwrap()
+        let q = sdem_at(scene, &moved, &sensor, &grid, seed + 1);
+        localize(&r, &q, &config).unwrap()
     };
     let found = localize_in(&sim::corridor(30.0).unwrap(), 21);
     let d = &found.diagnostics;
@@ -297,99 +292,104 @@ fn a_thin_match_and_an_unconfirmed_grid_pose_are_flagged() {
     let sensor = SensorConfig::default();
     let truth = Vec3::new(0.2, 0.05, 0.0);
     let scene = sim::paper_room();
-    let (r, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 31);
-    let (q, qa) = sdem_at(
+    let r = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 31);
+    let q = sdem_at(
         &scene,
         &pose_from_parts(truth, Attitude::default()),
         &sensor,
         &grid,
         32,
     );
-    let base = LocalizeConfig {
+    let base = LocalizeOptions {
         window: SearchWindow::around(&truth, [0.05, 0.05, 0.03]),
         heading: HeadingWindow::none(),
         runner_up: false,
         ..Default::default()
     };
-    let reasons = |config: &LocalizeConfig| {
-        let d = localize(&r, &ra, &q, &qa, config).unwrap().diagnostics;
-        assert_eq!(d.ambiguous, !d.ambiguity.is_empty());
-        d.ambiguity
+    let reasons = |config: &LocalizeOptions| {
+        let found = localize(&r, &q, config).unwrap();
+        let shape: Vec<Doubt> = (found.doubts.iter())
+            .filter(|d| d.is_ambiguity())
+            .cloned()
+            .collect();
+        assert_eq!(found.diagnostics.ambiguous, !shape.is_empty());
+        assert_eq!(found.trusted, found.doubts.is_empty());
+        shape
     };
-    let has = |reasons: &[String], start: &str| reasons.iter().any(|r| r.contains(start));
+    let has = |reasons: &[Doubt], kind: &str| reasons.iter().any(|d| d.kind() == kind);
     let clean = reasons(&base);
     assert!(
-        !has(&clean, "only") && !has(&clean, "refinement failed"),
+        !has(&clean, "few_inliers") && !has(&clean, "refinement_failed"),
         "{clean:?}"
     );
     // The same match is thin when almost every point must match.
-    let strict = LocalizeConfig {
+    let strict = LocalizeOptions {
         min_trusted_inlier_fraction: 0.99,
         ..base.clone()
     };
-    assert!(has(&reasons(&strict), "only"));
+    assert!(has(&reasons(&strict), "few_inliers"));
     // A refinement allowed to move 10 µm fails on 5 mm noise: the grid pose is flagged.
     let mut stuck = base.clone();
     stuck.refinement.max_translation_m = 1e-5;
     let stuck = reasons(&stuck);
-    assert!(has(&stuck, "refinement failed"), "{stuck:?}");
+    assert!(has(&stuck, "refinement_failed"), "{stuck:?}");
 }
 
 #[test]
 fn bad_windows_and_steps_are_errors() {
     let scene = sim::paper_room();
     let grid = SdemConfig::default();
-    let (s, a) = sdem_at(
+    let s = sdem_at(
         &scene,
         &Pose::identity(),
         &SensorConfig::default(),
         &grid,
         7,
     );
-    let inverted = LocalizeConfig {
+    let inverted = LocalizeOptions {
         window: SearchWindow {
             min: [0.1, 0.0, 0.0],
             max: [-0.1, 0.0, 0.0],
         },
         ..Default::default()
     };
-    let message = localize(&s, &a, &s, &a, &inverted).unwrap_err().to_string();
+    let message = localize(&s, &s, &inverted).unwrap_err().to_string();
     assert!(message.contains("inverted"), "{message}");
     for step in [0.0, -0.01, f64::NAN] {
-        let config = LocalizeConfig {
+        let config = LocalizeOptions {
             step_m: step,
             ..Default::default()
         };
-        assert!(localize(&s, &a, &s, &a, &config).is_err());
+        assert!(localize(&s, &s, &config).is_err());
     }
-    let nan = LocalizeConfig {
+    let nan = LocalizeOptions {
         window: SearchWindow {
             min: [f64::NAN, 0.0, 0.0],
             max: [0.1, 0.0, 0.0],
         },
         ..Default::default()
     };
-    assert!(localize(&s, &a, &s, &a, &nan).is_err());
-    let bad_heading = LocalizeConfig {
+    assert!(localize(&s, &s, &nan).is_err());
+    let bad_heading = LocalizeOptions {
         heading: HeadingWindow {
             half_range_deg: 200.0,
             step_deg: None,
         },
         ..Default::default()
     };
-    assert!(localize(&s, &a, &s, &a, &bad_heading).is_err());
-    let bnb_on_virtual = LocalizeConfig {
+    assert!(localize(&s, &s, &bad_heading).is_err());
+    let bnb_on_virtual = LocalizeOptions {
         cost: virtual_cost(),
         ..Default::default()
     };
-    assert!(localize(&s, &a, &s, &a, &bnb_on_virtual).is_err());
+    assert!(localize(&s, &s, &bnb_on_virtual).is_err());
 }
 
 #[test]
 fn no_overlap_is_an_error_not_a_pose() {
     let scene = sim::paper_room();
     let grid = SdemConfig::default();
-    let (s, a) = sdem_at(
+    let s = sdem_at(
         &scene,
         &Pose::identity(),
         &SensorConfig::default(),
@@ -398,7 +398,7 @@ fn no_overlap_is_an_error_not_a_pose() {
     );
     // Candidates 50 m away see nothing of the reference.
     for mode in [SearchMode::BranchAndBound, SearchMode::Exhaustive] {
-        let far = LocalizeConfig {
+        let far = LocalizeOptions {
             window: SearchWindow {
                 min: [50.0, 50.0, 0.0],
                 max: [50.1, 50.1, 0.0],
@@ -406,13 +406,22 @@ fn no_overlap_is_an_error_not_a_pose() {
             mode,
             ..Default::default()
         };
-        let error = localize(&s, &a, &s, &a, &far).unwrap_err();
+        let error = localize(&s, &s, &far).unwrap_err();
         assert!(matches!(error, Error::Localize(_)), "{error}");
     }
 }
 
 /// A small seeded problem: coarse 2° scans, a query displaced and turned.
-fn small_problem(seed: u64, x: f64, y: f64, z: f64, yaw: f64) -> (Sdem, Attitude, Sdem, Attitude) {
+/// A coarse (2°) pair in the paper's room: the reference at the origin, the query at
+/// `(x, y, z)` turned by `yaw` degrees, its compass reading `compass_error_deg` off.
+fn small_problem(
+    seed: u64,
+    x: f64,
+    y: f64,
+    z: f64,
+    yaw: f64,
+    compass_error_deg: f64,
+) -> (Sdem, Sdem) {
     let scene = sim::paper_room();
     let grid = SdemConfig {
         resolution_deg: 2.0,
@@ -424,9 +433,13 @@ fn small_problem(seed: u64, x: f64, y: f64, z: f64, yaw: f64) -> (Sdem, Attitude
         ..Default::default()
     };
     let truth = pose_from_parts(Vec3::new(x, y, z), Attitude::from_degrees(0.0, 0.0, yaw));
-    let (reference, ra) = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seed);
-    let (query, qa) = sdem_at(&scene, &truth, &sensor, &grid, seed + 1);
-    (reference, ra, query, qa)
+    let reference = sdem_at(&scene, &Pose::identity(), &sensor, &grid, seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed + 1);
+    let sweep = sim::scan(&scene, &sensor, &truth, 0.0, &mut rng);
+    let mut reading = sweep.mean_attitude();
+    reading.yaw += compass_error_deg.to_radians();
+    let query = Sdem::from_points(&sweep.points_in_sensor(), &reading, &grid).unwrap();
+    (reference, query)
 }
 
 proptest! {
@@ -444,10 +457,9 @@ proptest! {
         window_shift in -0.1f64..0.1,
         prior in proptest::option::of((-0.15f64..0.15, -0.15f64..0.15, -7.0f64..-1.6)),
     ) {
-        let (reference, ra, query, mut qa) = small_problem(seed, x, y, z, yaw);
-        qa.yaw += compass_error.to_radians();
+        let (reference, query) = small_problem(seed, x, y, z, yaw, compass_error);
         let centre = Vec3::new(x + window_shift, y - window_shift, z);
-        let base = LocalizeConfig {
+        let base = LocalizeOptions {
             window: SearchWindow::around(&centre, [0.08, 0.08, 0.04]),
             step_m: 0.02,
             heading: HeadingWindow { half_range_deg: 3.0, step_deg: Some(1.0) },
@@ -462,9 +474,9 @@ proptest! {
             },
             ..Default::default()
         };
-        let oracle = localize(&reference, &ra, &query, &qa,
-            &LocalizeConfig { mode: SearchMode::Exhaustive, ..base.clone() });
-        let fast = localize(&reference, &ra, &query, &qa, &base);
+        let oracle = localize(&reference, &query,
+            &LocalizeOptions { mode: SearchMode::Exhaustive, ..base.clone() });
+        let fast = localize(&reference, &query, &base);
         match (oracle, fast) {
             (Ok(oracle), Ok(fast)) => {
                 prop_assert_eq!(fast.grid_index, oracle.grid_index);
@@ -484,9 +496,9 @@ proptest! {
         x in -0.3f64..0.3, y in -0.2f64..0.4, z in -0.05f64..0.05,
         yaw in -30.0f64..30.0,
     ) {
-        let (reference, ra, query, qa) = small_problem(seed, x, y, z, yaw);
+        let (reference, query) = small_problem(seed, x, y, z, yaw, 0.0);
         let window = SearchWindow::around(&Vec3::new(x, y, z), [0.12, 0.12, 0.06]);
-        let base = LocalizeConfig {
+        let base = LocalizeOptions {
             window,
             step_m: 0.02,
             heading: HeadingWindow::none(),
@@ -495,9 +507,9 @@ proptest! {
             refine: false,
             ..Default::default()
         };
-        let oracle = localize(&reference, &ra, &query, &qa,
-            &LocalizeConfig { mode: SearchMode::Exhaustive, ..base.clone() }).unwrap();
-        let fast = localize(&reference, &ra, &query, &qa, &base).unwrap();
+        let oracle = localize(&reference, &query,
+            &LocalizeOptions { mode: SearchMode::Exhaustive, ..base.clone() }).unwrap();
+        let fast = localize(&reference, &query, &base).unwrap();
         prop_assert_eq!(fast.grid_index, oracle.grid_index);
         prop_assert_eq!(fast.cost, oracle.cost);
         prop_assert!(fast.candidates_evaluated < oracle.candidates_evaluated);

@@ -1,3 +1,4 @@
+use sdem::doubt::Doubt;
 use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
 use sdem::map::{verify_loop_closure, LoopClosure, Map, Node};
 use sdem::sensor::SensorConfig;
@@ -30,7 +31,7 @@ fn loop_run() -> &'static LoopRun {
         let run = sim::simulate_run(&scene, &stops[i..=j], &sensor, seed).unwrap();
         let truth: Vec<Pose> = run.iter().map(|s| s.world_from_sensor).collect();
         let odometry = simulate_odometry(&truth, &OdometryNoise::default(), seed).unwrap();
-        let mut slam = Slam::new(SlamConfig::default()).unwrap();
+        let mut slam = Slam::new(SlamOptions::default()).unwrap();
         let steps = run
             .iter()
             .enumerate()
@@ -168,7 +169,7 @@ fn trajectory_errors_ignore_a_rigid_offset_and_see_a_bent_path() {
 
 #[test]
 fn scans_out_of_order_and_empty_scans_are_errors() {
-    let mut slam = Slam::new(SlamConfig::default()).unwrap();
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
     let points: Vec<Vec3> = (0..2000)
         .map(|k| {
             let a = k as f64 * 0.01;
@@ -212,7 +213,7 @@ fn along_a_featureless_corridor_the_odometry_decides() {
         })
         .collect();
     let odometry = simulate_odometry(&truth, &OdometryNoise::default(), 7).unwrap();
-    let mut slam = Slam::new(SlamConfig::default()).unwrap();
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
     let mut fused = 0;
     for (i, pose) in truth.iter().enumerate() {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(100 + i as u64);
@@ -225,12 +226,7 @@ fn along_a_featureless_corridor_the_odometry_decides() {
                 odometry: (i > 0).then(|| (odometry[i], odometry[i - 1])),
             })
             .unwrap();
-        fused += usize::from(
-            report
-                .ambiguity
-                .iter()
-                .any(|a| a.contains("the position is the prediction's")),
-        );
+        fused += usize::from(report.doubts.iter().any(taken_from_prediction));
     }
     assert_eq!(fused, 5, "every step after the first is along the corridor");
     let estimate = slam.poses();
@@ -263,7 +259,7 @@ fn a_relocalization_with_a_prediction_takes_it_along_a_corridor() {
     use rand::SeedableRng;
     let scene = sim::corridor(40.0).unwrap();
     let sensor = SensorConfig::default();
-    let config = SlamConfig::default();
+    let config = SlamOptions::default();
     let scan = |pose: &Pose, seed| {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         sim::scan(&scene, &sensor, pose, 0.0, &mut rng).points_in_sensor()
@@ -277,35 +273,26 @@ fn a_relocalization_with_a_prediction_takes_it_along_a_corridor() {
     let relocalized = |near: Near| {
         let found = relocalize(&map, &config, &points, level, Some(near), 1).unwrap();
         let pose = Pose::from(&found.world_from_sensor);
-        (pose.translation.vector, found.diagnostics)
+        (pose.translation.vector, found.diagnostics, found.doubts)
     };
     // A prediction 4 cm ahead of the truth along the corridor.
     let predicted = truth.translation.vector + Vec3::new(0.04, 0.0, 0.0);
-    let (at, diagnostics) = relocalized(Near {
+    let (at, _, doubts) = relocalized(Near {
         position: predicted,
         sigma_m: Some(0.05),
     });
     assert!((at.x - predicted.x).abs() < 0.002, "along: {at:?}");
     let across = (at - truth.translation.vector).yz();
     assert!(across.norm() < 0.01, "across: {at:?}");
-    assert!(
-        diagnostics
-            .ambiguity
-            .iter()
-            .any(|a| a.contains("the position is the prediction's")),
-        "{diagnostics:?}"
-    );
+    assert!(doubts.iter().any(taken_from_prediction), "{doubts:?}");
     // Only a rough position: the match's own (14 cm short when written, the grid's, the
     // refinement refusing to follow it), flagged; nothing taken from the rough position.
-    let (at, diagnostics) = relocalized(Near {
+    let (at, diagnostics, doubts) = relocalized(Near {
         position: predicted,
         sigma_m: None,
     });
     assert!(diagnostics.ambiguous, "{at:?} {diagnostics:?}");
-    assert!(!diagnostics
-        .ambiguity
-        .iter()
-        .any(|a| a.contains("the position is the prediction's")));
+    assert!(!doubts.iter().any(taken_from_prediction), "{doubts:?}");
     for sigma_m in [0.0, -1.0, f64::NAN] {
         let bad = relocalize(
             &map,
@@ -320,4 +307,10 @@ fn a_relocalization_with_a_prediction_takes_it_along_a_corridor() {
         );
         assert!(bad.is_err(), "σ {sigma_m} accepted");
     }
+}
+
+/// The doubt a step carries when the prediction, not the scans, set its position along a free
+/// direction.
+fn taken_from_prediction(doubt: &Doubt) -> bool {
+    matches!(doubt, Doubt::TakenFromPrediction { .. })
 }

@@ -13,7 +13,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use sdem::error::{Error, Result};
 use sdem::geometry::{Attitude, Vec3};
-use sdem::localize::{CostConfig, HeadingWindow, LocalizeConfig, OffsetPrior, SearchWindow};
+use sdem::localize::{CostConfig, HeadingWindow, LocalizeOptions, OffsetPrior, SearchWindow};
 use sdem::sdem::SdemConfig;
 
 /// A pair with faults, the robot's prior, and what was injected.
@@ -226,8 +226,8 @@ pub const MIN_PRIOR_SIGMA_M: f64 = 0.01;
 /// [`FaultConfig::odometry_error_fraction`] of the predicted motion ([`OffsetPrior`]), headings
 /// within [`FaultConfig::heading_half_range_deg`] of the compass, the grid step
 /// [`FaultConfig::step_m`], refinement on, no runner-up search (as `sdem slam` runs).
-pub fn localize_config(config: &FaultConfig, pair: &FaultPair) -> LocalizeConfig {
-    LocalizeConfig {
+pub fn localize_config(config: &FaultConfig, pair: &FaultPair) -> LocalizeOptions {
+    LocalizeOptions {
         window: SearchWindow::around(&pair.predicted_offset, config.window_half_m),
         step_m: config.step_m,
         heading: HeadingWindow {

@@ -30,9 +30,10 @@ mod trajectory;
 pub use relocalize::{relocalize, Near, Relocalization};
 pub use trajectory::{trajectory_errors, TrajectoryErrors};
 
+use crate::doubt::Doubt;
 use crate::error::{Error, Result};
 use crate::geometry::{attitude_of, pose_from_parts, Attitude, Pose, Vec3};
-use crate::localize::{localize, CostConfig, LocalizeConfig, OffsetPrior, SearchWindow};
+use crate::localize::{localize, CostConfig, LocalizeOptions, OffsetPrior, SearchWindow};
 use crate::map::{
     verify_loop_closure, world_from_query, Descriptor, LoopClosure, LoopClosureConfig, Map, Node,
 };
@@ -48,11 +49,11 @@ use std::time::Instant;
 /// Everything the loop needs; written beside the results as `config.toml`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
-pub struct SlamConfig {
+pub struct SlamOptions {
     /// The S-DEM grid.
     pub sdem: SdemConfig,
     /// The search and refinement (the window and heading are set per scan from the fields below).
-    pub localize: LocalizeConfig,
+    pub localize: LocalizeOptions,
     /// Half-size of the window around an odometry prediction, metres.
     pub window_half_m: [f64; 3],
     /// Half-size of the window when there is no odometry (the robot may have moved anywhere
@@ -89,13 +90,13 @@ pub struct SlamConfig {
     pub voxel: VoxelConfig,
 }
 
-impl Default for SlamConfig {
+impl Default for SlamOptions {
     fn default() -> Self {
         Self {
             sdem: SdemConfig::default(),
             // A 2 cm grid finds the basin and the 6-DoF refinement the bottom (sub-millimetre on
             // the seeded pairs of `sdem bench`), at an eighth of the 1 cm grid's candidates.
-            localize: LocalizeConfig {
+            localize: LocalizeOptions {
                 step_m: 0.02,
                 runner_up: false,
                 ..Default::default()
@@ -119,7 +120,7 @@ impl Default for SlamConfig {
     }
 }
 
-impl SlamConfig {
+impl SlamOptions {
     /// Checks the values the loop itself uses (the search, S-DEM and voxel settings check
     /// themselves when used).
     pub fn validate(&self) -> Result<()> {
@@ -240,8 +241,11 @@ pub struct StepReport {
     /// Covariance of `[x, y, z, roll, pitch, yaw]` from the match (world axes), as its edges
     /// carry it: along a direction the scans leave free, widened by the prediction's variance.
     pub covariance: Option<[[f64; 6]; 6]>,
-    /// The match's ambiguity warnings, if any.
-    pub ambiguity: Vec<String>,
+    /// Every reason not to trust the match (see [`crate::localize::Localization::doubts`]);
+    /// empty for the first scan.
+    pub doubts: Vec<Doubt>,
+    /// No doubt about the match: the step's pose rests on the scans.
+    pub trusted: bool,
     /// How the match's refinement went (`None` for the first scan).
     pub refinement: Option<crate::localize::RefinementSummary>,
     /// Loop closures checked at this scan, accepted or not.
@@ -268,7 +272,7 @@ pub struct OptimizationSummary {
 /// The loop's state: the map, the pose graph's edges and the fused voxel map.
 #[derive(Debug, Clone)]
 pub struct Slam {
-    config: SlamConfig,
+    config: SlamOptions,
     /// The nodes.
     pub map: Map,
     /// The pose graph's edges (matches to reference nodes and loop closures).
@@ -284,7 +288,7 @@ impl Slam {
     ///
     /// # Errors
     /// An invalid configuration.
-    pub fn new(config: SlamConfig) -> Result<Self> {
+    pub fn new(config: SlamOptions) -> Result<Self> {
         config.validate()?;
         let voxels = VoxelMap::new(config.voxel)?;
         Ok(Self {
@@ -301,7 +305,7 @@ impl Slam {
     /// # Errors
     /// An invalid configuration, or edges naming nodes that are not there.
     pub fn restore(
-        config: SlamConfig,
+        config: SlamOptions,
         map: Map,
         edges: Vec<Edge>,
         loop_closures: Vec<LoopClosure>,
@@ -322,7 +326,7 @@ impl Slam {
     }
 
     /// The configuration.
-    pub fn config(&self) -> &SlamConfig {
+    pub fn config(&self) -> &SlamOptions {
         &self.config
     }
 
@@ -393,7 +397,8 @@ impl Slam {
                 overlap_fraction: None,
                 inlier_fraction: None,
                 covariance: None,
-                ambiguity: Vec::new(),
+                doubts: Vec::new(),
+                trusted: true,
                 refinement: None,
                 loop_closures: Vec::new(),
                 optimization: None,
@@ -460,11 +465,7 @@ impl Slam {
         };
 
         // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
-        let query = Sdem::from_points(
-            scan.points_in_sensor,
-            &attitude.rotation(),
-            &self.config.sdem,
-        )?;
+        let query = Sdem::from_points(scan.points_in_sensor, &attitude, &self.config.sdem)?;
         if query.known_cells() == 0 {
             return Err(Error::Invalid(format!(
                 "scan {} has no usable point (all closer than {} m or not finite)",
@@ -496,7 +497,7 @@ impl Slam {
         let reference = self
             .map
             .merged_reference(&reference_ids, &origin, &self.config.sdem)?;
-        let localize_config = LocalizeConfig {
+        let localize_config = LocalizeOptions {
             window: SearchWindow::around(&(position - origin), window_half),
             heading: HeadingWindow {
                 half_range_deg: heading_half,
@@ -512,14 +513,7 @@ impl Slam {
             ..self.config.localize.clone()
         };
         let localize_start = Instant::now();
-        let found = localize(
-            &reference,
-            &Attitude::default(),
-            &query,
-            &attitude,
-            &localize_config,
-        )
-        .map_err(|e| match e {
+        let found = localize(&reference, &query, &localize_config).map_err(|e| match e {
             Error::Localize(why) => Error::Localize(format!(
                 "scan {} against nodes {reference_ids:?}: {why}",
                 scan.scan_index
@@ -531,6 +525,7 @@ impl Slam {
         let refinement =
             crate::localize::RefinementSummary::new(found.refined, found.refinement.as_ref());
         let mut diagnostics = found.diagnostics;
+        let mut doubts = found.doubts;
         // Along a direction the scans leave free (a ditch's or a corridor's axis), the match's
         // position is the scans' sampling pattern, not the scene: it pulls towards the
         // reference's own origin (a forward-looking scan in a straight corridor came out 20 %
@@ -540,6 +535,7 @@ impl Slam {
             take_prediction_along(
                 &mut world_from_sensor,
                 &mut diagnostics,
+                &mut doubts,
                 &position,
                 prior_sigma_m,
             );
@@ -594,7 +590,8 @@ impl Slam {
             overlap_fraction: Some(diagnostics.overlap_fraction),
             inlier_fraction: Some(diagnostics.inlier_fraction),
             covariance: diagnostics.covariance,
-            ambiguity: diagnostics.ambiguity,
+            trusted: doubts.is_empty(),
+            doubts,
             refinement: Some(refinement),
             loop_closures: closures,
             optimization,

@@ -1,11 +1,12 @@
 //! Relocalization: finding where a scan was taken in a saved map, and the fusion of a match with
 //! a prediction along the direction the scans leave free.
 
-use super::{ms, SlamConfig};
+use super::{ms, SlamOptions};
+use crate::doubt::Doubt;
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Pose, Vec3};
 use crate::localize::{
-    localize, CostConfig, Diagnostics, LocalizeConfig, OffsetPrior, SearchWindow,
+    localize, CostConfig, Diagnostics, LocalizeOptions, OffsetPrior, SearchWindow,
 };
 use crate::map::{world_from_query, Descriptor, Map};
 use crate::sdem::Sdem;
@@ -26,6 +27,10 @@ pub struct Relocalization {
     pub cost: f64,
     /// The match's diagnostics.
     pub diagnostics: crate::localize::Diagnostics,
+    /// Every reason not to trust the pose (see [`crate::localize::Localization::doubts`]).
+    pub doubts: Vec<Doubt>,
+    /// No doubt: the pose can be used as it is.
+    pub trusted: bool,
     /// Wall time, ms.
     pub time_ms: f64,
 }
@@ -46,7 +51,7 @@ pub struct Near {
 
 /// Finds where a scan was taken in a saved map: near `near` when given, else at the nodes whose
 /// place descriptors look most like the scan's, trying up to `max_nodes` nodes with the exact
-/// search (a window of [`SlamConfig::window_half_no_odometry_m`] around the node, or around
+/// search (a window of [`SlamOptions::window_half_no_odometry_m`] around the node, or around
 /// `near`), nearest or most alike first, until one clears the inlier threshold of loop closure.
 ///
 /// # Errors
@@ -54,7 +59,7 @@ pub struct Near {
 /// node that matches.
 pub fn relocalize(
     map: &Map,
-    config: &SlamConfig,
+    config: &SlamOptions,
     points_in_sensor: &[Vec3],
     attitude: Option<Attitude>,
     near: Option<Near>,
@@ -83,7 +88,7 @@ pub fn relocalize(
     }
     let near_position = near.map(|n| n.position);
     let level = attitude.unwrap_or_default();
-    let query = Sdem::from_points(points_in_sensor, &level.rotation(), &config.sdem)?;
+    let query = Sdem::from_points(points_in_sensor, &level, &config.sdem)?;
     if query.known_cells() == 0 {
         return Err(Error::Invalid("the scan has no usable point".into()));
     }
@@ -122,7 +127,7 @@ pub fn relocalize(
             offset: centre.into(),
             sigma_m,
         });
-        let localize_config = LocalizeConfig {
+        let localize_config = LocalizeOptions {
             window: SearchWindow::around(&centre, config.window_half_no_odometry_m),
             heading: HeadingWindow {
                 half_range_deg: heading,
@@ -134,13 +139,7 @@ pub fn relocalize(
             },
             ..config.localize.clone()
         };
-        match localize(
-            &reference,
-            &Attitude::default(),
-            &query,
-            &level,
-            &localize_config,
-        ) {
+        match localize(&reference, &query, &localize_config) {
             Ok(found)
                 if found.diagnostics.inlier_fraction >= config.loop_closure.min_inlier_fraction =>
             {
@@ -172,12 +171,13 @@ pub fn relocalize(
     };
     let mut pose = world_from_query(&origin, &found);
     let mut diagnostics = found.diagnostics;
+    let mut doubts = found.doubts;
     if let Some(Near {
         position,
         sigma_m: Some(sigma_m),
     }) = near
     {
-        take_prediction_along(&mut pose, &mut diagnostics, &position, sigma_m);
+        take_prediction_along(&mut pose, &mut diagnostics, &mut doubts, &position, sigma_m);
     }
     Ok(Relocalization {
         world_from_sensor: (&pose).into(),
@@ -185,6 +185,8 @@ pub fn relocalize(
         tried,
         cost: found.cost,
         diagnostics,
+        trusted: doubts.is_empty(),
+        doubts,
         time_ms: ms(start),
     })
 }
@@ -192,10 +194,11 @@ pub fn relocalize(
 /// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): where `diagnostics` name
 /// a free direction (unit, world axes), moves `pose` along it to the `predicted` position's
 /// place, widens the covariance (world axes) there by the prediction's variance `sigma_m²`, and
-/// adds a note saying so to the ambiguity.
+/// adds a doubt saying so.
 pub(super) fn take_prediction_along(
     pose: &mut Pose,
     diagnostics: &mut Diagnostics,
+    doubts: &mut Vec<Doubt>,
     predicted: &Vec3,
     sigma_m: f64,
 ) {
@@ -213,12 +216,8 @@ pub(super) fn take_prediction_along(
             }
         }
     }
-    diagnostics.ambiguity.push(format!(
-        "along ({:.2}, {:.2}, {:.2}) the position is the prediction's ({:+.1} cm from the \
-         match's)",
-        v.x,
-        v.y,
-        v.z,
-        along * 100.0
-    ));
+    doubts.push(Doubt::TakenFromPrediction {
+        direction: flat,
+        shift_m: along,
+    });
 }

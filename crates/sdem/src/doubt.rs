@@ -1,0 +1,199 @@
+//! Why a localization's pose may be wrong: the typed doubts a result carries.
+//!
+//! A localization succeeds, fails (an [`crate::Error`]), or succeeds with doubts. The doubts are
+//! values a caller can act on (widen the window, try other nodes, keep the pose out of the map),
+//! not sentences to parse: each says what was seen, with the figures. [`Doubt`]'s `Display`
+//! gives the same in words for people.
+
+use serde::Serialize;
+use std::fmt;
+
+/// One reason not to trust a localization's pose. A result with any doubt is not trusted
+/// ([`crate::localize::Localization::trusted`]).
+///
+/// Directions are unit vectors in the reference's levelled frame (world axes, origin at the
+/// reference sensor).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Doubt {
+    /// Another candidate, far from the optimum, scores almost as well: the scene repeats, or
+    /// the scans share too little to tell the places apart.
+    RunnerUp {
+        /// How far the runner-up lies from the optimum, metres.
+        distance_m: f64,
+        /// Its cost (eq. 1), m².
+        cost: f64,
+        /// The optimum's cost, m².
+        best_cost: f64,
+    },
+    /// The refinement's covariance is much wider along one direction than across it: the scans
+    /// leave the pose free along it (a featureless corridor's axis).
+    FlatCovariance {
+        /// The direction of the widest σ.
+        direction: [f64; 3],
+        /// σ along it, metres.
+        sigma_m: f64,
+        /// σ along the best-constrained direction, metres.
+        across_sigma_m: f64,
+    },
+    /// The search's cost barely rises along one direction from the optimum.
+    FlatCost {
+        /// The flattest direction.
+        direction: [f64; 3],
+        /// How far from the optimum the rise was measured, metres.
+        distance_m: f64,
+        /// The rise along it, m².
+        rise: f64,
+        /// The rise along the steepest direction, m².
+        across_rise: f64,
+    },
+    /// Too few of the query's points matched the reference after the refinement.
+    FewInliers {
+        /// The fraction that matched.
+        fraction: f64,
+        /// The fraction a trusted match needs.
+        trusted_from: f64,
+    },
+    /// The 6-DoF refinement failed; the pose is the grid search's, unconfirmed by the points.
+    RefinementFailed {
+        /// Why it failed.
+        reason: String,
+    },
+    /// The optimum lies on the search window's edge: the true pose may lie outside the window.
+    OnWindowEdge,
+    /// Along a direction the scans leave free, the position was taken from the prediction
+    /// (odometry or the last motion), not from the scans.
+    TakenFromPrediction {
+        /// The free direction.
+        direction: [f64; 3],
+        /// How far the prediction's position lies from the match's along it, metres.
+        shift_m: f64,
+    },
+}
+
+impl Doubt {
+    /// Whether this doubt concerns the match's shape (a repeated or flat cost, too few points,
+    /// a failed refinement), as opposed to where the search looked or what the loop did with
+    /// the result. Such a match is `ambiguous` in [`crate::localize::Diagnostics`].
+    pub fn is_ambiguity(&self) -> bool {
+        !matches!(
+            self,
+            Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. }
+        )
+    }
+
+    /// A short name for the kind, as the JSON's `kind` field spells it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Doubt::RunnerUp { .. } => "runner_up",
+            Doubt::FlatCovariance { .. } => "flat_covariance",
+            Doubt::FlatCost { .. } => "flat_cost",
+            Doubt::FewInliers { .. } => "few_inliers",
+            Doubt::RefinementFailed { .. } => "refinement_failed",
+            Doubt::OnWindowEdge => "on_window_edge",
+            Doubt::TakenFromPrediction { .. } => "taken_from_prediction",
+        }
+    }
+}
+
+impl fmt::Display for Doubt {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Doubt::RunnerUp {
+                distance_m,
+                cost,
+                best_cost,
+            } => write!(
+                f,
+                "a candidate {:.0} cm away scores {cost:.3e} m² against the best {best_cost:.3e} m²",
+                distance_m * 100.0
+            ),
+            Doubt::FlatCovariance {
+                direction: v,
+                sigma_m,
+                across_sigma_m,
+            } => write!(
+                f,
+                "the cost is flat along ({:.2}, {:.2}, {:.2}): σ {:.2} mm there against {:.2} mm \
+                 across",
+                v[0],
+                v[1],
+                v[2],
+                sigma_m * 1e3,
+                across_sigma_m * 1e3
+            ),
+            Doubt::FlatCost {
+                direction: v,
+                distance_m,
+                rise,
+                across_rise,
+            } => write!(
+                f,
+                "the cost is flat along ({:.2}, {:.2}, {:.2}): {:.0} cm away it rises {:.2e} m², \
+                 against {:.2e} m² across",
+                v[0],
+                v[1],
+                v[2],
+                distance_m * 100.0,
+                rise,
+                across_rise
+            ),
+            Doubt::FewInliers {
+                fraction,
+                trusted_from,
+            } => write!(
+                f,
+                "only {:.0} % of the query's points matched the reference (trusted from {:.0} %): \
+                 too little in common",
+                fraction * 100.0,
+                trusted_from * 100.0
+            ),
+            Doubt::RefinementFailed { reason } => write!(
+                f,
+                "the 6-DoF refinement failed ({reason}); the pose is the grid's, unconfirmed by \
+                 the points"
+            ),
+            Doubt::OnWindowEdge => write!(
+                f,
+                "the optimum lies on the search window's edge: the true pose may lie outside it"
+            ),
+            Doubt::TakenFromPrediction {
+                direction: v,
+                shift_m,
+            } => write!(
+                f,
+                "along ({:.2}, {:.2}, {:.2}) the position is the prediction's ({:+.1} cm from the \
+                 match's)",
+                v[0],
+                v[1],
+                v[2],
+                shift_m * 100.0
+            ),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_json_names_the_kind_beside_the_figures() {
+        let doubt = Doubt::FewInliers {
+            fraction: 0.2,
+            trusted_from: 0.25,
+        };
+        let json = serde_json::to_value(&doubt).unwrap();
+        assert_eq!(json["kind"], doubt.kind());
+        assert_eq!(json["fraction"], 0.2);
+        assert!(doubt
+            .to_string()
+            .starts_with("only 20 % of the query's points"));
+        assert!(doubt.is_ambiguity());
+        assert!(!Doubt::OnWindowEdge.is_ambiguity());
+        assert_eq!(
+            serde_json::to_value(Doubt::OnWindowEdge).unwrap()["kind"],
+            Doubt::OnWindowEdge.kind()
+        );
+    }
+}
