@@ -3,7 +3,9 @@
 use crate::output::{elapsed_ms, pose_line, print_json};
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
-use sdem::slam::{trajectory_errors, ScanInput, Slam, SlamOptions, StepReport, TrajectoryErrors};
+use sdem::slam::{
+    trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport, TrajectoryErrors,
+};
 use sdem_io::{
     load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
     write_voxel_map, Dataset, NodeFiles,
@@ -252,7 +254,10 @@ fn map_scan(
     })?;
     let attitude = dataset.attitudes.as_ref().map(|a| a[index]);
     let odometry = match (&dataset.odometry, index) {
-        (Some(odometry), i) if i > 0 => Some((odometry[i], odometry[i - 1])),
+        (Some(odometry), i) if i > 0 => Some(Odometry {
+            odom_from_sensor: odometry[i],
+            odom_from_previous_sensor: odometry[i - 1],
+        }),
         _ => None,
     };
     slam.add_scan(&ScanInput {
@@ -285,7 +290,7 @@ fn step_line(index: usize, total: usize, step: &StepReport) -> String {
         .collect();
     format!(
         "scan {index:4}/{total}: {}  {:6.0} ms  refs {:?}{}{}",
-        pose_line(&Pose::from(&step.pose)),
+        pose_line(&Pose::from(&step.world_from_sensor)),
         step.time_ms,
         step.reference_nodes.iter().map(|r| r.0).collect::<Vec<_>>(),
         if closures.is_empty() {

@@ -79,7 +79,7 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
     // A scan relocalized in the saved map lands where the map put it.
     let attitude = std::fs::read_to_string(dir.path().join("data/attitude.csv")).unwrap();
     let row: Vec<&str> = attitude.lines().nth(3).unwrap().split(',').collect();
-    let mapped = &steps[2]["pose"];
+    let mapped = &steps[2]["world_from_sensor"];
     let near = format!(
         "{},{},{}",
         mapped["x"].as_f64().unwrap() + 0.1,

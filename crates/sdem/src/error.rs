@@ -25,15 +25,102 @@ pub enum Error {
         /// What is wrong and, where possible, how to fix it.
         message: String,
     },
-    /// An argument or configuration value is out of its valid range.
+    /// An option, argument or configuration value is out of its valid range; the message says
+    /// which and what range.
     #[error("{0}")]
     Invalid(String),
-    /// A localization could not produce a trustworthy answer.
-    #[error("localization failed: {0}")]
-    Localize(String),
+    /// Input data (points, an attitude) that cannot be used, with what it is and why.
+    #[error("{what}: {problem}")]
+    InvalidInput {
+        /// Which input: `"attitude"`, `"point 17"`, ….
+        what: String,
+        /// What is wrong with it.
+        problem: String,
+    },
+    /// A scan fills too few S-DEM cells to be localized or to localize against.
+    #[error(
+        "the scan fills {usable} cells of its S-DEM, fewer than the {needed} a localization \
+         compares; check that the points are metres in the sensor frame and within range"
+    )]
+    TooFewPoints {
+        /// Cells that hold a return.
+        usable: usize,
+        /// The fewest a localization needs.
+        needed: usize,
+    },
+    /// No candidate in the search window shares enough cells with the query.
+    #[error(
+        "no candidate in the window shares {needed} cells with the query \
+         S-DEM ({compared} compared); check the window and the attitudes, or lower the minimum \
+         overlap"
+    )]
+    NoOverlap {
+        /// Cells a candidate must share.
+        needed: usize,
+        /// Query points compared.
+        compared: usize,
+    },
+    /// The best candidate in the window matches too few of the query's points.
+    #[error(
+        "nothing in the window matches: at the best candidate only \
+         {matched} of the query's {compared} compared cells lie within {truncation_m} m of the \
+         reference (need {needed}); the scans may not overlap, or the motion lies outside the \
+         window"
+    )]
+    NoMatch {
+        /// Compared points within the truncation at the best candidate.
+        matched: usize,
+        /// Query points compared.
+        compared: usize,
+        /// The fewest that must match.
+        needed: usize,
+        /// The truncation distance, metres.
+        truncation_m: f64,
+    },
+    /// The continuous refinement could not be solved (too few points paired, a degenerate
+    /// problem, a step beyond its bounds).
+    #[error("{reason}")]
+    RefinementFailed {
+        /// Why.
+        reason: String,
+    },
+    /// A relocalization found no node that the scan matches.
+    #[error(
+        "the scan matches none of the nodes tried: {}",
+        tried.iter().map(|(n, why)| format!("node {n}: {why}")).collect::<Vec<_>>().join("; ")
+    )]
+    NotFound {
+        /// Each node tried, with why it did not match.
+        tried: Vec<(usize, String)>,
+    },
+    /// A step of the stop-and-go loop failed to localize its scan against the map.
+    #[error("scan {scan_index} against nodes {nodes:?}: {source}")]
+    AtScan {
+        /// The scan's index.
+        scan_index: usize,
+        /// The nodes it was matched against.
+        nodes: Vec<usize>,
+        /// What went wrong.
+        #[source]
+        source: Box<Error>,
+    },
 }
 
 impl Error {
+    /// Whether the scans were usable but did not match: nothing in the window overlaps or
+    /// matches, the refinement failed, or no node matched. A caller can widen the search, try
+    /// other nodes, or keep the scan out of the map; every other error is bad input or options.
+    pub fn is_no_match(&self) -> bool {
+        match self {
+            Error::NoOverlap { .. }
+            | Error::NoMatch { .. }
+            | Error::RefinementFailed { .. }
+            | Error::NotFound { .. } => true,
+            Error::AtScan { source, .. } => source.is_no_match(),
+            _ => false,
+        }
+    }
+
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {

@@ -19,7 +19,7 @@ use crate::geometry::{Attitude, Pose, Vec3};
 use crate::refine::{refine, RefineConfig, Refinement, SurfaceNormals};
 use crate::sdem::Sdem;
 use crate::search::{matched_heading_step, CandidateGrid, Evaluator, Index, Scored};
-use nalgebra::{Isometry3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix6, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 pub use crate::cost::{correlate, Correlation, CostConfig, OffsetPrior};
@@ -108,7 +108,17 @@ pub struct Localization {
     /// The query sensor's pose in the reference sensor's frame:
     /// `inverse(world_from_reference) * world_from_query`.
     pub reference_from_query: Pose,
-    /// The estimated offset (query origin − reference origin, world axes), refined when asked.
+    /// Covariance of the pose over `[x, y, z, rx, ry, rz]` in the query sensor's frame: metres
+    /// along its axes, then small rotations (radians) about them. From the curvature of the
+    /// refinement's cost with independent residuals, so optimistic; `None` without a 6-DoF
+    /// refinement. ([`Diagnostics::covariance`] is the same on the levelled reference's axes.)
+    pub covariance: Option<Matrix6<f64>>,
+    /// The lowest cost (eq. 1, m²) found more than [`LocalizeOptions::peak_radius_m`] from the
+    /// optimum, when it lies below [`LocalizeOptions::ambiguous_cost_ratio`] × [`Self::cost`]:
+    /// another place that looks almost the same. `None`: nothing came that close.
+    pub runner_up: Option<f64>,
+    /// The estimated offset (query origin − reference origin, on the reference's levelled axes:
+    /// the world's axes with the reference sensor's origin), refined when asked.
     pub offset: Vec3,
     /// The estimated heading correction to the query's compass reading, radians.
     pub heading_correction: f64,
@@ -331,30 +341,30 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
         },
     );
     let Some((cost, flat)) = best else {
-        return Err(Error::Localize(format!(
-            "no candidate in the window shares {} cells with the query S-DEM ({} compared); \
-             check the window and the attitudes, or lower the minimum overlap",
-            correlator.min_overlap(),
-            correlator.compared_points()
-        )));
+        return Err(Error::NoOverlap {
+            needed: correlator.min_overlap(),
+            compared: correlator.compared_points(),
+        });
     };
     let grid_index = grid.index(flat);
     let grid_offset = grid.offset(grid_index);
     let grid_heading = grid.yaw(grid_index);
     // Scores the best candidate again here and, for the diagnostics, its neighbours.
-    let at_best = correlator
-        .evaluate(&grid_offset, grid_heading)
-        .ok_or_else(|| Error::Localize("the best candidate could not be scored again".into()))?;
+    let at_best =
+        (correlator.evaluate(&grid_offset, grid_heading)).ok_or_else(|| Error::NoOverlap {
+            needed: correlator.min_overlap(),
+            compared: correlator.compared_points(),
+        })?;
     let overlap = at_best.overlap;
     let compared = correlator.compared_points();
     let needed_inliers = (config.cost.min_inlier_fraction * compared as f64).ceil();
     if (at_best.inliers as f64) < needed_inliers {
-        return Err(Error::Localize(format!(
-            "nothing in the window matches: at the best candidate only {} of the query's {} \
-             compared cells lie within {} m of the reference (need {}); the scans may not \
-             overlap, or the motion lies outside the window",
-            at_best.inliers, compared, config.cost.truncation_m, needed_inliers
-        )));
+        return Err(Error::NoMatch {
+            matched: at_best.inliers,
+            compared,
+            needed: needed_inliers as usize,
+            truncation_m: config.cost.truncation_m,
+        });
     }
     let grid_rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), grid_heading);
     let mut rotation = grid_rotation;
@@ -391,10 +401,10 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
         let (_, _, yaw) = rotation.euler_angles();
         yaw
     };
-    // reference_level_from_query_level = (rotation, offset); the levelled frames are the sensor
-    // frames rotated by their attitude readings.
-    let world_from_reference = rotation_only(reference_attitude);
-    let world_from_query = Isometry3::from_parts(
+    // The levelled frames are the sensor frames rotated by their attitude readings, both with
+    // the reference sensor's origin: the search found `(rotation, offset)` between them.
+    let level_from_reference = rotation_only(reference_attitude);
+    let level_from_query = Isometry3::from_parts(
         Translation3::from(offset),
         rotation * rotation_only(query_attitude).rotation,
     );
@@ -437,8 +447,13 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
     if on_window_edge {
         doubts.push(Doubt::OnWindowEdge);
     }
+    let covariance = diagnostics
+        .covariance
+        .map(|c| in_query_frame(&Matrix6::from_fn(|i, j| c[i][j]), &level_from_query));
     Ok(Localization {
-        reference_from_query: world_from_reference.inverse() * world_from_query,
+        reference_from_query: level_from_reference.inverse() * level_from_query,
+        covariance,
+        runner_up: diagnostics.runner_up_cost,
         offset,
         heading_correction,
         grid_offset,
@@ -596,6 +611,20 @@ fn diagnose(
         ambiguous: doubts.iter().any(Doubt::is_ambiguity),
     };
     (diagnostics, doubts)
+}
+
+/// A covariance over `[x, y, z, rx, ry, rz]` on the levelled reference's axes, expressed on the
+/// query sensor's axes: both blocks turned by the rotation `level_from_query`.
+fn in_query_frame(covariance_in_level: &Matrix6<f64>, level_from_query: &Pose) -> Matrix6<f64> {
+    let r = level_from_query.rotation.to_rotation_matrix().into_inner();
+    let mut query_from_level = Matrix6::zeros();
+    query_from_level
+        .fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(&r.transpose());
+    query_from_level
+        .fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(&r.transpose());
+    query_from_level * covariance_in_level * query_from_level.transpose()
 }
 
 /// Runs the configured search over the evaluator's grid.

@@ -396,8 +396,8 @@ pub fn verify_loop_closure(
     };
     let found = match localize(&reference, &query, &localize_config) {
         Ok(found) => found,
-        Err(Error::Localize(why)) => {
-            closure.reason = why;
+        Err(e) if e.is_no_match() => {
+            closure.reason = e.to_string();
             return Ok(closure);
         }
         Err(e) => return Err(e),

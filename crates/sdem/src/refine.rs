@@ -465,7 +465,7 @@ impl Pairing<'_> {
 /// took the refinement from 17 to 11 ms (median) with the same errors to 0.02 mm.
 ///
 /// # Errors
-/// [`Error::Localize`] when too few points associate, the problem is degenerate, or the
+/// [`Error::RefinementFailed`] when too few points associate, the problem is degenerate, or the
 /// correction leaves the plausible range (then the grid optimum should be kept).
 pub fn refine(
     reference: &Sdem,
@@ -516,10 +516,12 @@ pub fn refine(
             .reduce(NormalEquations::default, NormalEquations::merged);
         let (h, g, chi2, wsum, inliers) = normal_equations.parts();
         if inliers < config.min_inliers {
-            return Err(Error::Localize(format!(
-                "refinement associated {inliers} points, fewer than {}",
-                config.min_inliers
-            )));
+            return Err(Error::RefinementFailed {
+                reason: format!(
+                    "refinement associated {inliers} points, fewer than {}",
+                    config.min_inliers
+                ),
+            });
         }
         let sigma_sq = (chi2 / wsum.max(1e-12)).max(1e-12);
         // The information reported is the scans' alone: the prediction steers the estimate
@@ -545,9 +547,10 @@ pub fn refine(
             })
         };
         let Some(delta) = delta else {
-            return Err(Error::Localize(
-                "refinement is degenerate: the surfaces constrain fewer than all axes".into(),
-            ));
+            return Err(Error::RefinementFailed {
+                reason: "refinement is degenerate: the surfaces constrain fewer than all axes"
+                    .into(),
+            });
         };
         let omega = Vec3::new(delta[3], delta[4], delta[5]);
         let step_rotation = Rotation3::new(omega);
@@ -575,13 +578,15 @@ pub fn refine(
     if rotation_change.to_degrees() > config.max_rotation_deg
         || translation_change > config.max_translation_m
     {
-        return Err(Error::Localize(format!(
-            "refinement moved {:.1} cm and {:.2}°, beyond the plausible {:.1} cm and {:.1}°",
-            translation_change * 100.0,
-            rotation_change.to_degrees(),
-            config.max_translation_m * 100.0,
-            config.max_rotation_deg
-        )));
+        return Err(Error::RefinementFailed {
+            reason: format!(
+                "refinement moved {:.1} cm and {:.2}°, beyond the plausible {:.1} cm and {:.1}°",
+                translation_change * 100.0,
+                rotation_change.to_degrees(),
+                config.max_translation_m * 100.0,
+                config.max_rotation_deg
+            ),
+        });
     }
     Ok(Refinement {
         transform: Isometry3::from_parts(

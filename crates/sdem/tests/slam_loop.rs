@@ -41,7 +41,10 @@ fn loop_run() -> &'static LoopRun {
                     scan_index: k,
                     points_in_sensor: &points,
                     attitude: Some(stop.sweep.mean_attitude()),
-                    odometry: (k > 0).then(|| (odometry[k], odometry[k - 1])),
+                    odometry: (k > 0).then(|| Odometry {
+                        odom_from_sensor: odometry[k],
+                        odom_from_previous_sensor: odometry[k - 1],
+                    }),
                 })
                 .unwrap()
             })
@@ -223,7 +226,10 @@ fn along_a_featureless_corridor_the_odometry_decides() {
                 scan_index: i,
                 points_in_sensor: &sweep.points_in_sensor(),
                 attitude: Some(sweep.mean_attitude()),
-                odometry: (i > 0).then(|| (odometry[i], odometry[i - 1])),
+                odometry: (i > 0).then(|| Odometry {
+                    odom_from_sensor: odometry[i],
+                    odom_from_previous_sensor: odometry[i - 1],
+                }),
             })
             .unwrap();
         fused += usize::from(report.doubts.iter().any(taken_from_prediction));

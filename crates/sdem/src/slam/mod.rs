@@ -192,9 +192,27 @@ pub struct ScanInput<'a> {
     pub points_in_sensor: &'a [Vec3],
     /// The gyro/compass reading, when there is one.
     pub attitude: Option<Attitude>,
-    /// The odometry's `world_from_sensor` at this scan and at the previous one (only their
-    /// relative motion is used), when there is odometry.
-    pub odometry: Option<(Pose, Pose)>,
+    /// The odometry's readings at this scan and at the previous one, when there is odometry
+    /// (only their relative motion is used).
+    pub odometry: Option<Odometry>,
+}
+
+/// Two readings of the robot's odometry frame (as ROS's `/odom` gives it): at this scan and at
+/// the previous one. Only the motion between them, `previous_sensor_from_sensor`, is used: the
+/// odometry frame itself drifts without bound.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Odometry {
+    /// The odometry's pose of the sensor at this scan.
+    pub odom_from_sensor: Pose,
+    /// The odometry's pose of the sensor at the previous scan.
+    pub odom_from_previous_sensor: Pose,
+}
+
+impl Odometry {
+    /// The motion since the previous scan, in the previous sensor's frame.
+    pub fn previous_sensor_from_sensor(&self) -> Pose {
+        self.odom_from_previous_sensor.inverse() * self.odom_from_sensor
+    }
 }
 
 /// Where the heading prior came from.
@@ -224,10 +242,11 @@ pub struct StepReport {
     pub time_ms: f64,
     /// Wall time of the localization alone, ms.
     pub localize_ms: f64,
-    /// The estimated `world_from_sensor` when the step ended, as `{x, y, z, roll_deg, …}`.
-    pub pose: crate::geometry::PoseRecord,
+    /// The estimated pose of the scan's sensor in the world when the step ended, as
+    /// `{x, y, z, roll_deg, …}`.
+    pub world_from_sensor: crate::geometry::PoseRecord,
     /// The prediction the search started from.
-    pub predicted: crate::geometry::PoseRecord,
+    pub predicted_world_from_sensor: crate::geometry::PoseRecord,
     /// Where the heading prior came from.
     pub heading_prior: HeadingPrior,
     /// Reference nodes merged, with the query cells each one saw.
@@ -281,6 +300,35 @@ pub struct Slam {
     pub loop_closures: Vec<LoopClosure>,
     /// The fused occupancy map on the current poses.
     pub voxels: VoxelMap,
+    /// The odometry's reading at the last scan given to [`Slam::add`].
+    last_odom_from_sensor: Option<Pose>,
+    /// The index [`Slam::add`] gives the next scan.
+    next_scan_index: usize,
+}
+
+/// How a stop went, in one word.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StepStatus {
+    /// The first scan: it defines the world frame.
+    First,
+    /// Matched against the map with no doubt.
+    Tracked,
+    /// Matched, but the match has doubts ([`StepReport::doubts`]); its pose is the best guess.
+    Doubtful,
+}
+
+/// One stop added by [`Slam::add`]: where the sensor stood, how the match went, and the full
+/// report `sdem slam` writes for it.
+#[derive(Debug, Clone)]
+pub struct Step {
+    /// The pose of the scan's sensor in the world when the step ended (later loop closures can
+    /// move it: see [`Slam::poses`]).
+    pub world_from_sensor: Pose,
+    /// First, tracked, or doubtful.
+    pub status: StepStatus,
+    /// The localization's figures, doubts, loop closures and times.
+    pub report: StepReport,
 }
 
 impl Slam {
@@ -297,6 +345,8 @@ impl Slam {
             edges: Vec::new(),
             loop_closures: Vec::new(),
             voxels,
+            last_odom_from_sensor: None,
+            next_scan_index: 0,
         })
     }
 
@@ -321,6 +371,7 @@ impl Slam {
         slam.map = map;
         slam.edges = edges;
         slam.loop_closures = loop_closures;
+        slam.next_scan_index = slam.map.nodes.last().map_or(0, |node| node.scan_index + 1);
         slam.rebuild_voxels();
         Ok(slam)
     }
@@ -330,7 +381,95 @@ impl Slam {
         &self.config
     }
 
-    /// The estimated `world_from_sensor` of every node, in order.
+    /// Adds the next stop's scan: predicts its pose, localizes it against the map, adds it as
+    /// a node, closes loops and updates the fused map: the loop `sdem slam` runs, one stop at a
+    /// time.
+    ///
+    /// # Arguments
+    /// * `points_in_sensor` — the scan, sensor frame, metres (NaN points are skipped).
+    /// * `attitude` — the gyro/compass reading at the stop, or `None` without one.
+    /// * `odom_from_sensor` — the odometry frame's pose of the sensor at the stop (as ROS's
+    ///   `/odom` gives it), or `None` without odometry. Only its motion since the last call
+    ///   that gave one is used.
+    ///
+    /// # Returns
+    /// The [`Step`]: the sensor's pose in the world, the match's status and its report.
+    ///
+    /// # Errors
+    /// Invalid input (see [`crate::Scan::from_points`]), or a scan that matches nothing in the
+    /// map ([`Error::is_no_match`]): the map is then unchanged.
+    ///
+    /// # Example
+    /// ```
+    /// use nalgebra::{Isometry3, Point3, Vector3};
+    /// use sdem::{Attitude, Slam, SlamOptions};
+    /// // A box-shaped room; the robot drives 10 cm along x between two stops.
+    /// let room = |x: f64| -> Vec<Point3<f64>> {
+    ///     let mut points = Vec::new();
+    ///     for i in -40..=40 {
+    ///         for j in -40..=40 {
+    ///             let (u, v) = (i as f64 * 0.05, j as f64 * 0.05);
+    ///             for p in [[2.0, u, v], [-1.5, u, v], [u, 1.7, v], [u, -1.3, v], [u, v, 1.1], [u, v, -0.4]] {
+    ///                 points.push(Point3::new(p[0] - x, p[1], p[2]));
+    ///             }
+    ///         }
+    ///     }
+    ///     points
+    /// };
+    /// let mut slam = Slam::new(SlamOptions::default())?;
+    /// let level = Some(Attitude::default());
+    /// for x in [0.0, 0.1] {
+    ///     let odom_from_sensor = Isometry3::translation(x * 1.05, 0.0, 0.0); // 5 % long
+    ///     slam.add(&room(x), level, Some(odom_from_sensor))?;
+    /// }
+    /// let world_from_sensor = slam.poses()[1];
+    /// assert!((world_from_sensor.translation.vector - Vector3::new(0.1, 0.0, 0.0)).norm() < 0.005);
+    /// # Ok::<(), sdem::Error>(())
+    /// ```
+    pub fn add(
+        &mut self,
+        points_in_sensor: &[nalgebra::Point3<f64>],
+        attitude: Option<Attitude>,
+        odom_from_sensor: Option<Pose>,
+    ) -> Result<Step> {
+        if let Some(a) = attitude.filter(|a| !a.is_finite()) {
+            return Err(Error::InvalidInput {
+                what: "attitude".into(),
+                problem: format!("{:?} is not finite", a.to_degrees()),
+            });
+        }
+        let points: Vec<Vec3> = points_in_sensor.iter().map(|p| p.coords).collect();
+        let odometry = odom_from_sensor.zip(self.last_odom_from_sensor).map(
+            |(odom_from_sensor, odom_from_previous_sensor)| Odometry {
+                odom_from_sensor,
+                odom_from_previous_sensor,
+            },
+        );
+        let scan_index = self.next_scan_index;
+        self.next_scan_index += 1;
+        let report = self.add_scan(&ScanInput {
+            scan_index,
+            points_in_sensor: &points,
+            attitude,
+            odometry,
+        })?;
+        self.last_odom_from_sensor = odom_from_sensor;
+        let status = if report.reference_nodes.is_empty() {
+            StepStatus::First
+        } else if report.trusted {
+            StepStatus::Tracked
+        } else {
+            StepStatus::Doubtful
+        };
+        Ok(Step {
+            world_from_sensor: self.map.nodes[report.node_id].world_from_sensor,
+            status,
+            report,
+        })
+    }
+
+    /// The pose in the world, `world_from_sensor`, of every node's sensor, in the order the
+    /// scans were added, as the last loop closure left them.
     pub fn poses(&self) -> Vec<Pose> {
         self.map.nodes.iter().map(|n| n.world_from_sensor).collect()
     }
@@ -389,8 +528,8 @@ impl Slam {
                 node_id,
                 time_ms: ms(start),
                 localize_ms: 0.0,
-                pose: (&pose).into(),
-                predicted: (&pose).into(),
+                world_from_sensor: (&pose).into(),
+                predicted_world_from_sensor: (&pose).into(),
                 heading_prior: HeadingPrior::First,
                 reference_nodes: Vec::new(),
                 cost: None,
@@ -420,9 +559,10 @@ impl Slam {
             .checked_sub(2)
             .map(|i| self.map.nodes[i].world_from_sensor);
         let (motion, motion_prior) = match (&scan.odometry, before_last) {
-            (Some((odom_now, odom_last)), _) => {
-                (Some(odom_last.inverse() * odom_now), HeadingPrior::Odometry)
-            }
+            (Some(odometry), _) => (
+                Some(odometry.previous_sensor_from_sensor()),
+                HeadingPrior::Odometry,
+            ),
             (None, Some(before)) => (
                 Some(before.inverse() * last_pose),
                 HeadingPrior::ConstantVelocity,
@@ -513,12 +653,16 @@ impl Slam {
             ..self.config.localize.clone()
         };
         let localize_start = Instant::now();
-        let found = localize(&reference, &query, &localize_config).map_err(|e| match e {
-            Error::Localize(why) => Error::Localize(format!(
-                "scan {} against nodes {reference_ids:?}: {why}",
-                scan.scan_index
-            )),
-            other => other,
+        let found = localize(&reference, &query, &localize_config).map_err(|e| {
+            if e.is_no_match() {
+                Error::AtScan {
+                    scan_index: scan.scan_index,
+                    nodes: reference_ids.clone(),
+                    source: Box::new(e),
+                }
+            } else {
+                e
+            }
         })?;
         let localize_ms = ms(localize_start);
         let mut world_from_sensor = world_from_query(&origin, &found);
@@ -582,8 +726,8 @@ impl Slam {
             node_id,
             time_ms: ms(start),
             localize_ms,
-            pose: (&pose).into(),
-            predicted: (&predicted).into(),
+            world_from_sensor: (&pose).into(),
+            predicted_world_from_sensor: (&predicted).into(),
             heading_prior,
             reference_nodes: references,
             cost: Some(found.cost),

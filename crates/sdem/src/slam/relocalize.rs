@@ -155,19 +155,12 @@ pub fn relocalize(
                     found.diagnostics.inlier_fraction * 100.0
                 ),
             )),
-            Err(Error::Localize(why)) => tried.push((node_id, why)),
+            Err(e) if e.is_no_match() => tried.push((node_id, e.to_string())),
             Err(e) => return Err(e),
         }
     }
     let Some((node_id, found, origin)) = best else {
-        return Err(Error::Localize(format!(
-            "the scan matches none of the nodes tried: {}",
-            tried
-                .iter()
-                .map(|(n, why)| format!("node {n}: {why}"))
-                .collect::<Vec<_>>()
-                .join("; ")
-        )));
+        return Err(Error::NotFound { tried });
     };
     let mut pose = world_from_query(&origin, &found);
     let mut diagnostics = found.diagnostics;
