@@ -1,0 +1,98 @@
+//! Uses sdem through its crate root only, as the README shows: two scans localized (with a gyro
+//! reading, and without one), then an incremental map over a run with odometry. Exits non-zero
+//! when a result is off the truth.
+
+use nalgebra::{Isometry3, Point3};
+use sdem::{Attitude, LocalizeOptions, Scan, Slam, SlamOptions, StepStatus};
+use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
+use sdem_sim::sim;
+use std::process::ExitCode;
+
+/// Stops of the simulated run, and its seed.
+const STOPS: usize = 12;
+const SEED: u64 = 5;
+
+fn main() -> ExitCode {
+    match run() {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("library-user: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run() -> Result<(), Box<dyn std::error::Error>> {
+    // A simulated run through a collapsed building, with the true pose of every stop.
+    let scene = sim::collapsed_building(SEED);
+    let sensor = sdem::sensor::SensorConfig::default();
+    let stops = sim::collapsed_building_stops(&scene, SEED, STOPS, &sensor.lift)?;
+    let run = sim::simulate_run(&scene, &stops, &sensor, SEED)?;
+    let points = |k: usize| -> Vec<Point3<f64>> {
+        (run[k].sweep.points_in_sensor().iter())
+            .map(|p| Point3::from(*p))
+            .collect()
+    };
+    let reading = |k: usize| -> Attitude { run[k].sweep.mean_attitude() };
+
+    // 1. One scan against another: with both gyro readings, then with none for the query.
+    let (points0, points1) = (points(0), points(1));
+    let truth = run[0].world_from_sensor.inverse() * run[1].world_from_sensor;
+    let reference = Scan::from_points(&points0, Some(reading(0)))?;
+    for query_attitude in [Some(reading(1)), None] {
+        let query = Scan::from_points(&points1, query_attitude)?;
+        let found = sdem::localize(&reference, &query, &LocalizeOptions::default())?;
+        let reference_from_query: Isometry3<f64> = found.reference_from_query;
+        let error_m = (reference_from_query.translation.vector - truth.translation.vector).norm();
+        let error_deg = reference_from_query
+            .rotation
+            .angle_to(&truth.rotation)
+            .to_degrees();
+        println!(
+            "localize, query attitude {}: error {:.2} mm, {:.3}°, trusted {}, {} doubts, {:.0} ms",
+            if query_attitude.is_some() {
+                "read"
+            } else {
+                "unknown"
+            },
+            error_m * 1e3,
+            error_deg,
+            found.trusted,
+            found.doubts.len(),
+            found.time.as_secs_f64() * 1e3
+        );
+        if !found.trusted {
+            eprintln!("doubts: {:?}", found.doubts);
+        }
+        if error_m > 0.01 || error_deg > 0.5 {
+            return Err(format!("localization off the truth: {error_m} m, {error_deg}°").into());
+        }
+    }
+
+    // 2. The incremental loop, one stop at a time, with odometry 5 % long and 0.5° a step off.
+    let truth: Vec<_> = run.iter().map(|s| s.world_from_sensor).collect();
+    let odometry = simulate_odometry(&truth, &OdometryNoise::default(), SEED)?;
+    let mut slam = Slam::new(SlamOptions::default())?;
+    for (k, odom_from_sensor) in odometry.iter().enumerate() {
+        let step = slam.add(&points(k), Some(reading(k)), Some(*odom_from_sensor))?;
+        if step.status == StepStatus::Doubtful {
+            println!("stop {k}: doubtful: {:?}", step.report.doubts);
+        }
+    }
+    let world_from_sensor = slam.poses();
+    let squared: f64 = (world_from_sensor.iter().zip(&truth))
+        .map(|(estimate, truth)| {
+            (estimate.translation.vector - truth.translation.vector).norm_squared()
+        })
+        .sum();
+    let ate_m = (squared / truth.len() as f64).sqrt();
+    println!(
+        "slam: {} stops with odometry, ATE {:.2} cm",
+        truth.len(),
+        ate_m * 100.0
+    );
+    if ate_m > 0.02 {
+        return Err(format!("the map is {ate_m} m off the truth (ATE)").into());
+    }
+    Ok(())
+}
