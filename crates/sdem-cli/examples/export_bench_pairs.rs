@@ -95,7 +95,7 @@ fn matrix_text(pose: &Pose) -> String {
     text
 }
 
-fn write_text(path: &Path, text: &str) -> sdem::Result<()> {
+fn write_text(path: &Path, text: &str) -> sdem_io::Result<()> {
     sdem_io::write_atomic(path, |w| w.write_all(text.as_bytes()))
 }
 
@@ -112,12 +112,12 @@ fn run(args: &Args) -> Result<(), Box<dyn std::error::Error>> {
         args.seed,
         start.elapsed().as_secs_f64()
     );
-    std::fs::create_dir_all(&args.out).map_err(|e| sdem::Error::io(&args.out, e))?;
+    std::fs::create_dir_all(&args.out).map_err(|e| sdem_io::Error::io(&args.out, e))?;
     let mut guess_rng = ChaCha8Rng::seed_from_u64(args.seed ^ GUESS_SALT);
     let mut index_lines = String::new();
     for (i, pair) in pairs.iter().enumerate() {
         let dir = args.out.join(format!("pair_{i:03}"));
-        std::fs::create_dir_all(&dir).map_err(|e| sdem::Error::io(&dir, e))?;
+        std::fs::create_dir_all(&dir).map_err(|e| sdem_io::Error::io(&dir, e))?;
         sdem_io::write_points_ply(&dir.join("reference.ply"), &pair.reference_points)?;
         sdem_io::write_points_ply(&dir.join("query.ply"), &pair.query_points)?;
         write_text(&dir.join("truth.txt"), &matrix_text(&pair.truth))?;

@@ -1,7 +1,7 @@
 //! `attitude.csv`: the gyro/compass reading at each stop, degrees.
 
 use super::{fmt_f64, numbered_lines, parse_count, parse_finite, read_text, write_atomic};
-use sdem::error::{Error, Result};
+use crate::error::{Error, Result};
 use sdem::geometry::Attitude;
 use std::path::Path;
 

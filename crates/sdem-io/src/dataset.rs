@@ -7,7 +7,7 @@ use super::{
     write_attitude_csv, write_points_ply, write_poses, write_sensor_toml, write_sweep, PointFormat,
     POINT_EXTENSIONS,
 };
-use sdem::error::{Error, Result};
+use crate::error::{Error, Result};
 use sdem::geometry::{Attitude, Pose, Vec3};
 use sdem::sensor::{SensorConfig, Sweep};
 use std::collections::HashMap;

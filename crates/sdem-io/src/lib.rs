@@ -183,7 +183,7 @@
 //!
 //! Scans are renumbered from `000000` in the order of their source numbers.
 
-use sdem::error::{Error, Result};
+pub use crate::error::{Error, Result};
 use sdem::geometry::Vec3;
 use sdem::sensor::{SensorConfig, Sweep};
 use std::ffi::OsString;
@@ -193,6 +193,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 mod attitude;
 mod dataset;
+mod error;
 mod import;
 mod mapfile;
 mod pcd;
@@ -500,7 +501,7 @@ pub fn read_slam_config(path: &Path) -> Result<sdem::slam::SlamOptions> {
 
 /// A configuration's validation error as a parse error of `path` at the line of `text` that
 /// sets the key the message names (the whole file where none does).
-fn at_named_key(path: &Path, text: &str, validated: Result<()>) -> Result<()> {
+fn at_named_key(path: &Path, text: &str, validated: sdem::Result<()>) -> Result<()> {
     validated.map_err(|e| {
         let message = e.to_string();
         Error::parse(path, line_of_named_key(text, &message), message)

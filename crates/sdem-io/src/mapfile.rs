@@ -23,8 +23,8 @@
 use super::poses::to_rotation;
 use super::voxels::crc32;
 use super::{remove_stale_temporaries, write_atomic};
+use crate::error::{Error, Result};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
-use sdem::error::{Error, Result};
 use sdem::geometry::{Attitude, Pose};
 use sdem::map::{LoopClosure, Map, Node};
 use sdem::posegraph::{Edge, EdgeKind};
@@ -324,6 +324,33 @@ pub fn save_map(
 /// non-finite or non-rotation pose, edges naming missing nodes — each naming the file.
 pub fn load_map(folder: &Path) -> Result<SavedMap> {
     let manifest_path = folder.join(MAP_MANIFEST);
+    let body = read_manifest(folder, &manifest_path)?;
+    let bad = |why: String| Error::parse(&manifest_path, None, why);
+    let mut nodes = Vec::with_capacity(body.nodes.len());
+    for (i, record) in body.nodes.iter().enumerate() {
+        nodes.push(load_node(folder, &manifest_path, i, record)?);
+    }
+    let edges = edges_from_records(&manifest_path, &body.edges, nodes.len())?;
+    let loop_closures = closures_from_records(&manifest_path, &body.loop_closures, nodes.len())?;
+    body.config
+        .validate()
+        .map_err(|e| bad(format!("invalid configuration: {e}")))?;
+    let node_files = NodeFiles {
+        crc32: body.nodes.iter().map(|r| r.points_crc32).collect(),
+    };
+    Ok(SavedMap {
+        node_files,
+        config: body.config,
+        map: Map { nodes },
+        edges,
+        loop_closures,
+        dataset: body.dataset,
+    })
+}
+
+/// Reads the manifest of the map in `folder` (at `manifest_path`) and checks its format, version
+/// and checksum; returns its body.
+fn read_manifest(folder: &Path, manifest_path: &Path) -> Result<Body> {
     if !manifest_path.is_file() {
         return Err(Error::Invalid(format!(
             "{} is not a saved map: {} is missing (sdem slam writes it into DIR/map)",
@@ -331,11 +358,11 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
             manifest_path.display()
         )));
     }
-    let bytes = std::fs::read(&manifest_path).map_err(|e| Error::io(&manifest_path, e))?;
-    let bad = |why: String| Error::parse(&manifest_path, None, why);
+    let bytes = std::fs::read(manifest_path).map_err(|e| Error::io(manifest_path, e))?;
+    let bad = |why: String| Error::parse(manifest_path, None, why);
     let manifest: Manifest = serde_json::from_slice(&bytes).map_err(|e| {
         Error::parse(
-            &manifest_path,
+            manifest_path,
             Some(e.line()),
             format!("not a map manifest: {e}"),
         )
@@ -372,65 +399,71 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
     let body: Body = serde_json::from_slice::<BodyOnly>(&bytes)
         .map_err(|e| {
             Error::parse(
-                &manifest_path,
+                manifest_path,
                 Some(e.line()),
                 format!("malformed map body: {e}"),
             )
         })?
         .body;
-    let mut nodes = Vec::with_capacity(body.nodes.len());
-    for (i, record) in body.nodes.iter().enumerate() {
-        if record.node_id != i {
-            return Err(bad(format!(
-                "node {i} is recorded with id {}",
-                record.node_id
-            )));
-        }
-        if record.points_file != points_file_name(i) {
-            return Err(bad(format!(
-                "node {i} names points file {:?}, expected {:?}",
-                record.points_file,
-                points_file_name(i)
-            )));
-        }
-        let world_from_sensor =
-            pose_from_row_major(&record.world_from_sensor).ok_or_else(|| {
-                bad(format!(
-                    "node {i}: the pose is not a finite rigid transform"
-                ))
-            })?;
-        let attitude_reading = match record.attitude_reading_deg {
-            Some(a) if a.iter().all(|v| v.is_finite()) => {
-                Some(Attitude::from_degrees(a[0], a[1], a[2]))
-            }
-            Some(_) => return Err(bad(format!("node {i}: non-finite attitude reading"))),
-            None => None,
-        };
-        let path = folder.join(&record.points_file);
-        let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-        let points_in_sensor = decode_points(&path, &bytes, record.points_crc32)?;
-        if points_in_sensor.len() != record.points {
-            return Err(Error::parse(
-                &path,
-                None,
-                format!(
-                    "holds {} points, the map says {}",
-                    points_in_sensor.len(),
-                    record.points
-                ),
-            ));
-        }
-        nodes.push(Node {
-            node_id: i,
-            scan_index: record.scan_index,
-            world_from_sensor,
-            attitude_reading,
-            points_in_sensor,
-        });
+    Ok(body)
+}
+
+/// Node `i` of the map in `folder` from its manifest record and its points file, checked.
+fn load_node(folder: &Path, manifest_path: &Path, i: usize, record: &NodeRecord) -> Result<Node> {
+    let bad = |why: String| Error::parse(manifest_path, None, why);
+    if record.node_id != i {
+        return Err(bad(format!(
+            "node {i} is recorded with id {}",
+            record.node_id
+        )));
     }
-    let n = nodes.len();
-    let mut edges = Vec::with_capacity(body.edges.len());
-    for (k, e) in body.edges.iter().enumerate() {
+    if record.points_file != points_file_name(i) {
+        return Err(bad(format!(
+            "node {i} names points file {:?}, expected {:?}",
+            record.points_file,
+            points_file_name(i)
+        )));
+    }
+    let world_from_sensor = pose_from_row_major(&record.world_from_sensor).ok_or_else(|| {
+        bad(format!(
+            "node {i}: the pose is not a finite rigid transform"
+        ))
+    })?;
+    let attitude_reading = match record.attitude_reading_deg {
+        Some(a) if a.iter().all(|v| v.is_finite()) => {
+            Some(Attitude::from_degrees(a[0], a[1], a[2]))
+        }
+        Some(_) => return Err(bad(format!("node {i}: non-finite attitude reading"))),
+        None => None,
+    };
+    let path = folder.join(&record.points_file);
+    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    let points_in_sensor = decode_points(&path, &bytes, record.points_crc32)?;
+    if points_in_sensor.len() != record.points {
+        return Err(Error::parse(
+            &path,
+            None,
+            format!(
+                "holds {} points, the map says {}",
+                points_in_sensor.len(),
+                record.points
+            ),
+        ));
+    }
+    Ok(Node {
+        node_id: i,
+        scan_index: record.scan_index,
+        world_from_sensor,
+        attitude_reading,
+        points_in_sensor,
+    })
+}
+
+/// The pose graph's edges from their manifest records, checked against the `n` nodes.
+fn edges_from_records(manifest_path: &Path, records: &[EdgeRecord], n: usize) -> Result<Vec<Edge>> {
+    let bad = |why: String| Error::parse(manifest_path, None, why);
+    let mut edges = Vec::with_capacity(records.len());
+    for (k, e) in records.iter().enumerate() {
         if e.from >= n || e.to >= n {
             return Err(bad(format!(
                 "edge {k} joins nodes {} and {}, but there are {n}",
@@ -450,8 +483,18 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
             kind: e.kind,
         });
     }
-    let mut loop_closures = Vec::with_capacity(body.loop_closures.len());
-    for (k, c) in body.loop_closures.iter().enumerate() {
+    Ok(edges)
+}
+
+/// The accepted loop closures from their manifest records, checked against the `n` nodes.
+fn closures_from_records(
+    manifest_path: &Path,
+    records: &[ClosureRecord],
+    n: usize,
+) -> Result<Vec<LoopClosure>> {
+    let bad = |why: String| Error::parse(manifest_path, None, why);
+    let mut loop_closures = Vec::with_capacity(records.len());
+    for (k, c) in records.iter().enumerate() {
         if c.from >= n || c.to >= n {
             return Err(bad(format!("loop closure {k} joins missing nodes")));
         }
@@ -470,20 +513,7 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
             covariance: None,
         });
     }
-    body.config
-        .validate()
-        .map_err(|e| bad(format!("invalid configuration: {e}")))?;
-    let node_files = NodeFiles {
-        crc32: body.nodes.iter().map(|r| r.points_crc32).collect(),
-    };
-    Ok(SavedMap {
-        node_files,
-        config: body.config,
-        map: Map { nodes },
-        edges,
-        loop_closures,
-        dataset: body.dataset,
-    })
+    Ok(loop_closures)
 }
 
 #[cfg(test)]

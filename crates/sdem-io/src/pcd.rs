@@ -7,7 +7,7 @@
 //! `VIEWPOINT` are ignored, as are unknown keys.
 
 use super::{count_newlines, parse_count, read_bytes};
-use sdem::error::{Error, Result};
+use crate::error::{Error, Result};
 use sdem::geometry::Vec3;
 use std::path::Path;
 

@@ -8,9 +8,9 @@
 //! to accept the `nan` that scanners write for "no return".
 
 use super::{check_points_writable, read_bytes, write_atomic};
+use crate::error::{Error, Result};
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{ElementDef, Encoding, Property, PropertyAccess, PropertyType, ScalarType};
-use sdem::error::{Error, Result};
 use sdem::geometry::Vec3;
 use std::collections::{HashMap, HashSet};
 use std::path::Path;

@@ -1,7 +1,7 @@
 //! Point-cloud dispatch and the simple formats: `.xyz` / `.txt`, 3DTK `.3d`, KITTI `.bin`.
 
 use super::{numbered_lines, parse_finite, read_bytes, read_text, sweep_points};
-use sdem::error::{Error, Result};
+use crate::error::{Error, Result};
 use sdem::geometry::Vec3;
 use std::path::Path;
 

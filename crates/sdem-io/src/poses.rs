@@ -1,8 +1,8 @@
 //! Pose files: KITTI (row-major 3×4 `[R | t]` per line) and TUM (`t x y z qx qy qz qw`).
 
 use super::{fmt_f64, numbered_lines, parse_finite, read_text, write_atomic};
+use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion};
-use sdem::error::{Error, Result};
 use sdem::geometry::Pose;
 use std::path::Path;
 

@@ -5,7 +5,7 @@ use super::attitude::tilt_reading_problem;
 use super::{
     fmt_f64, numbered_lines, parse_count, parse_finite, read_text, write_atomic, MAX_MEDIAN_RANGE_M,
 };
-use sdem::error::{Error, Result};
+use crate::error::{Error, Result};
 use sdem::geometry::Attitude;
 use sdem::sensor::{Sweep, SweepLine};
 use std::path::Path;
@@ -90,9 +90,9 @@ fn fmt_range(r: f32) -> String {
 /// every range must be NaN (no return) or finite and ≥ 0; otherwise this is an
 /// [`Error::Invalid`] and nothing is written.
 pub fn write_sweep(path: &Path, sweep: &Sweep) -> Result<()> {
-    sweep.validate()?;
     let refuse =
         |why: String| Error::Invalid(format!("refusing to write {}: {why}", path.display()));
+    sweep.validate().map_err(|e| refuse(e.to_string()))?;
     let pan_count = sweep.lines.first().map_or(0, |l| l.ranges.len());
     if sweep.lines.is_empty() || pan_count == 0 {
         return Err(refuse("the sweep has no lines or no beams".into()));
@@ -168,148 +168,19 @@ pub fn read_sweep(path: &Path) -> Result<Sweep> {
         ));
     }
     let last_line = text.lines().count();
-    let mut lines = numbered_lines(&text).filter(|(_, l)| {
-        let t = l.trim_start();
-        !t.is_empty() && !t.starts_with('#')
-    });
-    let mut next_header = |key: &str, usage: &str| -> Result<(usize, Vec<&str>)> {
-        let Some((line_no, line)) = lines.next() else {
-            return Err(Error::parse(
-                path,
-                Some(last_line),
-                format!(
-                    "the file ends here, before the '{usage}' line; the sweep header is incomplete"
-                ),
-            ));
-        };
-        let tokens: Vec<&str> = line.split_whitespace().collect();
-        if tokens.first() != Some(&key) {
-            return Err(Error::parse(
-                path,
-                Some(line_no),
-                format!("expected '{usage}' here"),
-            ));
-        }
-        Ok((line_no, tokens))
+    let mut header = Header {
+        path,
+        last_line,
+        lines: numbered_lines(&text).filter(|(_, l)| {
+            let t = l.trim_start();
+            !t.is_empty() && !t.starts_with('#')
+        }),
     };
-
-    let (line_no, tokens) = next_header(SWEEP_MAGIC, "sdem-sweep 1").map_err(|e| match e {
-        Error::Parse { line, .. } => Error::parse(
-            path,
-            line,
-            "not an sdem sweep file: the first line must be 'sdem-sweep 1'",
-        ),
-        other => other,
-    })?;
-    match tokens.as_slice() {
-        [_, version] if version.parse::<u32>() == Ok(SWEEP_VERSION) => {}
-        [_, version] => {
-            return Err(Error::parse(
-                path,
-                Some(line_no),
-                format!(
-                    "sweep format version '{version}' is not supported; this sdem reads version \
-                     {SWEEP_VERSION}"
-                ),
-            ))
-        }
-        _ => {
-            return Err(Error::parse(
-                path,
-                Some(line_no),
-                "expected 'sdem-sweep 1' (the magic word and the format version)",
-            ))
-        }
-    }
-
-    let (line_no, tokens) = next_header("pan_deg", "pan_deg PAN_MIN PAN_STEP PAN_COUNT")?;
-    let [_, pan_min, pan_step, pan_count] = tokens.as_slice() else {
-        return Err(Error::parse(
-            path,
-            Some(line_no),
-            "expected 'pan_deg PAN_MIN PAN_STEP PAN_COUNT' (degrees, degrees, beams per line)",
-        ));
-    };
-    let pan_min_deg = parse_finite(path, line_no, pan_min, "PAN_MIN")?;
-    let pan_step_deg = parse_finite(path, line_no, pan_step, "PAN_STEP")?;
-    if pan_step_deg <= 0.0 {
-        return Err(Error::parse(
-            path,
-            Some(line_no),
-            format!("PAN_STEP is {pan_step_deg}; it must be > 0"),
-        ));
-    }
-    let pan_count = parse_count(path, line_no, pan_count, "PAN_COUNT")?;
-    if !(1..=MAX_PAN_COUNT).contains(&pan_count) {
-        return Err(Error::parse(
-            path,
-            Some(line_no),
-            format!("PAN_COUNT is {pan_count}; it must lie in 1..={MAX_PAN_COUNT}"),
-        ));
-    }
-    if let Some(why) = pan_problem(pan_min_deg, pan_step_deg, pan_count) {
-        return Err(Error::parse(path, Some(line_no), why));
-    }
-
-    let (line_no, tokens) = next_header("lift_slide_m", "lift_slide_m U")?;
-    let [_, slide] = tokens.as_slice() else {
-        return Err(Error::parse(
-            path,
-            Some(line_no),
-            "expected 'lift_slide_m U' (the lift's slide, metres)",
-        ));
-    };
-    let lift_slide_m = parse_finite(path, line_no, slide, "the lift slide")?;
-
-    let (line_no, tokens) = next_header("lines", "lines N")?;
-    let [_, count] = tokens.as_slice() else {
-        return Err(Error::parse(
-            path,
-            Some(line_no),
-            "expected 'lines N' (the number of scan lines that follow)",
-        ));
-    };
-    let line_count = parse_count(path, line_no, count, "the line count")?;
-    // Every value takes at least one character and one separator.
-    let min_line_bytes = 2 * (4 + pan_count);
-    if line_count == 0 || line_count > text.len() / min_line_bytes {
-        return Err(Error::parse(
-            path,
-            Some(line_no),
-            format!(
-                "'lines {line_count}' cannot be right: a sweep has at least one line, and {} bytes \
-                 hold at most {} lines of {} values",
-                text.len(),
-                text.len() / min_line_bytes,
-                4 + pan_count
-            ),
-        ));
-    }
-
-    let mut sweep_lines = Vec::with_capacity(line_count);
-    let mut line_numbers = Vec::with_capacity(line_count);
-    for (line_no, line) in lines {
-        if sweep_lines.len() == line_count {
-            return Err(Error::parse(
-                path,
-                Some(line_no),
-                format!("more data lines than the {line_count} that 'lines' declares"),
-            ));
-        }
-        sweep_lines.push(data_line(path, line_no, line, pan_count)?);
-        line_numbers.push(line_no);
-    }
-    if sweep_lines.len() != line_count {
-        return Err(Error::parse(
-            path,
-            Some(last_line),
-            format!(
-                "the file ends here, after {} of the {line_count} data lines that 'lines' declares; \
-                 it is truncated",
-                sweep_lines.len()
-            ),
-        ));
-    }
+    header.magic()?;
+    let (pan_min_deg, pan_step_deg, pan_count) = header.pan()?;
+    let lift_slide_m = header.lift_slide()?;
+    let line_count = header.line_count(text.len(), pan_count)?;
+    let (sweep_lines, line_numbers) = header.data_lines(line_count, pan_count)?;
     if !text.ends_with('\n') {
         return Err(Error::parse(
             path,
@@ -332,6 +203,185 @@ pub fn read_sweep(path: &Path) -> Result<Sweep> {
         return Err(Error::parse(path, line, ranges_message(median)));
     }
     Ok(sweep)
+}
+
+/// A `.sweep` file being read: its numbered lines that are neither blank nor comments, the header
+/// lines first, one at a time, then the data lines.
+struct Header<'p, I> {
+    path: &'p Path,
+    /// The file's last line number, for errors at its end.
+    last_line: usize,
+    lines: I,
+}
+
+impl<'t, I: Iterator<Item = (usize, &'t str)>> Header<'_, I> {
+    /// The next header line, which must start with `key` (`usage` shows the whole line): its
+    /// number and its tokens.
+    fn next(&mut self, key: &str, usage: &str) -> Result<(usize, Vec<&'t str>)> {
+        let Some((line_no, line)) = self.lines.next() else {
+            return Err(Error::parse(
+                self.path,
+                Some(self.last_line),
+                format!(
+                    "the file ends here, before the '{usage}' line; the sweep header is incomplete"
+                ),
+            ));
+        };
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        if tokens.first() != Some(&key) {
+            return Err(Error::parse(
+                self.path,
+                Some(line_no),
+                format!("expected '{usage}' here"),
+            ));
+        }
+        Ok((line_no, tokens))
+    }
+
+    /// The magic line, `sdem-sweep 1`.
+    fn magic(&mut self) -> Result<()> {
+        let path = self.path;
+        let (line_no, tokens) = self
+            .next(SWEEP_MAGIC, "sdem-sweep 1")
+            .map_err(|e| match e {
+                Error::Parse { line, .. } => Error::parse(
+                    path,
+                    line,
+                    "not an sdem sweep file: the first line must be 'sdem-sweep 1'",
+                ),
+                other => other,
+            })?;
+        match tokens.as_slice() {
+            [_, version] if version.parse::<u32>() == Ok(SWEEP_VERSION) => Ok(()),
+            [_, version] => Err(Error::parse(
+                path,
+                Some(line_no),
+                format!(
+                    "sweep format version '{version}' is not supported; this sdem reads version \
+                     {SWEEP_VERSION}"
+                ),
+            )),
+            _ => Err(Error::parse(
+                path,
+                Some(line_no),
+                "expected 'sdem-sweep 1' (the magic word and the format version)",
+            )),
+        }
+    }
+
+    /// The `pan_deg PAN_MIN PAN_STEP PAN_COUNT` line: the first beam's angle and the step,
+    /// degrees, and the beams per line.
+    fn pan(&mut self) -> Result<(f64, f64, usize)> {
+        let path = self.path;
+        let (line_no, tokens) = self.next("pan_deg", "pan_deg PAN_MIN PAN_STEP PAN_COUNT")?;
+        let [_, pan_min, pan_step, pan_count] = tokens.as_slice() else {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                "expected 'pan_deg PAN_MIN PAN_STEP PAN_COUNT' (degrees, degrees, beams per line)",
+            ));
+        };
+        let pan_min_deg = parse_finite(path, line_no, pan_min, "PAN_MIN")?;
+        let pan_step_deg = parse_finite(path, line_no, pan_step, "PAN_STEP")?;
+        if pan_step_deg <= 0.0 {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!("PAN_STEP is {pan_step_deg}; it must be > 0"),
+            ));
+        }
+        let pan_count = parse_count(path, line_no, pan_count, "PAN_COUNT")?;
+        if !(1..=MAX_PAN_COUNT).contains(&pan_count) {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!("PAN_COUNT is {pan_count}; it must lie in 1..={MAX_PAN_COUNT}"),
+            ));
+        }
+        if let Some(why) = pan_problem(pan_min_deg, pan_step_deg, pan_count) {
+            return Err(Error::parse(path, Some(line_no), why));
+        }
+        Ok((pan_min_deg, pan_step_deg, pan_count))
+    }
+
+    /// The `lift_slide_m U` line: the lift's slide, metres.
+    fn lift_slide(&mut self) -> Result<f64> {
+        let (line_no, tokens) = self.next("lift_slide_m", "lift_slide_m U")?;
+        let [_, slide] = tokens.as_slice() else {
+            return Err(Error::parse(
+                self.path,
+                Some(line_no),
+                "expected 'lift_slide_m U' (the lift's slide, metres)",
+            ));
+        };
+        parse_finite(self.path, line_no, slide, "the lift slide")
+    }
+
+    /// The `lines N` line: the number of scan lines, which a file of `text_len` bytes with
+    /// `pan_count` beams per line must be able to hold.
+    fn line_count(&mut self, text_len: usize, pan_count: usize) -> Result<usize> {
+        let path = self.path;
+        let (line_no, tokens) = self.next("lines", "lines N")?;
+        let [_, count] = tokens.as_slice() else {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                "expected 'lines N' (the number of scan lines that follow)",
+            ));
+        };
+        let line_count = parse_count(path, line_no, count, "the line count")?;
+        // Every value takes at least one character and one separator.
+        let min_line_bytes = 2 * (4 + pan_count);
+        if line_count == 0 || line_count > text_len / min_line_bytes {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!(
+                    "'lines {line_count}' cannot be right: a sweep has at least one line, and {} \
+                     bytes hold at most {} lines of {} values",
+                    text_len,
+                    text_len / min_line_bytes,
+                    4 + pan_count
+                ),
+            ));
+        }
+        Ok(line_count)
+    }
+
+    /// The rest of the file: exactly `line_count` data lines of `pan_count` beams, with their
+    /// line numbers.
+    fn data_lines(
+        self,
+        line_count: usize,
+        pan_count: usize,
+    ) -> Result<(Vec<SweepLine>, Vec<usize>)> {
+        let path = self.path;
+        let mut sweep_lines = Vec::with_capacity(line_count);
+        let mut line_numbers = Vec::with_capacity(line_count);
+        for (line_no, line) in self.lines {
+            if sweep_lines.len() == line_count {
+                return Err(Error::parse(
+                    path,
+                    Some(line_no),
+                    format!("more data lines than the {line_count} that 'lines' declares"),
+                ));
+            }
+            sweep_lines.push(data_line(path, line_no, line, pan_count)?);
+            line_numbers.push(line_no);
+        }
+        if sweep_lines.len() != line_count {
+            return Err(Error::parse(
+                path,
+                Some(self.last_line),
+                format!(
+                    "the file ends here, after {} of the {line_count} data lines that 'lines' \
+                     declares; it is truncated",
+                    sweep_lines.len()
+                ),
+            ));
+        }
+        Ok((sweep_lines, line_numbers))
+    }
 }
 
 /// Parses `TILT ROLL PITCH YAW R_0 … R_(n−1)`.

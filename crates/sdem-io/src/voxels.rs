@@ -2,7 +2,7 @@
 //! [`crate`]).
 
 use super::{read_bytes, write_atomic};
-use sdem::error::{Error, Result};
+use crate::error::{Error, Result};
 use sdem::voxel::{VoxelConfig, VoxelKey, VoxelMap, MAX_KEY};
 use std::path::Path;
 

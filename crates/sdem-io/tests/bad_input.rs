@@ -157,7 +157,7 @@ fn folder(
 }
 
 /// Runs one reader on `path` (a file, or a folder for `Map` and `Dataset`).
-fn read(reader: Reader, path: &Path) -> sdem::Result<()> {
+fn read(reader: Reader, path: &Path) -> sdem_io::Result<()> {
     match reader {
         Reader::Points => sdem_io::read_points(path).map(drop),
         Reader::Sweep => sdem_io::read_sweep(path).map(drop),
@@ -1300,5 +1300,5 @@ fn unit_checks_accept_real_extremes() {
     assert_eq!(sdem_io::read_attitude_csv(&path).unwrap().len(), 2);
     // Writers refuse what the readers refuse, so sdem never writes such a file.
     let err = sdem_io::write_attitude_csv(&path, &[Attitude::from_degrees(400.0, 0.0, 0.0)]);
-    assert!(matches!(err, Err(sdem::Error::Invalid(_))), "{err:?}");
+    assert!(matches!(err, Err(sdem_io::Error::Invalid(_))), "{err:?}");
 }

@@ -157,7 +157,7 @@ fn check_attitude(a: &Attitude) -> Result<(), String> {
 
 /// Reads `path` as `target` and checks what came back; `Ok(Err(message))` is a reader's error.
 fn read_and_check(target: Target, path: &Path) -> Result<Result<(), String>, String> {
-    let e = |e: sdem::Error| Ok(Err(e.to_string()));
+    let e = |e: sdem_io::Error| Ok(Err(e.to_string()));
     let checked = match target {
         Target::Points(_) => match sdem_io::read_points(path) {
             Ok(points) => check_points(&points),

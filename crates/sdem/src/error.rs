@@ -1,30 +1,10 @@
-//! The library's error type: every failure says what was wrong and where.
+//! The library's error type: every failure says what was wrong and where, with its figures.
 
-use std::path::PathBuf;
-
-/// What can go wrong in sdem. Each variant's message names the problem and, for files, the path
-/// and line, so the command line can print it as one line.
+/// What can go wrong in sdem's algorithms: a variant per cause a caller can act on, each with
+/// its figures, and a message that can be printed as one line. (Files have their own errors, in
+/// `sdem-io`.)
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// A file could not be opened, read or written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What the operating system said.
-        #[source]
-        source: std::io::Error,
-    },
-    /// A file was read but its content is malformed.
-    #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
-    Parse {
-        /// The file.
-        path: PathBuf,
-        /// The 1-based line, where the problem has one.
-        line: Option<usize>,
-        /// What is wrong and, where possible, how to fix it.
-        message: String,
-    },
     /// An option, argument or configuration value is out of its valid range; the message says
     /// which and what range.
     #[error("{0}")]
@@ -118,27 +98,6 @@ impl Error {
             | Error::NotFound { .. } => true,
             Error::AtScan { source, .. } => source.is_no_match(),
             _ => false,
-        }
-    }
-
-    /// An I/O error on `path`.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io {
-            path: path.into(),
-            source,
-        }
-    }
-
-    /// A parse error in `path` at 1-based `line` (or `None` for the whole file).
-    pub fn parse(
-        path: impl Into<PathBuf>,
-        line: Option<usize>,
-        message: impl Into<String>,
-    ) -> Self {
-        Error::Parse {
-            path: path.into(),
-            line,
-            message: message.into(),
         }
     }
 }

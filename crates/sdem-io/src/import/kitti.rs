@@ -14,12 +14,12 @@ use super::{
     ImportOptions, ImportSummary,
 };
 use crate::dataset::check_no_stale_file;
+use crate::error::{Error, Result};
 use crate::poses::parse_row_major_pose;
 use crate::{
     numbered_lines, read_bytes, read_kitti_poses, read_points, read_text, write_atomic,
     write_poses, SCANS_DIR, TRUTH_FILE,
 };
-use sdem::error::{Error, Result};
 use sdem::geometry::Pose;
 use std::path::Path;
 

@@ -8,7 +8,7 @@
 //! failed write).
 
 use super::{clear_dataset, DATASET_ENTRIES, SCANS_DIR};
-use sdem::error::{Error, Result};
+use crate::error::{Error, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 

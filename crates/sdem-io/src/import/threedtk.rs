@@ -35,13 +35,13 @@ use super::{
     ImportOptions, ImportSummary,
 };
 use crate::dataset::{ODOMETRY_FILE, SLAM6D_FILE};
+use crate::error::{Error, Result};
 use crate::poses::to_rotation;
 use crate::{
     numbered_lines, parse_finite, read_points, read_text, write_attitude_csv, write_points_ply,
     write_poses, write_sensor_toml, ATTITUDE_FILE, SCANS_DIR, SENSOR_FILE,
 };
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
-use sdem::error::{Error, Result};
 use sdem::geometry::{attitude_of, Attitude, Pose, Vec3};
 use sdem::sensor::SensorConfig;
 use std::path::Path;

@@ -1,0 +1,62 @@
+//! The errors of reading and writing files: each names the file and, where it has one, the line.
+
+use std::path::PathBuf;
+
+/// What can go wrong reading or writing sdem's files. Each message names the file and, for
+/// text, the 1-based line, and says what is wrong and how to fix it, so the command line can
+/// print it as one line.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file could not be opened, read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the operating system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file was read but its content is malformed.
+    #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// The 1-based line, where the problem has one.
+        line: Option<usize>,
+        /// What is wrong and, where possible, how to fix it.
+        message: String,
+    },
+    /// A request that cannot be carried out as asked (a folder that would be overwritten, data
+    /// that cannot be written in the format); the message says which and how to fix it.
+    #[error("{0}")]
+    Invalid(String),
+    /// An error of the algorithms, passed on (an invalid configuration read from a file, …).
+    #[error(transparent)]
+    Sdem(#[from] sdem::Error),
+}
+
+impl Error {
+    /// An I/O error on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Error::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A parse error in `path` at 1-based `line` (or `None` for the whole file).
+    pub fn parse(
+        path: impl Into<PathBuf>,
+        line: Option<usize>,
+        message: impl Into<String>,
+    ) -> Self {
+        Error::Parse {
+            path: path.into(),
+            line,
+            message: message.into(),
+        }
+    }
+}
+
+/// The result of reading or writing a file.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
