@@ -7,80 +7,143 @@ use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim;
 use std::sync::OnceLock;
 
-/// The loop of the simulated collapsed building (stops i..=j of the 40-stop route, where
+/// The loop of the simulated collapsed building `seed` (stops i..=j of the 40-stop route, where
 /// stop j stands where stop i stood), 5 mm range noise, compass noise 2°, odometry 5 % and
-/// 0.5° per step, mapped once and shared by the tests below.
+/// 0.5° per step, mapped stop by stop.
 struct LoopRun {
+    scene: sim::Scene,
     slam: Slam,
     truth: Vec<Pose>,
     steps: Vec<StepReport>,
 }
 
-fn loop_run() -> &'static LoopRun {
-    static RUN: OnceLock<LoopRun> = OnceLock::new();
-    RUN.get_or_init(|| {
-        let seed = 1;
-        let scene = sim::collapsed_building(seed);
-        let sensor = SensorConfig {
-            compass_noise_deg: 2.0,
-            ..Default::default()
-        };
-        let stops =
-            sim::collapsed_building_stops(&scene, seed, sim::MAX_STOPS, &sensor.lift).unwrap();
-        let (i, j) = scene.loop_closure_stops().unwrap();
-        let run = sim::simulate_run(&scene, &stops[i..=j], &sensor, seed).unwrap();
-        let truth: Vec<Pose> = run.iter().map(|s| s.world_from_sensor).collect();
-        let odometry = simulate_odometry(&truth, &OdometryNoise::default(), seed).unwrap();
-        let mut slam = Slam::new(SlamOptions::default()).unwrap();
-        let steps = run
-            .iter()
-            .enumerate()
-            .map(|(k, stop)| {
-                let points = stop.sweep.points_in_sensor();
-                slam.add_scan(&ScanInput {
-                    scan_index: k,
-                    points_in_sensor: &points,
-                    attitude: Some(stop.sweep.mean_attitude()),
-                    odometry: (k > 0).then(|| Odometry {
-                        odom_from_sensor: odometry[k],
-                        odom_from_previous_sensor: odometry[k - 1],
-                    }),
-                })
-                .unwrap()
+fn map_loop(seed: u64) -> LoopRun {
+    let scene = sim::collapsed_building(seed);
+    let sensor = SensorConfig {
+        compass_noise_deg: 2.0,
+        ..Default::default()
+    };
+    let stops = sim::collapsed_building_stops(&scene, seed, sim::MAX_STOPS, &sensor.lift).unwrap();
+    let (i, j) = scene.loop_closure_stops().unwrap();
+    let run = sim::simulate_run(&scene, &stops[i..=j], &sensor, seed).unwrap();
+    let truth: Vec<Pose> = run.iter().map(|s| s.world_from_sensor).collect();
+    let odometry = simulate_odometry(&truth, &OdometryNoise::default(), seed).unwrap();
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
+    let steps = run
+        .iter()
+        .enumerate()
+        .map(|(k, stop)| {
+            let points = stop.sweep.points_in_sensor();
+            slam.add_scan(&ScanInput {
+                scan_index: k,
+                points_in_sensor: &points,
+                attitude: Some(stop.sweep.mean_attitude()),
+                odometry: (k > 0).then(|| Odometry {
+                    odom_from_sensor: odometry[k],
+                    odom_from_previous_sensor: odometry[k - 1],
+                }),
             })
-            .collect();
-        LoopRun { slam, truth, steps }
-    })
+            .unwrap()
+        })
+        .collect();
+    LoopRun {
+        scene,
+        slam,
+        truth,
+        steps,
+    }
 }
 
+/// The loop of seed 1, mapped once and shared by the tests below.
+fn loop_run() -> &'static LoopRun {
+    static RUN: OnceLock<LoopRun> = OnceLock::new();
+    RUN.get_or_init(|| map_loop(1))
+}
+
+impl LoopRun {
+    /// The scene's frame from the map's: the map's world is the first scan's sensor (levelled
+    /// by its own, noisy, attitude reading) and the pose graph holds node 0 fixed, so this
+    /// takes node 0 to where it truly stood and nothing else. No best fit: an error anywhere
+    /// else in the map stays in the comparison.
+    fn scene_from_map(&self) -> Pose {
+        self.truth[0] * self.slam.map.nodes[0].world_from_sensor.inverse()
+    }
+}
+
+/// Every pose of the loop lies within 2 cm of the truth, both as each step reported it (before
+/// the loop closed: the drift) and as the closed loop left it, on three buildings (each maps
+/// in about 2 s; when written the worst step was 12.6 mm off, the worst final pose 10.9 mm, the
+/// worst motion between two stops 2.6 mm).
 #[test]
 fn the_simulated_loop_is_closed_and_the_map_stays_within_2_cm() {
-    let run = loop_run();
-    assert!(run.truth.len() >= 20, "a loop of {} stops", run.truth.len());
-    let accepted: Vec<&LoopClosure> = run
-        .steps
-        .iter()
-        .flat_map(|s| &s.loop_closures)
-        .filter(|c| c.accepted)
-        .collect();
-    let last = run.truth.len() - 1;
-    assert!(
-        accepted.iter().any(|c| c.to == last && c.from <= 2),
-        "the return to the loop's start was not closed: {:?}",
-        run.steps
-            .iter()
-            .flat_map(|s| &s.loop_closures)
-            .collect::<Vec<_>>()
-    );
-    assert!(run.steps.iter().any(|s| s.optimization.is_some()));
-    let errors = trajectory_errors(&run.slam.poses(), &run.truth).unwrap();
-    assert!(
-        errors.ate_rmse_m <= 0.02,
-        "ATE RMSE {} m",
-        errors.ate_rmse_m
-    );
-    // Every step's own match is good too.
-    assert!(errors.rpe_translation_rmse_m <= 0.01, "{errors:?}");
+    let (_, extra) = rayon::join(loop_run, || [2, 3].map(map_loop));
+    for (seed, run) in [(1, loop_run())]
+        .into_iter()
+        .chain([2, 3].into_iter().zip(&extra))
+    {
+        assert!(
+            run.truth.len() >= 20,
+            "seed {seed}: {} stops",
+            run.truth.len()
+        );
+        let last = run.truth.len() - 1;
+        let closures: Vec<&LoopClosure> = run.steps.iter().flat_map(|s| &s.loop_closures).collect();
+        assert!(
+            closures
+                .iter()
+                .any(|c| c.accepted && c.to == last && c.from <= 2),
+            "seed {seed}: the return to the loop's start was not closed: {closures:?}"
+        );
+        assert!(
+            run.steps.iter().any(|s| s.optimization.is_some()),
+            "seed {seed}"
+        );
+        let scene_from_map = run.scene_from_map();
+        let off = |k: usize, map_from_sensor: &Pose| {
+            ((scene_from_map * map_from_sensor).translation.vector
+                - run.truth[k].translation.vector)
+                .norm()
+        };
+        let reported: Vec<f64> = (run.steps.iter().enumerate())
+            .map(|(k, step)| off(k, &Pose::from(&step.world_from_sensor)))
+            .collect();
+        let poses = run.slam.poses();
+        let final_errors: Vec<f64> = (poses.iter().enumerate())
+            .map(|(k, pose)| off(k, pose))
+            .collect();
+        // Every step's own match is good too: each motion between consecutive stops.
+        let motion_errors: Vec<f64> = (1..poses.len())
+            .map(|k| {
+                let estimated = poses[k - 1].inverse() * poses[k];
+                let true_motion = run.truth[k - 1].inverse() * run.truth[k];
+                (true_motion.inverse() * estimated)
+                    .translation
+                    .vector
+                    .norm()
+            })
+            .collect();
+        let worst = |e: &[f64]| e.iter().copied().fold(0.0, f64::max);
+        println!(
+            "seed {seed}: worst step {:.4} m, worst final pose {:.4} m, worst motion {:.4} m",
+            worst(&reported),
+            worst(&final_errors),
+            worst(&motion_errors)
+        );
+        assert!(
+            worst(&reported) <= 0.02,
+            "seed {seed}: the steps reported poses off by {reported:.3?} m"
+        );
+        assert!(
+            worst(&final_errors) <= 0.02,
+            "seed {seed}: the nodes end off by {final_errors:.3?} m"
+        );
+        let errors = trajectory_errors(&poses, &run.truth).unwrap();
+        assert!(errors.ate_max_m <= 0.02, "seed {seed}: {errors:?}");
+        assert!(
+            worst(&motion_errors) <= 0.01,
+            "seed {seed}: the motions between stops are off by {motion_errors:.3?} m"
+        );
+    }
 }
 
 #[test]
@@ -118,25 +181,154 @@ fn a_wrong_loop_closure_proposed_on_purpose_is_rejected() {
     assert!(closure.accepted, "{closure:?}");
 }
 
+/// True when a surface of `scene` (a face of the air or of a solid) passes within `h` of
+/// `p`: the centre and the eight corners of the cube `p ± h` do not all agree on being free.
+/// A plane within `h` of `p` always separates the centre from one corner (the corner's offset
+/// along the plane's normal is `h |n|₁ ≥ h`); a surface found lies at most `h √3` away.
+fn near_a_surface(scene: &sim::Scene, p: &Vec3, h: f64) -> bool {
+    let free = scene.is_free(p);
+    (0..8).any(|corner: u32| {
+        let sign = |bit: u32| if corner & (1 << bit) == 0 { -h } else { h };
+        scene.is_free(&(p + Vec3::new(sign(0), sign(1), sign(2)))) != free
+    })
+}
+
+/// The fused map of the loop against the scene it was mapped in: its occupied voxels lie on
+/// the scene's surfaces, its free voxels in the scene's air, and what the sensor saw from
+/// the true poses is in it.
 #[test]
 fn the_fused_map_holds_the_scene_and_free_space() {
     let run = loop_run();
-    let (occupied, free) = run.slam.voxels.counts();
+    let scene = &run.scene;
+    let voxels = &run.slam.voxels;
+    let s = voxels.voxel_m();
+    let scene_from_map = run.scene_from_map();
+    let in_scene =
+        |key: &[i32; 3]| (scene_from_map * nalgebra::Point3::from(voxels.centre_of(key))).coords;
+    let (occupied, free): (Vec<Vec3>, Vec<Vec3>) = {
+        let (mut occupied, mut free) = (Vec::new(), Vec::new());
+        for (key, log_odds) in voxels.iter() {
+            let centre = in_scene(&key);
+            if log_odds > 0.0 {
+                occupied.push(centre);
+            } else {
+                free.push(centre);
+            }
+        }
+        (occupied, free)
+    };
+    assert_eq!((occupied.len(), free.len()), voxels.counts());
     assert!(
-        occupied > 1000 && free > occupied,
-        "{occupied} occupied, {free} free"
+        occupied.len() > 10_000 && free.len() > occupied.len(),
+        "{} occupied, {} free",
+        occupied.len(),
+        free.len()
+    );
+
+    // Occupied voxels lie on the scene's surfaces: a surface passes within one voxel of the
+    // centre. A return lies inside its voxel, so its centre is at most s√3/2 from the surface
+    // hit, and the poses are within 2 cm (the test above): every voxel would pass but for far,
+    // grazing returns, where 0.5° of attitude error moves a point 4 cm at 5 m. When written,
+    // 99.84 % passed (99.77–99.93 % on seeds 1–6).
+    let on_surface = |points: &[Vec3]| {
+        points
+            .iter()
+            .filter(|c| near_a_surface(scene, c, s))
+            .count() as f64
+            / points.len() as f64
+    };
+    let fraction = on_surface(&occupied);
+    assert!(
+        fraction >= 0.995,
+        "{:.3} % of the occupied voxels lie off the scene's surfaces",
+        100.0 * (1.0 - fraction)
+    );
+    // The check can fail: the same voxels 10 cm higher mostly float off the floors (67 % on
+    // a surface when written: walls and rubble keep some).
+    let raised: Vec<Vec3> = occupied
+        .iter()
+        .map(|c| c + Vec3::new(0.0, 0.0, 0.1))
+        .collect();
+    assert!(on_surface(&raised) < 0.9);
+
+    // Free voxels lie in the scene's air, between the sensors and the surfaces they saw. A ray
+    // that grazes a surface crosses voxels whose centres lie just behind it (0.29 % of the free
+    // voxels when written, 0.3–0.5 % on seeds 1–6), so those may be within a voxel of a
+    // surface; deeper in a solid, or outside the air, a free voxel is a ray registered through
+    // a wall (3 of 288,767 when written; at most 1 in 10,000 on seeds 1–6).
+    let mut in_air = 0;
+    let mut deep = Vec::new();
+    for c in &free {
+        if scene.is_free(c) {
+            in_air += 1;
+        } else if !near_a_surface(scene, c, s) {
+            deep.push(c);
+        }
+    }
+    let in_air = in_air as f64 / free.len() as f64;
+    assert!(
+        in_air >= 0.99,
+        "{:.3} % of the free voxels lie in the air",
+        100.0 * in_air
+    );
+    assert!(
+        deep.len() * 5_000 <= free.len(),
+        "{} of {} free voxels lie more than a voxel inside the scene's solids: {:?}",
+        deep.len(),
+        free.len(),
+        &deep[..deep.len().min(5)]
     );
     // Every sensor origin stood in free space.
     for node in &run.slam.map.nodes {
         assert_eq!(
-            run.slam.voxels.occupancy(&node.position()),
+            voxels.occupancy(&node.position()),
             sdem::voxel::Occupancy::Free,
             "node {}",
             node.node_id
         );
     }
+
+    // What the sensor saw from the true poses is in the map: a noise-free coarse sweep (5°)
+    // from every fifth stop, its returns within 4 m moved into the map's frame, falls in an
+    // occupied voxel or next to one (a return on a surface may lie in the voxel just in front
+    // of the one the noisy scans filled).
+    let sensor = SensorConfig {
+        range_noise_m: 0.0,
+        tilt_sensor_noise_deg: 0.0,
+        compass_noise_deg: 0.0,
+        tilt_step_deg: 5.0,
+        pan_step_deg: 5.0,
+        ..Default::default()
+    };
+    let map_from_scene = scene_from_map.inverse();
+    let (mut seen, mut held) = (0, 0);
+    for truth in run.truth.iter().step_by(5) {
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0);
+        let sweep = sim::scan(scene, &sensor, truth, 0.0, &mut rng);
+        for p in sweep.points_in_sensor() {
+            if p.norm() > 4.0 {
+                continue;
+            }
+            let in_map = (map_from_scene * truth * nalgebra::Point3::from(p)).coords;
+            let key = voxels.key_of(&in_map).unwrap();
+            seen += 1;
+            let near = (0..27).any(|n: i32| {
+                let k = [
+                    key[0] + n % 3 - 1,
+                    key[1] + (n / 3) % 3 - 1,
+                    key[2] + n / 9 - 1,
+                ];
+                voxels.log_odds(&k).is_some_and(|l| l > 0.0)
+            });
+            held += usize::from(near);
+        }
+    }
+    let held = held as f64 / seen as f64;
+    println!("occupied on a surface {fraction:.5}, free in the air {in_air:.5}, deep free {}, sweep returns held {held:.5} of {seen}", deep.len());
+    assert!(seen > 1000 && held >= 0.99, "{held} of {seen} returns held");
+
     let cloud = run.slam.merged_cloud();
-    assert!(cloud.len() > 1000 && cloud.len() <= occupied);
+    assert!(cloud.len() > 1000 && cloud.len() <= occupied.len());
 }
 
 #[test]
