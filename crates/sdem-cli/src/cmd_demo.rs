@@ -1,11 +1,13 @@
 //! `sdem demo`: the paper's preparatory experiment, then a short stop-and-go run, with the errors
-//! against truth.
+//! against truth. Results with doubts are labelled as `localize` and `slam` label them, but the
+//! exit status stays 0: the demonstration has the truth to show how far off they are.
 
-use crate::output::{pose_line, print_json};
+use crate::output::{doubts_json, estimate_label, pose_line, print_doubts, print_json};
 use anyhow::{Context, Result};
 use sdem::geometry::{PoseRecord, Vec3};
 use sdem_sim::experiment::{paper_experiment, stop_and_go_run, ExperimentConfig, RunStop, Trial};
 use serde::Serialize;
+use serde_json::Value;
 use std::path::PathBuf;
 
 /// Arguments of `sdem demo`.
@@ -36,6 +38,8 @@ struct CaseReport {
     overlap: usize,
     candidates_evaluated: usize,
     time_ms: f64,
+    trusted: bool,
+    doubts: Vec<Value>,
 }
 
 impl From<&Trial> for CaseReport {
@@ -50,6 +54,8 @@ impl From<&Trial> for CaseReport {
             overlap: t.localization.overlap,
             candidates_evaluated: t.localization.candidates_evaluated,
             time_ms: t.time_ms,
+            trusted: t.localization.trusted,
+            doubts: doubts_json(&t.localization.doubts),
         }
     }
 }
@@ -67,6 +73,8 @@ struct StopReport {
 #[derive(Serialize)]
 struct RunReport {
     stops: Vec<StopReport>,
+    /// Steps whose localization has doubts.
+    doubtful_steps: usize,
     max_step_error_m: f64,
     final_position_error_m: f64,
     path_length_m: f64,
@@ -100,6 +108,10 @@ fn run_report(stops: &[RunStop]) -> RunReport {
         .map(|w| (w[1].truth.translation.vector - w[0].truth.translation.vector).norm())
         .sum();
     RunReport {
+        doubtful_steps: stops
+            .iter()
+            .filter(|s| s.step.as_ref().is_some_and(|t| !t.localization.trusted))
+            .count(),
         stops: reports,
         max_step_error_m,
         final_position_error_m: stops.last().map_or(0.0, |s| s.position_error_m),
@@ -188,7 +200,12 @@ fn print_paper(paper: &[Trial]) {
     for t in paper {
         println!("   {}", t.case);
         println!("     truth     {}", pose_line(&t.truth));
-        println!("     estimate  {}", pose_line(&t.estimate));
+        println!(
+            "     {}  {}",
+            estimate_label(t.localization.trusted),
+            pose_line(&t.estimate)
+        );
+        print_doubts("     ", &t.localization.doubts);
         println!(
             "     error     {:.2} cm  ({} candidates, {:.0} ms)",
             t.error_m * 100.0,
@@ -207,17 +224,26 @@ fn print_run_heading(config: &ExperimentConfig) {
     println!("   stop   step error   position error   overlap   time");
 }
 
-/// Prints one row per stop of the run.
+/// Prints one row per stop of the run; a step with doubts is marked DOUBTFUL, with its doubts
+/// on the lines below.
 fn print_stops(stops: &[RunStop]) {
     for (i, s) in stops.iter().enumerate() {
         match &s.step {
-            Some(t) => println!(
-                "   {i:4}   {:7.2} cm   {:11.2} cm   {:7}   {:4.0} ms",
-                t.error_m * 100.0,
-                s.position_error_m * 100.0,
-                t.localization.overlap,
-                t.time_ms
-            ),
+            Some(t) => {
+                println!(
+                    "   {i:4}   {:7.2} cm   {:11.2} cm   {:7}   {:4.0} ms{}",
+                    t.error_m * 100.0,
+                    s.position_error_m * 100.0,
+                    t.localization.overlap,
+                    t.time_ms,
+                    if t.localization.trusted {
+                        ""
+                    } else {
+                        "   DOUBTFUL"
+                    }
+                );
+                print_doubts("          ", &t.localization.doubts);
+            }
             None => println!("   {i:4}   (origin)"),
         }
     }
@@ -226,10 +252,13 @@ fn print_stops(stops: &[RunStop]) {
 /// Prints the run's totals and the files written.
 fn print_summary(args: &Args, report: &Report) {
     println!(
-        "\n   path {:.2} m, largest step error {:.2} cm, final position error {:.2} cm",
+        "\n   path {:.2} m, largest step error {:.2} cm, final position error {:.2} cm; {} of {} \
+         steps doubtful",
         report.run.path_length_m,
         report.run.max_step_error_m * 100.0,
-        report.run.final_position_error_m * 100.0
+        report.run.final_position_error_m * 100.0,
+        report.run.doubtful_steps,
+        report.run.stops.len().saturating_sub(1)
     );
     println!(
         "   wrote {}/report.json, poses.txt (+ .tum), poses_truth.txt, map.ply, plan.png, \

@@ -1,6 +1,9 @@
 //! `sdem localize`: one scan against another.
 
-use crate::output::{elapsed_ms, pose_line, print_json};
+use crate::output::{
+    doubts_json, elapsed_ms, estimate_label, pose_line, print_doubts, print_json,
+    with_doubt_messages, Outcome,
+};
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, Pose, PoseRecord};
@@ -12,6 +15,7 @@ use sdem::sdem::{Sdem, SdemConfig};
 use sdem::slam::Near;
 use sdem_io::Dataset;
 use serde::Serialize;
+use serde_json::Value;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -77,13 +81,17 @@ pub struct Args {
     /// Heading step, degrees [default: matched to the scan's extent and --step].
     #[arg(long, allow_hyphen_values = true)]
     heading_step: Option<f64>,
-    /// Skip the second search for the runner-up outside the peak (halves the time; the
-    /// `ambiguous` flag then rests on the covariance only).
+    /// Skip the second search for the runner-up outside the peak (halves the time; a distant
+    /// place that scores almost as well then raises no `runner_up` doubt).
     #[arg(long)]
     no_runner_up: bool,
     /// S-DEM cell size, degrees.
     #[arg(long, default_value_t = 1.0)]
     resolution: f64,
+    /// Take a result with doubts as the best guess: exit status 0 instead of 3. The output
+    /// still labels it doubtful (`"trusted": false` with its doubts).
+    #[arg(long)]
+    accept_doubtful: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -154,6 +162,10 @@ struct Report {
     refined: RefineOutcome,
     refinement: RefinementSummary,
     diagnostics: Diagnostics,
+    /// No doubt: the pose can be used as it is.
+    trusted: bool,
+    /// Every reason not to trust the pose: its `kind`, its figures and a `message`.
+    doubts: Vec<Value>,
     time_ms: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
     truth: Option<PoseRecord>,
@@ -195,7 +207,7 @@ fn parse_prior(text: &str) -> Result<OffsetPrior> {
 }
 
 /// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.
-fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
+fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     let folder = if map.join(sdem_io::MAP_MANIFEST).exists() {
         map.to_path_buf()
     } else {
@@ -228,12 +240,15 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
     // The map's own search settings (its config.toml), not this command's --step.
     let found = sdem::slam::relocalize(&saved.map, &saved.config, &points, attitude, near, 3)
         .with_context(|| format!("{} in the map {}", scan.display(), folder.display()))?;
+    let outcome = Outcome::of(found.trusted, args.accept_doubtful);
     if args.json {
-        return print_json(&found);
+        let value = serde_json::to_value(&found).context("cannot encode the result as JSON")?;
+        print_json(&with_doubt_messages(value, &found.doubts))?;
+        return Ok(outcome);
     }
     let pose = sdem::geometry::Pose::from(&found.world_from_sensor);
     println!("{} in the map {}:", scan.display(), folder.display());
-    println!("  estimate  {}", pose_line(&pose));
+    println!("  {}  {}", estimate_label(found.trusted), pose_line(&pose));
     println!(
         "  matched node {} (cost {:.3e} m², {:.0} % of the cells within the truncation) in {:.0} ms",
         found.node_id,
@@ -244,16 +259,21 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<()> {
     for (node, why) in &found.tried {
         println!("  node {node} did not match: {why}");
     }
-    if found.diagnostics.ambiguous {
-        for why in found.doubts.iter().filter(|d| d.is_ambiguity()) {
-            println!("  AMBIGUOUS: {why}");
-        }
-    }
-    Ok(())
+    print_doubts("  ", &found.doubts);
+    print_accepted(found.trusted, args.accept_doubtful);
+    Ok(outcome)
 }
 
-/// Runs `sdem localize`.
-pub fn run(args: Args) -> Result<()> {
+/// Says that a doubtful result was taken as the best guess, when `--accept-doubtful` asked.
+fn print_accepted(trusted: bool, accept_doubtful: bool) {
+    if !trusted && accept_doubtful {
+        println!("  taken as the best guess (--accept-doubtful)");
+    }
+}
+
+/// Runs `sdem localize`: done, or done with doubts (exit status 3) when the result is not
+/// trusted and `--accept-doubtful` was not given.
+pub fn run(args: Args) -> Result<Outcome> {
     if let Some(map) = args.map.clone() {
         return run_map(&args, &map);
     }
@@ -287,13 +307,17 @@ pub fn run(args: Args) -> Result<()> {
         .as_ref()
         .map(|t| t[reference_index].inverse() * t[query_index]);
     let report = make_report(pair, &found, &config, time_ms, truth.as_ref());
+    let outcome = Outcome::of(found.trusted, args.accept_doubtful);
     if args.json {
-        return print_json(&report);
+        print_json(&report)?;
+        return Ok(outcome);
     }
     print_estimate(&report, &found, truth.as_ref());
     print_fit(&report, &found.diagnostics, &config);
-    print_search(&report, &found, &config);
-    Ok(())
+    print_search(&report, &config);
+    print_doubts("  ", &found.doubts);
+    print_accepted(found.trusted, args.accept_doubtful);
+    Ok(outcome)
 }
 
 /// The search's settings from the arguments, checked.
@@ -400,6 +424,8 @@ fn make_report(
         refined: found.refined,
         refinement: RefinementSummary::new(found.refined, found.refinement.as_ref()),
         diagnostics: found.diagnostics.clone(),
+        trusted: found.trusted,
+        doubts: doubts_json(&found.doubts),
         time_ms,
         truth: truth.map(PoseRecord::from),
         error_m: errors.map(|e| e.0),
@@ -413,7 +439,11 @@ fn print_estimate(report: &Report, found: &Localization, truth: Option<&Pose>) {
         "scan {} in the frame of scan {}:",
         report.query, report.reference
     );
-    println!("  estimate  {}", pose_line(&found.reference_from_query));
+    println!(
+        "  {}  {}",
+        estimate_label(found.trusted),
+        pose_line(&found.reference_from_query)
+    );
     if let Some(t) = truth {
         println!("  truth     {}", pose_line(t));
     }
@@ -461,9 +491,13 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
         ),
         (None, None) => {}
     }
-    if let (Some(v), Some(w), Some(s)) =
-        (d.weakest_direction, d.weakest_sigma_m, d.strongest_sigma_m)
-    {
+    // A failed refinement leaves no covariance to read σ from (NaN): say nothing then.
+    let finite = |v: Option<f64>| v.filter(|v| v.is_finite());
+    if let (Some(v), Some(w), Some(s)) = (
+        d.weakest_direction,
+        finite(d.weakest_sigma_m),
+        finite(d.strongest_sigma_m),
+    ) {
         println!(
             "  weakest direction ({:.2}, {:.2}, {:.2}): σ {:.2} mm (strongest {:.2} mm)",
             v[0],
@@ -475,8 +509,8 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
     }
 }
 
-/// Prints the search's effort and its warnings: ambiguity, an optimum on the window's edge.
-fn print_search(report: &Report, found: &Localization, config: &LocalizeOptions) {
+/// Prints the search's effort.
+fn print_search(report: &Report, config: &LocalizeOptions) {
     println!(
         "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({:?})",
         report.candidates_evaluated,
@@ -485,15 +519,4 @@ fn print_search(report: &Report, found: &Localization, config: &LocalizeOptions)
         report.time_ms,
         config.mode
     );
-    let d = &found.diagnostics;
-    if d.ambiguous {
-        for why in found.doubts.iter().filter(|d| d.is_ambiguity()) {
-            println!("  AMBIGUOUS: {why}");
-        }
-    }
-    if found.on_window_edge {
-        println!(
-            "  warning: the optimum lies on the window's edge; the true position may be outside it"
-        );
-    }
 }

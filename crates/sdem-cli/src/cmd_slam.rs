@@ -1,6 +1,6 @@
 //! `sdem slam`: the stop-and-go loop over a dataset folder, saving the map after every scan.
 
-use crate::output::{elapsed_ms, pose_line, print_json};
+use crate::output::{elapsed_ms, pose_line, print_json, with_doubt_messages, Outcome};
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
 use sdem::slam::{
@@ -52,6 +52,10 @@ pub struct Args {
     /// the 3D viewer page (viewer.html).
     #[arg(long)]
     no_pictures: bool,
+    /// Take steps with doubts as the best guess: exit status 0 instead of 3. They are still
+    /// counted and labelled DOUBTFUL (`"trusted": false` with their doubts in report.json).
+    #[arg(long)]
+    accept_doubtful: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -73,6 +77,12 @@ struct Report {
     free_voxels: usize,
     map_points: usize,
     pictures: Vec<PathBuf>,
+    /// No step of the map has doubts.
+    trusted: bool,
+    /// Steps whose match has doubts (their poses are best guesses).
+    doubtful_steps: usize,
+    /// The scan indices of those steps.
+    doubtful_scans: Vec<u64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     truth: Option<TrajectoryErrors>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -102,8 +112,9 @@ struct Outputs {
     pictures: Vec<PathBuf>,
 }
 
-/// Runs `sdem slam`.
-pub fn run(args: Args) -> Result<()> {
+/// Runs `sdem slam`: done, or done with doubts (exit status 3) when a step of the map has
+/// doubts and `--accept-doubtful` was not given.
+pub fn run(args: Args) -> Result<Outcome> {
     let start = Instant::now();
     let dataset = Dataset::open(&args.dataset)?;
     let map_dir = args.out.join(MAP_DIR);
@@ -124,7 +135,7 @@ pub fn run(args: Args) -> Result<()> {
     } else {
         print_text(&args, &report);
     }
-    Ok(())
+    Ok(Outcome::of(report.trusted, args.accept_doubtful))
 }
 
 /// Refuses to overwrite or resume the wrong map, then creates the output folder.
@@ -218,8 +229,8 @@ fn map_scans(args: &Args, dataset: &Dataset, map_dir: &Path, run: &mut Run) -> R
             bar.suspend(|| eprintln!("{}", step_line(index, total, &step)));
         }
         bar.inc(1);
-        run.steps
-            .push(serde_json::to_value(&step).context("cannot encode the step")?);
+        let value = serde_json::to_value(&step).context("cannot encode the step")?;
+        run.steps.push(with_doubt_messages(value, &step.doubts));
         save_progress(args, map_dir, run)?;
     }
     bar.finish_and_clear();
@@ -298,10 +309,11 @@ fn step_line(index: usize, total: usize, step: &StepReport) -> String {
         } else {
             format!("  {}", closures.join(", "))
         },
-        if step.doubts.is_empty() {
+        if step.trusted {
             String::new()
         } else {
-            "  AMBIGUOUS".into()
+            let kinds: Vec<&str> = step.doubts.iter().map(|d| d.kind()).collect();
+            format!("  DOUBTFUL ({})", kinds.join(", "))
         }
     )
 }
@@ -403,6 +415,11 @@ fn make_report(
         resumed_at,
         ..
     } = run;
+    let doubtful_scans: Vec<u64> = steps
+        .iter()
+        .filter(|s| s["trusted"] == Value::Bool(false))
+        .map(|s| s["scan_index"].as_u64().unwrap_or_default())
+        .collect();
     let (occupied_voxels, free_voxels) = slam.voxels.counts();
     let points_total: usize = slam
         .map
@@ -430,6 +447,9 @@ fn make_report(
         free_voxels,
         map_points: cloud.len(),
         pictures,
+        trusted: doubtful_scans.is_empty(),
+        doubtful_steps: doubtful_scans.len(),
+        doubtful_scans,
         truth,
         compare,
         steps,
@@ -446,6 +466,7 @@ fn print_text(args: &Args, report: &Report) {
         report.loop_closures_accepted,
         report.loop_closures_rejected
     );
+    print_doubtful_steps(args, report);
     if let Some(t) = &report.truth {
         println!(
             "against poses_truth.txt: ATE RMSE {:.2} cm (max {:.2} cm), RPE {:.2} cm / {:.3}°",
@@ -480,6 +501,35 @@ fn print_text(args: &Args, report: &Report) {
             ", plan.png, section.png, panorama.png, slice.png, cost.png, viewer.html"
         }
     );
+}
+
+/// Prints how many steps are doubtful, then each doubtful step's doubts, one `DOUBT:` line each.
+fn print_doubtful_steps(args: &Args, report: &Report) {
+    println!(
+        "{} of {} steps doubtful{}",
+        report.doubtful_steps,
+        report.steps.len(),
+        if report.trusted {
+            ""
+        } else if args.accept_doubtful {
+            " (their poses are best guesses, taken with --accept-doubtful)"
+        } else {
+            " (their poses are best guesses)"
+        }
+    );
+    for step in report
+        .steps
+        .iter()
+        .filter(|s| s["trusted"] == Value::Bool(false))
+    {
+        println!("  scan {} DOUBTFUL:", step["scan_index"]);
+        let doubts = step["doubts"].as_array().map(Vec::as_slice).unwrap_or(&[]);
+        for doubt in doubts {
+            // A step log written by this command has messages; name the kind otherwise.
+            let message = doubt["message"].as_str().or(doubt["kind"].as_str());
+            println!("    DOUBT: {}", message.unwrap_or("(no reason recorded)"));
+        }
+    }
 }
 
 /// The report without its per-step list, for `--json` on stdout (report.json has it all).

@@ -1,7 +1,8 @@
 //! `sdem`: Sphere-DEM localization and mapping for rescue robots, from the command line.
 //!
 //! This binary parses arguments, reports progress and prints results; the work is done by the
-//! `sdem` library. Errors go to stderr as one line, with a non-zero exit code.
+//! `sdem` library. Errors go to stderr as one line. The exit status says how it ended (see
+//! [`EXIT_STATUS`]).
 
 mod bench_tally;
 mod cmd_bench;
@@ -16,12 +17,27 @@ mod output;
 mod progress;
 
 use clap::{Parser, Subcommand};
+use output::Outcome;
 use std::process::ExitCode;
+
+/// The exit statuses, as `sdem --help` prints them.
+const EXIT_STATUS: &str = "\
+Exit status:
+  0  done, and every result trusted
+  1  an error: stderr says what was wrong, where, and how to fix it
+  2  a malformed command line
+  3  done, but a result has doubts (localize, slam): the pose is printed as a best guess,
+     labelled \"best guess (doubtful)\" or DOUBTFUL with a \"DOUBT:\" line per reason, and with
+     --json \"trusted\": false and its \"doubts\". --accept-doubtful takes the best guess: status
+     0, still labelled";
+
+/// A result done but with doubts (see [`EXIT_STATUS`]).
+const EXIT_DOUBTS: u8 = 3;
 
 /// Three-dimensional localization and mapping for a rescue robot with a tilting laser range
 /// finder (Nagatani et al., IROS 2003).
 #[derive(Parser)]
-#[command(name = "sdem", version, about, long_about = None)]
+#[command(name = "sdem", version, about, long_about = None, after_help = EXIT_STATUS)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -34,9 +50,11 @@ enum Command {
     /// Write a simulated dataset folder (scans, attitude.csv, odometry.txt, poses_truth.txt,
     /// sensor.toml).
     Simulate(cmd_simulate::Args),
-    /// Localize one scan of a dataset against another and print the pose.
+    /// Localize one scan of a dataset against another, or in a saved map, and print the pose.
+    #[command(after_help = EXIT_STATUS)]
     Localize(cmd_localize::Args),
     /// Map a dataset: the stop-and-go loop with merging, loop closure and a fused map.
+    #[command(after_help = EXIT_STATUS)]
     Slam(cmd_slam::Args),
     /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs.
     Bench(cmd_bench::Args),
@@ -49,17 +67,26 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let done = |result: anyhow::Result<()>| result.map(|()| Outcome::Done);
     let result = match cli.command {
-        Command::Demo(args) => cmd_demo::run(args),
-        Command::Simulate(args) => cmd_simulate::run(args),
+        Command::Demo(args) => done(cmd_demo::run(args)),
+        Command::Simulate(args) => done(cmd_simulate::run(args)),
         Command::Localize(args) => cmd_localize::run(args),
-        Command::Bench(args) => cmd_bench::run(args),
-        Command::Import(args) => cmd_import::run(args),
+        Command::Bench(args) => done(cmd_bench::run(args)),
+        Command::Import(args) => done(cmd_import::run(args)),
         Command::Slam(args) => cmd_slam::run(args),
-        Command::View(args) => cmd_view::run(args),
+        Command::View(args) => done(cmd_view::run(args)),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(Outcome::Done) => ExitCode::SUCCESS,
+        Ok(Outcome::DoneWithDoubts) => {
+            eprintln!(
+                "sdem: done with doubts (exit status {EXIT_DOUBTS}): a pose is a best guess (see \
+                 its DOUBT lines, or \"doubts\" in the JSON); --accept-doubtful takes it with \
+                 status 0"
+            );
+            ExitCode::from(EXIT_DOUBTS)
+        }
         Err(error) => {
             eprintln!("sdem: error: {error:#}");
             ExitCode::from(1)
