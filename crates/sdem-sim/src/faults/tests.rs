@@ -132,18 +132,31 @@ fn dust_and_lost_returns_have_their_sizes() {
     assert!((0.29..0.32).contains(&lost), "lost {lost}");
 }
 
+/// With [`Fault::Tilt`] the query's roll and pitch are drawn uniformly within ±30° (the
+/// bench's pairs otherwise stay within ±3°): over 12 pairs both angles go past 20° either way,
+/// none past 30°, and their mean size is near 15° (24 draws: 15° ± 4.5°, 2.5 standard errors).
 #[test]
 fn tilt_reaches_thirty_degrees() {
     let config = quick_config();
     let pairs = fault_pairs(6, 12, &[Fault::Tilt], &config).unwrap();
-    let steepest = pairs
+    let angles: Vec<[f64; 2]> = pairs
         .iter()
         .map(|p| {
             let a = attitude_of(&p.pair.world_from_query);
-            a.roll.abs().max(a.pitch.abs()).to_degrees()
+            [a.roll.to_degrees(), a.pitch.to_degrees()]
         })
-        .fold(0.0, f64::max);
-    assert!(steepest > 15.0 && steepest <= 30.0 + 1e-9, "{steepest}");
+        .collect();
+    assert!(
+        angles.iter().flatten().all(|a| a.abs() <= 30.0 + 1e-9),
+        "{angles:?}"
+    );
+    for axis in 0..2 {
+        let most = angles.iter().map(|a| a[axis]).fold(f64::MIN, f64::max);
+        let least = angles.iter().map(|a| a[axis]).fold(f64::MAX, f64::min);
+        assert!(most > 20.0 && least < -20.0, "axis {axis}: {angles:?}");
+    }
+    let mean_size = angles.iter().flatten().map(|a| a.abs()).sum::<f64>() / 24.0;
+    assert!((mean_size - 15.0).abs() < 4.5, "mean |tilt| {mean_size}°");
 }
 
 #[test]
@@ -232,11 +245,39 @@ fn a_run_with_faults_keeps_the_clean_run_where_no_fault_touches_it() {
         simulate_run_with_faults(&scene, &stops, &sensor, 2, &faults, &config).unwrap();
     for (k, (stop, i)) in run.iter().zip(&injected).enumerate() {
         assert_eq!(stop.world_from_sensor, clean[k].world_from_sensor);
-        let yaw_off =
-            wrap_angle(stop.sweep.mean_attitude().yaw - clean[k].sweep.mean_attitude().yaw);
+        // The readings differ by the compass and gyro errors, and by nothing else.
+        let (read, clean_read) = (stop.sweep.mean_attitude(), clean[k].sweep.mean_attitude());
+        let yaw_off = wrap_angle(read.yaw - clean_read.yaw);
         assert!((yaw_off.to_degrees() - i.compass_error_deg).abs() < 1e-6);
+        assert!(((read.roll - clean_read.roll).to_degrees() - i.gyro_error_deg[0]).abs() < 1e-6);
+        assert!(((read.pitch - clean_read.pitch).to_degrees() - i.gyro_error_deg[1]).abs() < 1e-6);
         assert!(i.gyro_error_deg.iter().all(|e| e.abs() <= 2.0));
         assert!(i.person_returns > 0, "stop {k}: {i:?}");
+        // The ranges are the clean run's, to the bit, but for the beams the person or the
+        // moved rubble stopped: fewer than they count (the person may stand before rubble),
+        // each nearer than the clean return or where it had none.
+        assert_eq!(stop.sweep.lines.len(), clean[k].sweep.lines.len());
+        let mut changed = 0;
+        for (line, clean_line) in stop.sweep.lines.iter().zip(&clean[k].sweep.lines) {
+            assert_eq!(line.tilt_deg, clean_line.tilt_deg);
+            for (r, c) in line.ranges.iter().zip(&clean_line.ranges) {
+                if r.to_bits() != c.to_bits() {
+                    changed += 1;
+                    assert!(
+                        c.is_nan() || r < c,
+                        "stop {k}: {r} m where the clean run saw {c} m"
+                    );
+                }
+            }
+        }
+        assert!(
+            changed >= i.person_returns,
+            "stop {k}: {changed} changed, {i:?}"
+        );
+        assert!(
+            changed <= i.person_returns + i.rubble_returns,
+            "stop {k}: {changed} changed, {i:?}"
+        );
     }
     // Rubble was moved in view of some stop after the first.
     assert!(
