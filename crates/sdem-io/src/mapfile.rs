@@ -578,25 +578,61 @@ mod tests {
         assert_eq!(saved.config, config);
         assert_eq!(saved.dataset.as_deref(), Some(Path::new("data/x")));
         assert_eq!(saved.map.nodes.len(), 3);
+        // Poses go through text and a rotation matrix: equal to rounding.
+        let same_pose = |a: &Pose, b: &Pose| {
+            (a.translation.vector - b.translation.vector).norm() < 1e-12
+                && a.rotation.angle_to(&b.rotation) < 1e-9
+        };
         for (a, b) in saved.map.nodes.iter().zip(&map.nodes) {
+            assert_eq!(a.node_id, b.node_id);
             assert_eq!(a.points_in_sensor, b.points_in_sensor);
             assert_eq!(a.scan_index, b.scan_index);
-            assert!(
-                (a.world_from_sensor.translation.vector - b.world_from_sensor.translation.vector)
-                    .norm()
-                    < 1e-12
-            );
-            assert!(
-                a.world_from_sensor
-                    .rotation
-                    .angle_to(&b.world_from_sensor.rotation)
-                    < 1e-9
-            );
-            assert_eq!(a.attitude_reading.is_some(), b.attitude_reading.is_some());
+            assert!(same_pose(&a.world_from_sensor, &b.world_from_sensor));
+            // Node 1 has no reading; the others theirs, angle by angle.
+            match (a.attitude_reading, b.attitude_reading) {
+                (None, None) => {}
+                (Some(x), Some(y)) => assert!(
+                    [x.roll - y.roll, x.pitch - y.pitch, x.yaw - y.yaw]
+                        .iter()
+                        .all(|d| d.abs() < 1e-12),
+                    "node {}: {x:?} vs {y:?}",
+                    b.node_id
+                ),
+                other => panic!("node {}: reading {other:?}", b.node_id),
+            }
         }
         assert_eq!(saved.edges.len(), 1);
-        assert_eq!(saved.edges[0].information, edges[0].information);
+        let (a, b) = (&saved.edges[0], &edges[0]);
+        assert_eq!((a.from, a.to, a.kind), (b.from, b.to, b.kind));
+        assert_eq!(a.information, b.information);
+        assert!(
+            same_pose(&a.from_from_to, &b.from_from_to),
+            "{a:?} vs {b:?}"
+        );
         assert_eq!(saved.loop_closures.len(), 1);
+        let (a, b) = (&saved.loop_closures[0], &closures[0]);
+        assert_eq!(
+            (a.from, a.to, a.accepted, &a.reason),
+            (b.from, b.to, b.accepted, &b.reason)
+        );
+        assert_eq!(
+            (
+                a.descriptor_distance,
+                a.cost,
+                a.inlier_fraction,
+                a.correction_m
+            ),
+            (
+                b.descriptor_distance,
+                b.cost,
+                b.inlier_fraction,
+                b.correction_m
+            )
+        );
+        assert!(same_pose(
+            a.from_from_to.as_ref().unwrap(),
+            b.from_from_to.as_ref().unwrap()
+        ));
         assert_eq!(saved.node_files, files);
         // Saving again rewrites nothing but the manifest, and the result is the same.
         save_map(
