@@ -184,16 +184,78 @@ mod tests {
             trusted_from: 0.25,
         };
         let json = serde_json::to_value(&doubt).unwrap();
-        assert_eq!(json["kind"], doubt.kind());
+        assert_eq!(json["kind"], "few_inliers");
         assert_eq!(json["fraction"], 0.2);
+        assert_eq!(json["trusted_from"], 0.25);
         assert!(doubt
             .to_string()
             .starts_with("only 20 % of the query's points"));
-        assert!(doubt.is_ambiguity());
-        assert!(!Doubt::OnWindowEdge.is_ambiguity());
-        assert_eq!(
-            serde_json::to_value(Doubt::OnWindowEdge).unwrap()["kind"],
-            Doubt::OnWindowEdge.kind()
-        );
+        // Every kind: the JSON's tag (serde's renaming) is what `kind` says, the figures sit
+        // beside it, and only the doubts about where the search looked or what the loop took
+        // from the prediction are not about the match's shape.
+        let all = [
+            (
+                Doubt::RunnerUp {
+                    distance_m: 0.3,
+                    cost: 2e-3,
+                    best_cost: 1e-3,
+                },
+                "runner_up",
+                true,
+            ),
+            (
+                Doubt::FlatCovariance {
+                    direction: [1.0, 0.0, 0.0],
+                    sigma_m: 0.05,
+                    across_sigma_m: 0.001,
+                },
+                "flat_covariance",
+                true,
+            ),
+            (
+                Doubt::FlatCost {
+                    direction: [0.0, 1.0, 0.0],
+                    distance_m: 0.1,
+                    rise: 1e-6,
+                    across_rise: 1e-3,
+                },
+                "flat_cost",
+                true,
+            ),
+            (doubt, "few_inliers", true),
+            (
+                Doubt::RefinementFailed {
+                    reason: "diverged".into(),
+                },
+                "refinement_failed",
+                true,
+            ),
+            (Doubt::OnWindowEdge, "on_window_edge", false),
+            (
+                Doubt::TakenFromPrediction {
+                    direction: [1.0, 0.0, 0.0],
+                    shift_m: 0.04,
+                },
+                "taken_from_prediction",
+                false,
+            ),
+        ];
+        for (doubt, kind, ambiguity) in &all {
+            let json = serde_json::to_value(doubt).unwrap();
+            assert_eq!(json["kind"], *kind, "{doubt:?}");
+            assert_eq!(doubt.kind(), *kind);
+            assert_eq!(doubt.is_ambiguity(), *ambiguity, "{doubt:?}");
+            // The kind and the variant's fields, nothing else.
+            let fields = json.as_object().unwrap().len() - 1;
+            let expected = match doubt {
+                Doubt::OnWindowEdge => 0,
+                Doubt::RefinementFailed { .. } => 1,
+                Doubt::FewInliers { .. } | Doubt::TakenFromPrediction { .. } => 2,
+                Doubt::RunnerUp { .. } | Doubt::FlatCovariance { .. } => 3,
+                Doubt::FlatCost { .. } => 4,
+            };
+            assert_eq!(fields, expected, "{json}");
+            assert!(!doubt.to_string().is_empty());
+        }
     }
 }
