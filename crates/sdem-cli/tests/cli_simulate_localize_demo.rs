@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{run, run_err, run_json, run_ok};
+use common::{doubt_kinds, run, run_err, run_json, run_ok};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;
@@ -730,25 +730,6 @@ fn localize_0_1(dir: &Path, ds: &Path, extra: &[&str]) -> common::Run {
     ];
     args.extend_from_slice(extra);
     run(dir, &args)
-}
-
-/// The kinds of a result's `doubts`, each checked to be an object with a `kind` and a
-/// `message` in words.
-fn doubt_kinds(result: &Value) -> Vec<String> {
-    let doubts = result["doubts"]
-        .as_array()
-        .unwrap_or_else(|| panic!("no doubts array in {result}"));
-    doubts
-        .iter()
-        .map(|d| {
-            let message = d["message"].as_str().unwrap_or_default();
-            assert!(message.len() > 20, "a doubt without its message: {d}");
-            d["kind"]
-                .as_str()
-                .unwrap_or_else(|| panic!("{d}"))
-                .to_string()
-        })
-        .collect()
 }
 
 /// A result with doubts is never presented as a plain success. Scan 1 lies 34 cm ahead of

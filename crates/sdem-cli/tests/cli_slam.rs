@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{fails, run, run_ok};
+use common::{doubt_kinds, fails, run, run_ok};
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -37,25 +37,6 @@ fn kitti(path: &Path) -> Vec<[f64; 12]> {
                 .collect();
             v.try_into()
                 .unwrap_or_else(|v| panic!("{}: {v:?}", path.display()))
-        })
-        .collect()
-}
-
-/// Checks the `doubts` of a result: each an object with its `kind` and a `message` in words.
-/// Returns the kinds.
-fn doubt_kinds(result: &Value) -> Vec<String> {
-    let doubts = result["doubts"]
-        .as_array()
-        .unwrap_or_else(|| panic!("no doubts array in {result}"));
-    doubts
-        .iter()
-        .map(|d| {
-            let message = d["message"].as_str().unwrap_or_default();
-            assert!(message.len() > 20, "a doubt without its message: {d}");
-            d["kind"]
-                .as_str()
-                .unwrap_or_else(|| panic!("{d}"))
-                .to_string()
         })
         .collect()
 }

@@ -95,3 +95,22 @@ pub fn fails(dir: &Path, args: &[&str]) -> String {
     assert!(!r.stderr.contains("panicked"), "{}", r.stderr);
     r.stderr
 }
+
+/// Checks the `doubts` of a result: each an object with its `kind` and a `message` in words.
+/// Returns the kinds.
+pub fn doubt_kinds(result: &Value) -> Vec<String> {
+    let doubts = result["doubts"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no doubts array in {result}"));
+    doubts
+        .iter()
+        .map(|d| {
+            let message = d["message"].as_str().unwrap_or_default();
+            assert!(message.len() > 20, "a doubt without its message: {d}");
+            d["kind"]
+                .as_str()
+                .unwrap_or_else(|| panic!("{d}"))
+                .to_string()
+        })
+        .collect()
+}
