@@ -19,7 +19,9 @@ use crate::geometry::{Attitude, Pose, Vec3};
 use crate::refine::{refine, RefineConfig, Refinement, SurfaceNormals};
 use crate::sdem::Sdem;
 use crate::search::{matched_heading_step, CandidateGrid, Evaluator, Index, Scored};
-use nalgebra::{Isometry3, Matrix6, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{
+    Isometry3, Matrix6, SMatrix, SVector, SymmetricEigen, Translation3, UnitQuaternion, Vector3, U3,
+};
 use serde::{Deserialize, Serialize};
 
 pub use crate::cost::{correlate, Correlation, CostConfig, OffsetPrior};
@@ -286,22 +288,7 @@ impl RefinementSummary {
 pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Result<Localization> {
     let start = std::time::Instant::now();
     let (reference_attitude, query_attitude) = (reference.attitude(), query.attitude());
-    config.cost.validate()?;
-    config.refinement.validate()?;
-    config.heading.validate()?;
-    if config.mode == SearchMode::BranchAndBound && config.cost.model != CostModel::Projective {
-        return Err(Error::Invalid(
-            "the branch-and-bound search needs the projective cost; use the exhaustive or \
-             coarse-to-fine search with the virtual-S-DEM cost"
-                .into(),
-        ));
-    }
-    if !(config.step_m.is_finite() && config.step_m > 0.0) {
-        return Err(Error::Invalid(format!(
-            "search step {} m must be a positive number",
-            config.step_m
-        )));
-    }
+    validate(config)?;
     let yaws = config
         .heading
         .samples(matched_heading_step(query, config.step_m));
@@ -318,85 +305,22 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
     // Shared by the search for the best candidate and the one for the runner-up.
     let prepared =
         (config.mode == SearchMode::BranchAndBound).then(|| bnb::Prepared::new(&correlator));
-    // The exact search sets aside what may cost up to the ambiguity ratio × the best, so the
-    // runner-up search continues from there instead of bounding the window again.
-    let reserve_ratio = config.runner_up.then_some(config.ambiguous_cost_ratio);
-    // The refinement's surface normals depend on the reference alone: they are fitted while
-    // the search runs, on the cores its sequential steps leave idle.
-    let ((best, stats, reserve), normals) = rayon::join(
-        || {
-            run_search(
-                &mut evaluator,
-                prepared.as_ref(),
-                config,
-                full_turn,
-                f64::INFINITY,
-                reserve_ratio,
-            )
-        },
-        || {
-            config
-                .refine
-                .then(|| SurfaceNormals::new(reference, config.refinement.normal_radius_cells))
-        },
+    let ((best, stats, reserve), normals) = search_and_fit_normals(
+        &mut evaluator,
+        prepared.as_ref(),
+        reference,
+        config,
+        full_turn,
     );
-    let Some((cost, flat)) = best else {
-        return Err(Error::NoOverlap {
-            needed: correlator.min_overlap(),
-            compared: correlator.compared_points(),
-        });
-    };
-    let grid_index = grid.index(flat);
-    let grid_offset = grid.offset(grid_index);
-    let grid_heading = grid.yaw(grid_index);
-    // Scores the best candidate again here and, for the diagnostics, its neighbours.
-    let at_best =
-        (correlator.evaluate(&grid_offset, grid_heading)).ok_or_else(|| Error::NoOverlap {
-            needed: correlator.min_overlap(),
-            compared: correlator.compared_points(),
-        })?;
-    let overlap = at_best.overlap;
-    let compared = correlator.compared_points();
-    let needed_inliers = (config.cost.min_inlier_fraction * compared as f64).ceil();
-    if (at_best.inliers as f64) < needed_inliers {
-        return Err(Error::NoMatch {
-            matched: at_best.inliers,
-            compared,
-            needed: needed_inliers as usize,
-            truncation_m: config.cost.truncation_m,
-        });
-    }
-    let grid_rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), grid_heading);
-    let mut rotation = grid_rotation;
-    let mut refinement = None;
-    let mut refine_error = None;
-    let (offset, refined) = if let Some(normals) = normals {
-        let initial = Isometry3::from_parts(Translation3::from(grid_offset), grid_rotation);
-        match refine(
-            reference,
-            &normals,
-            query,
-            &initial,
-            config.cost.prior.as_ref(),
-            &config.refinement,
-        ) {
-            Ok(r) => {
-                rotation = r.transform.rotation;
-                let t = r.transform.translation.vector;
-                refinement = Some(r);
-                (t, RefineOutcome::SixDof)
-            }
-            Err(e) => {
-                refine_error = Some(e.to_string());
-                match refine_quadratic(&mut evaluator, grid_index) {
-                    Some(o) => (o, RefineOutcome::Quadratic),
-                    None => (grid_offset, RefineOutcome::Failed),
-                }
-            }
-        }
-    } else {
-        (grid_offset, RefineOutcome::None)
-    };
+    let best = best_candidate(&mut correlator, &grid, best, config)?;
+    let (cost, grid_index, grid_offset, grid_heading) = (
+        best.cost,
+        best.grid_index,
+        best.grid_offset,
+        best.grid_heading,
+    );
+    let refined = refine_best(reference, query, normals, &mut evaluator, &best, config);
+    let (offset, rotation) = (refined.offset, refined.rotation);
     let heading_correction = {
         let (_, _, yaw) = rotation.euler_angles();
         yaw
@@ -409,22 +333,14 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
         rotation * rotation_only(query_attitude).rotation,
     );
     let runner_up = if config.runner_up {
-        let mut outside = grid.clone();
-        outside.exclude = Some((grid_offset, config.peak_radius_m));
-        // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
-        // the exact search cheap.
-        let cap = config.ambiguous_cost_ratio * cost;
-        let second = match (reserve, prepared.as_ref()) {
-            (Some(reserve), Some(prepared)) => bnb::runner_up(prepared, &outside, cap, reserve).0,
-            _ => {
-                let mut e = Evaluator::new(correlator.clone(), &outside);
-                run_search(&mut e, prepared.as_ref(), config, full_turn, cap, None).0
-            }
+        let search = RunnerUpSearch {
+            grid: &grid,
+            correlator: &correlator,
+            prepared: prepared.as_ref(),
+            reserve,
+            full_turn,
         };
-        second.map(|(c, flat)| {
-            let idx = outside.index(flat);
-            (c, outside.offset(idx), outside.yaw(idx))
-        })
+        search.run(grid_offset, cost, config)
     } else {
         None
     };
@@ -435,12 +351,12 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
     };
     let (diagnostics, mut doubts) = diagnose(
         config,
-        compared,
-        &at_best,
+        best.compared,
+        &best.at_best,
         grid_offset,
         runner_up,
-        refinement.as_ref(),
-        refine_error.as_deref(),
+        refined.refinement.as_ref(),
+        refined.error.as_deref(),
         &mut cost_at,
     );
     let on_window_edge = grid.on_edge(grid_index, full_turn);
@@ -460,18 +376,235 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
         grid_heading,
         grid_index,
         cost,
-        overlap,
+        overlap: best.at_best.overlap,
         candidates_total: grid.len(),
         candidates_evaluated: evaluator.evaluated,
         nodes_bounded: stats.nodes_bounded,
         on_window_edge,
-        refined,
-        refinement,
+        refined: refined.outcome,
+        refinement: refined.refinement,
         diagnostics,
         trusted: doubts.is_empty(),
         doubts,
         time: start.elapsed(),
     })
+}
+
+/// Rejects a configuration [`localize`] cannot run: an invalid cost, refinement or heading
+/// window, branch-and-bound with a cost other than the projective one, or a step that is not a
+/// positive number.
+fn validate(config: &LocalizeOptions) -> Result<()> {
+    config.cost.validate()?;
+    config.refinement.validate()?;
+    config.heading.validate()?;
+    if config.mode == SearchMode::BranchAndBound && config.cost.model != CostModel::Projective {
+        return Err(Error::Invalid(
+            "the branch-and-bound search needs the projective cost; use the exhaustive or \
+             coarse-to-fine search with the virtual-S-DEM cost"
+                .into(),
+        ));
+    }
+    if !(config.step_m.is_finite() && config.step_m > 0.0) {
+        return Err(Error::Invalid(format!(
+            "search step {} m must be a positive number",
+            config.step_m
+        )));
+    }
+    Ok(())
+}
+
+/// What a search returns: its best candidate, its statistics, and what the exact search set
+/// aside for the runner-up search.
+type SearchResult = (Option<Scored>, BranchAndBoundStats, Option<bnb::Reserve>);
+
+/// Runs the search for the best candidate and, when a refinement is asked for, fits the
+/// reference's surface normals meanwhile: they depend on the reference alone, so they are
+/// fitted while the search runs, on the cores its sequential steps leave idle.
+fn search_and_fit_normals(
+    evaluator: &mut Evaluator,
+    prepared: Option<&bnb::Prepared>,
+    reference: &Sdem,
+    config: &LocalizeOptions,
+    full_turn: bool,
+) -> (SearchResult, Option<SurfaceNormals>) {
+    // The exact search sets aside what may cost up to the ambiguity ratio × the best, so the
+    // runner-up search continues from there instead of bounding the window again.
+    let reserve_ratio = config.runner_up.then_some(config.ambiguous_cost_ratio);
+    rayon::join(
+        || {
+            run_search(
+                evaluator,
+                prepared,
+                config,
+                full_turn,
+                f64::INFINITY,
+                reserve_ratio,
+            )
+        },
+        || {
+            config
+                .refine
+                .then(|| SurfaceNormals::new(reference, config.refinement.normal_radius_cells))
+        },
+    )
+}
+
+/// The search's best grid candidate, scored again.
+struct BestCandidate {
+    /// Its cost, as the search found it.
+    cost: f64,
+    grid_index: Index,
+    grid_offset: Vec3,
+    grid_heading: f64,
+    /// Its comparison, scored again (overlap and inliers).
+    at_best: Correlation,
+    /// The query points compared.
+    compared: usize,
+}
+
+/// The search's best candidate scored again, or the error that says why there is no match:
+/// nothing overlaps enough, or too few of the compared points find their reference point.
+fn best_candidate(
+    correlator: &mut Correlator,
+    grid: &CandidateGrid,
+    best: Option<Scored>,
+    config: &LocalizeOptions,
+) -> Result<BestCandidate> {
+    let Some((cost, flat)) = best else {
+        return Err(Error::NoOverlap {
+            needed: correlator.min_overlap(),
+            compared: correlator.compared_points(),
+        });
+    };
+    let grid_index = grid.index(flat);
+    let grid_offset = grid.offset(grid_index);
+    let grid_heading = grid.yaw(grid_index);
+    // Scores the best candidate again here and, for the diagnostics, its neighbours.
+    let at_best =
+        (correlator.evaluate(&grid_offset, grid_heading)).ok_or_else(|| Error::NoOverlap {
+            needed: correlator.min_overlap(),
+            compared: correlator.compared_points(),
+        })?;
+    let compared = correlator.compared_points();
+    let needed_inliers = (config.cost.min_inlier_fraction * compared as f64).ceil();
+    if (at_best.inliers as f64) < needed_inliers {
+        return Err(Error::NoMatch {
+            matched: at_best.inliers,
+            compared,
+            needed: needed_inliers as usize,
+            truncation_m: config.cost.truncation_m,
+        });
+    }
+    Ok(BestCandidate {
+        cost,
+        grid_index,
+        grid_offset,
+        grid_heading,
+        at_best,
+        compared,
+    })
+}
+
+/// The estimate below the grid: the refinement's pose, the quadratic fit's translation, or the
+/// grid's own.
+struct Refined {
+    offset: Vec3,
+    rotation: UnitQuaternion<f64>,
+    outcome: RefineOutcome,
+    /// The 6-DoF refinement's result, when it succeeded.
+    refinement: Option<Refinement>,
+    /// Why the 6-DoF refinement failed, when it was asked for and did.
+    error: Option<String>,
+}
+
+/// Refines the best grid candidate: the robust 6-DoF refinement when `normals` were fitted (it
+/// was asked for), falling back to a quadratic fit of the grid costs around it.
+fn refine_best(
+    reference: &Sdem,
+    query: &Sdem,
+    normals: Option<SurfaceNormals>,
+    evaluator: &mut Evaluator,
+    best: &BestCandidate,
+    config: &LocalizeOptions,
+) -> Refined {
+    let grid_offset = best.grid_offset;
+    let grid_rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), best.grid_heading);
+    let mut rotation = grid_rotation;
+    let mut refinement = None;
+    let mut error = None;
+    let (offset, outcome) = if let Some(normals) = normals {
+        let initial = Isometry3::from_parts(Translation3::from(grid_offset), grid_rotation);
+        match refine(
+            reference,
+            &normals,
+            query,
+            &initial,
+            config.cost.prior.as_ref(),
+            &config.refinement,
+        ) {
+            Ok(r) => {
+                rotation = r.transform.rotation;
+                let t = r.transform.translation.vector;
+                refinement = Some(r);
+                (t, RefineOutcome::SixDof)
+            }
+            Err(e) => {
+                error = Some(e.to_string());
+                match refine_quadratic(evaluator, best.grid_index) {
+                    Some(o) => (o, RefineOutcome::Quadratic),
+                    None => (grid_offset, RefineOutcome::Failed),
+                }
+            }
+        }
+    } else {
+        (grid_offset, RefineOutcome::None)
+    };
+    Refined {
+        offset,
+        rotation,
+        outcome,
+        refinement,
+        error,
+    }
+}
+
+/// What the search for the runner-up continues from: the best candidate's grid, cost and
+/// search.
+struct RunnerUpSearch<'s, 'a> {
+    grid: &'s CandidateGrid,
+    correlator: &'s Correlator<'a>,
+    prepared: Option<&'s bnb::Prepared<'a>>,
+    /// What the exact search set aside for it.
+    reserve: Option<bnb::Reserve>,
+    full_turn: bool,
+}
+
+impl RunnerUpSearch<'_, '_> {
+    /// The best candidate more than the peak radius from `grid_offset` costing at most the
+    /// ambiguity ratio × `cost`: its cost, offset and heading.
+    fn run(
+        self,
+        grid_offset: Vec3,
+        cost: f64,
+        config: &LocalizeOptions,
+    ) -> Option<(f64, Vec3, f64)> {
+        let mut outside = self.grid.clone();
+        outside.exclude = Some((grid_offset, config.peak_radius_m));
+        // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
+        // the exact search cheap.
+        let cap = config.ambiguous_cost_ratio * cost;
+        let second = match (self.reserve, self.prepared) {
+            (Some(reserve), Some(prepared)) => bnb::runner_up(prepared, &outside, cap, reserve).0,
+            _ => {
+                let mut e = Evaluator::new(self.correlator.clone(), &outside);
+                run_search(&mut e, self.prepared, config, self.full_turn, cap, None).0
+            }
+        };
+        second.map(|(c, flat)| {
+            let idx = outside.index(flat);
+            (c, outside.offset(idx), outside.yaw(idx))
+        })
+    }
 }
 
 /// The diagnostics of a match (overlap, runner-up, covariance) and its doubts. `refinement` is
@@ -506,79 +639,20 @@ fn diagnose(
         let translation: nalgebra::Matrix3<f64> = cov.fixed_view::<3, 3>(0, 0).into_owned();
         translation.symmetric_eigen()
     });
-    let mut weakest = None;
-    let mut flat = None;
-    if let Some(eigen) = &eigen {
-        let (mut i_max, mut i_min) = (0, 0);
-        for i in 0..3 {
-            if eigen.eigenvalues[i] > eigen.eigenvalues[i_max] {
-                i_max = i;
-            }
-            if eigen.eigenvalues[i] < eigen.eigenvalues[i_min] {
-                i_min = i;
-            }
-        }
-        let v = eigen.eigenvectors.column(i_max).into_owned();
-        let sigma_max = eigen.eigenvalues[i_max].max(0.0).sqrt();
-        let sigma_min = eigen.eigenvalues[i_min].max(0.0).sqrt();
-        if sigma_max > config.ambiguous_sigma_ratio * sigma_min {
-            flat = Some([v.x, v.y, v.z]);
-            doubts.push(Doubt::FlatCovariance {
-                direction: [v.x, v.y, v.z],
-                sigma_m: sigma_max,
-                across_sigma_m: sigma_min,
-            });
-        }
-        weakest = Some(([v.x, v.y, v.z], sigma_max, sigma_min));
-    }
-    // The cost's own shape: how much it rises half the peak radius away from the optimum, along
-    // the principal directions. Flat along one direction and steep along another is a corridor.
-    let directions: Vec<Vec3> = match &eigen {
-        Some(eigen) => (0..3)
-            .map(|i| eigen.eigenvectors.column(i).into_owned())
-            .collect(),
-        None => vec![Vec3::x(), Vec3::y(), Vec3::z()],
+    let (mut weakest, mut flat) = match &eigen {
+        Some(eigen) => covariance_shape(eigen, config, &mut doubts),
+        None => (None, None),
     };
-    let d = 0.5 * config.peak_radius_m;
-    let rises: Vec<(f64, Vec3)> = directions
-        .iter()
-        .map(|v| {
-            let rise = cost_at(best_offset + v * d).min(cost_at(best_offset - v * d)) - best.cost;
-            (rise, *v)
-        })
-        .collect();
-    let flattest = rises
-        .iter()
-        .cloned()
-        .fold((f64::INFINITY, Vec3::zeros()), |a, b| {
-            if b.0 < a.0 {
-                b
-            } else {
-                a
-            }
-        });
-    let steepest = rises.iter().map(|r| r.0).fold(0.0, f64::max);
-    if flattest.0 < config.ambiguous_rise_ratio * steepest {
-        let v = flattest.1;
-        doubts.push(Doubt::FlatCost {
-            direction: [v.x, v.y, v.z],
-            distance_m: d,
-            rise: flattest.0.max(0.0),
-            across_rise: steepest,
-        });
-        if weakest.is_none() {
-            weakest = Some(([v.x, v.y, v.z], f64::NAN, f64::NAN));
-        }
-        // The grid's cost alone can be flat where the refined pose is not: on 3DTK's scan 2 the
-        // grid's pitch was 2° off, so no floor point fell within τ at any height, while the
-        // refinement was weakest along the corridor (σ 0.29 mm against 0.10 mm). It names the
-        // free direction only when the refinement's weakest direction agrees with it (or there
-        // is no refinement).
-        let agrees = weakest.is_none_or(|(w, _, _)| Vec3::from(w).dot(&v).abs() > 0.9);
-        if flat.is_none() && agrees {
-            flat = Some([v.x, v.y, v.z]);
-        }
-    }
+    cost_shape(
+        config,
+        best.cost,
+        best_offset,
+        eigen.as_ref(),
+        cost_at,
+        &mut weakest,
+        &mut flat,
+        &mut doubts,
+    );
     // Too little in common, or the points did not confirm the grid's answer: on the fault
     // bench's failures (a query 0.45 m away seeing little of what the reference saw) 14–21 % of
     // the points matched, or the grid optimum was 10 cm off and the refinement refused to follow
@@ -611,6 +685,105 @@ fn diagnose(
         ambiguous: doubts.iter().any(Doubt::is_ambiguity),
     };
     (diagnostics, doubts)
+}
+
+/// The weakest translational direction with its σ and the strongest σ.
+type Weakest = Option<([f64; 3], f64, f64)>;
+
+/// The shape of the refinement's translational covariance, from its principal directions
+/// `eigen`: the weakest direction with its σ and the strongest σ, and that direction again
+/// (the pose is free along it) when its σ exceeds the sigma ratio × the strongest, which is a
+/// doubt.
+fn covariance_shape(
+    eigen: &SymmetricEigen<f64, U3>,
+    config: &LocalizeOptions,
+    doubts: &mut Vec<Doubt>,
+) -> (Weakest, Option<[f64; 3]>) {
+    let (mut i_max, mut i_min) = (0, 0);
+    for i in 0..3 {
+        if eigen.eigenvalues[i] > eigen.eigenvalues[i_max] {
+            i_max = i;
+        }
+        if eigen.eigenvalues[i] < eigen.eigenvalues[i_min] {
+            i_min = i;
+        }
+    }
+    let v = eigen.eigenvectors.column(i_max).into_owned();
+    let sigma_max = eigen.eigenvalues[i_max].max(0.0).sqrt();
+    let sigma_min = eigen.eigenvalues[i_min].max(0.0).sqrt();
+    let mut flat = None;
+    if sigma_max > config.ambiguous_sigma_ratio * sigma_min {
+        flat = Some([v.x, v.y, v.z]);
+        doubts.push(Doubt::FlatCovariance {
+            direction: [v.x, v.y, v.z],
+            sigma_m: sigma_max,
+            across_sigma_m: sigma_min,
+        });
+    }
+    (Some(([v.x, v.y, v.z], sigma_max, sigma_min)), flat)
+}
+
+/// The cost's own shape: how much it rises half the peak radius away from the optimum, along
+/// the principal directions `eigen` (the axes without them). Flat along one direction and steep
+/// along another is a corridor: a doubt, and the free direction when the covariance named none
+/// and `weakest` agrees with it.
+#[allow(clippy::too_many_arguments)]
+fn cost_shape(
+    config: &LocalizeOptions,
+    best_cost: f64,
+    best_offset: Vec3,
+    eigen: Option<&SymmetricEigen<f64, U3>>,
+    cost_at: &mut dyn FnMut(Vec3) -> f64,
+    weakest: &mut Weakest,
+    flat: &mut Option<[f64; 3]>,
+    doubts: &mut Vec<Doubt>,
+) {
+    let directions: Vec<Vec3> = match eigen {
+        Some(eigen) => (0..3)
+            .map(|i| eigen.eigenvectors.column(i).into_owned())
+            .collect(),
+        None => vec![Vec3::x(), Vec3::y(), Vec3::z()],
+    };
+    let d = 0.5 * config.peak_radius_m;
+    let rises: Vec<(f64, Vec3)> = directions
+        .iter()
+        .map(|v| {
+            let rise = cost_at(best_offset + v * d).min(cost_at(best_offset - v * d)) - best_cost;
+            (rise, *v)
+        })
+        .collect();
+    let flattest = rises
+        .iter()
+        .cloned()
+        .fold((f64::INFINITY, Vec3::zeros()), |a, b| {
+            if b.0 < a.0 {
+                b
+            } else {
+                a
+            }
+        });
+    let steepest = rises.iter().map(|r| r.0).fold(0.0, f64::max);
+    if flattest.0 < config.ambiguous_rise_ratio * steepest {
+        let v = flattest.1;
+        doubts.push(Doubt::FlatCost {
+            direction: [v.x, v.y, v.z],
+            distance_m: d,
+            rise: flattest.0.max(0.0),
+            across_rise: steepest,
+        });
+        if weakest.is_none() {
+            *weakest = Some(([v.x, v.y, v.z], f64::NAN, f64::NAN));
+        }
+        // The grid's cost alone can be flat where the refined pose is not: on 3DTK's scan 2 the
+        // grid's pitch was 2° off, so no floor point fell within τ at any height, while the
+        // refinement was weakest along the corridor (σ 0.29 mm against 0.10 mm). It names the
+        // free direction only when the refinement's weakest direction agrees with it (or there
+        // is no refinement).
+        let agrees = weakest.is_none_or(|(w, _, _)| Vec3::from(w).dot(&v).abs() > 0.9);
+        if flat.is_none() && agrees {
+            *flat = Some([v.x, v.y, v.z]);
+        }
+    }
 }
 
 /// A covariance over `[x, y, z, rx, ry, rz]` on the levelled reference's axes, expressed on the
