@@ -33,7 +33,10 @@ pub use trajectory::{trajectory_errors, TrajectoryErrors};
 use crate::doubt::Doubt;
 use crate::error::{Error, Result};
 use crate::geometry::{attitude_of, pose_from_parts, Attitude, Pose, Vec3};
-use crate::localize::{localize, CostConfig, LocalizeOptions, OffsetPrior, SearchWindow};
+use crate::localize::{
+    localize, CostConfig, Diagnostics, LocalizeOptions, OffsetPrior, RefinementSummary,
+    SearchWindow,
+};
 use crate::map::{
     verify_loop_closure, world_from_query, Descriptor, LoopClosure, LoopClosureConfig, Map, Node,
 };
@@ -507,41 +510,7 @@ impl Slam {
         let start = Instant::now();
         let node_id = self.map.nodes.len();
         let Some(last) = self.map.nodes.last() else {
-            // The first scan defines the world: origin at its sensor, axes level, heading from
-            // its compass (DESIGN.md, "Units and frames").
-            let attitude = scan.attitude.unwrap_or_default();
-            let world_from_sensor = pose_from_parts(Vec3::zeros(), attitude);
-            let node = Node::from_scan(
-                node_id,
-                scan.scan_index,
-                world_from_sensor,
-                scan.attitude,
-                scan.points_in_sensor,
-                &self.config.sdem,
-            )?;
-            self.voxels
-                .insert_scan(&node.world_from_sensor, &node.sensor_points());
-            self.map.nodes.push(node);
-            let pose = world_from_sensor;
-            return Ok(StepReport {
-                scan_index: scan.scan_index,
-                node_id,
-                time_ms: ms(start),
-                localize_ms: 0.0,
-                world_from_sensor: (&pose).into(),
-                predicted_world_from_sensor: (&pose).into(),
-                heading_prior: HeadingPrior::First,
-                reference_nodes: Vec::new(),
-                cost: None,
-                overlap_fraction: None,
-                inlier_fraction: None,
-                covariance: None,
-                doubts: Vec::new(),
-                trusted: true,
-                refinement: None,
-                loop_closures: Vec::new(),
-                optimization: None,
-            });
+            return self.add_first_scan(scan, start);
         };
         if scan.scan_index <= last.scan_index {
             return Err(Error::Invalid(format!(
@@ -551,7 +520,102 @@ impl Slam {
         }
 
         // 1. Predict.
-        let last_pose = last.world_from_sensor;
+        let prediction = self.predict(scan, last.world_from_sensor, node_id);
+
+        // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
+        let query = Sdem::from_points(
+            scan.points_in_sensor,
+            &prediction.attitude,
+            &self.config.sdem,
+        )?;
+        if query.known_cells() == 0 {
+            return Err(Error::Invalid(format!(
+                "scan {} has no usable point (all closer than {} m or not finite)",
+                scan.scan_index, self.config.sdem.min_range_m
+            )));
+        }
+        let references = self.reference_nodes(&query, &prediction.position, node_id);
+        let reference_ids: Vec<usize> = references.iter().map(|r| r.0).collect();
+
+        // 3. Localize, and add the node with one edge per reference node.
+        let matched = self.match_scan(scan, &query, &prediction, &reference_ids)?;
+        self.add_node(scan, node_id, &matched, &reference_ids)?;
+
+        // 4. Loop closure.
+        let (closures, optimization) = self.close_loops_and_optimize(node_id)?;
+
+        let pose = self.map.nodes[node_id].world_from_sensor;
+        let Matched {
+            cost,
+            refinement,
+            diagnostics,
+            doubts,
+            localize_ms,
+            ..
+        } = matched;
+        Ok(StepReport {
+            scan_index: scan.scan_index,
+            node_id,
+            time_ms: ms(start),
+            localize_ms,
+            world_from_sensor: (&pose).into(),
+            predicted_world_from_sensor: (&prediction.predicted).into(),
+            heading_prior: prediction.heading_prior,
+            reference_nodes: references,
+            cost: Some(cost),
+            overlap_fraction: Some(diagnostics.overlap_fraction),
+            inlier_fraction: Some(diagnostics.inlier_fraction),
+            covariance: diagnostics.covariance,
+            trusted: doubts.is_empty(),
+            doubts,
+            refinement: Some(refinement),
+            loop_closures: closures,
+            optimization,
+        })
+    }
+
+    /// The first scan defines the world: origin at its sensor, axes level, heading from its
+    /// compass (DESIGN.md, "Units and frames"). It becomes node 0 as it is.
+    fn add_first_scan(&mut self, scan: &ScanInput, start: Instant) -> Result<StepReport> {
+        let node_id = self.map.nodes.len();
+        let attitude = scan.attitude.unwrap_or_default();
+        let world_from_sensor = pose_from_parts(Vec3::zeros(), attitude);
+        let node = Node::from_scan(
+            node_id,
+            scan.scan_index,
+            world_from_sensor,
+            scan.attitude,
+            scan.points_in_sensor,
+            &self.config.sdem,
+        )?;
+        self.voxels
+            .insert_scan(&node.world_from_sensor, &node.sensor_points());
+        self.map.nodes.push(node);
+        let pose = world_from_sensor;
+        Ok(StepReport {
+            scan_index: scan.scan_index,
+            node_id,
+            time_ms: ms(start),
+            localize_ms: 0.0,
+            world_from_sensor: (&pose).into(),
+            predicted_world_from_sensor: (&pose).into(),
+            heading_prior: HeadingPrior::First,
+            reference_nodes: Vec::new(),
+            cost: None,
+            overlap_fraction: None,
+            inlier_fraction: None,
+            covariance: None,
+            doubts: Vec::new(),
+            trusted: true,
+            refinement: None,
+            loop_closures: Vec::new(),
+            optimization: None,
+        })
+    }
+
+    /// Step 1: the scan's predicted pose from the last node's, `last_pose`, and the search's
+    /// window and prior around it, wider with a weaker prior.
+    fn predict(&self, scan: &ScanInput, last_pose: Pose, node_id: usize) -> Prediction {
         let last_attitude = attitude_of(&last_pose);
         // Without odometry the robot is assumed to repeat its last motion (a constant-velocity
         // model, as KISS-ICP does), or to stand still after the first scan.
@@ -603,19 +667,30 @@ impl Slam {
                 self.config.prior_sigma_no_odometry_m,
             )
         };
-
-        // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
-        let query = Sdem::from_points(scan.points_in_sensor, &attitude, &self.config.sdem)?;
-        if query.known_cells() == 0 {
-            return Err(Error::Invalid(format!(
-                "scan {} has no usable point (all closer than {} m or not finite)",
-                scan.scan_index, self.config.sdem.min_range_m
-            )));
+        Prediction {
+            has_motion: motion.is_some(),
+            position,
+            attitude,
+            predicted,
+            heading_prior,
+            heading_half,
+            window_half,
+            prior_sigma_m,
         }
+    }
+
+    /// Step 2: the recent nodes near `position` that overlap `query` enough, most overlap first,
+    /// with the cells they overlap; the last node when none does (the search then says why).
+    fn reference_nodes(
+        &self,
+        query: &Sdem,
+        position: &Vec3,
+        node_id: usize,
+    ) -> Vec<(usize, usize)> {
         let recent_from = node_id.saturating_sub(self.config.loop_closure.min_node_separation);
         let mut references: Vec<(usize, usize)> = self
             .map
-            .overlaps(&query, &position, self.config.reference_radius_m, 0.2)
+            .overlaps(query, position, self.config.reference_radius_m, 0.2)
             .into_iter()
             .filter(|&(id, cells)| {
                 id >= recent_from && cells >= self.config.min_reference_overlap_cells
@@ -626,38 +701,47 @@ impl Slam {
             // The last node always takes part: with no overlap the search says why.
             references.push((node_id - 1, 0));
         }
-        let reference_ids: Vec<usize> = references.iter().map(|r| r.0).collect();
+        references
+    }
 
-        // 3. Localize against the merged virtual S-DEM, seen from the origin of the node that
-        // overlaps most: its own points keep their full density there, and the other nodes fill
-        // in what it did not see. (Seen from the predicted origin instead, a node's points spread
-        // apart and leave holes: on the 3DTK scans, 1.6 m apart, a quarter of the query's cells
-        // found a reference cell instead of all of them.)
+    /// Step 3: localizes `query` against the merged virtual S-DEM of `reference_ids`, seen from
+    /// the origin of the node that overlaps most: its own points keep their full density there,
+    /// and the other nodes fill in what it did not see. (Seen from the predicted origin instead,
+    /// a node's points spread apart and leave holes: on the 3DTK scans, 1.6 m apart, a quarter
+    /// of the query's cells found a reference cell instead of all of them.)
+    fn match_scan(
+        &self,
+        scan: &ScanInput,
+        query: &Sdem,
+        prediction: &Prediction,
+        reference_ids: &[usize],
+    ) -> Result<Matched> {
+        let position = prediction.position;
         let origin = self.map.nodes[reference_ids[0]].position();
         let reference = self
             .map
-            .merged_reference(&reference_ids, &origin, &self.config.sdem)?;
+            .merged_reference(reference_ids, &origin, &self.config.sdem)?;
         let localize_config = LocalizeOptions {
-            window: SearchWindow::around(&(position - origin), window_half),
+            window: SearchWindow::around(&(position - origin), prediction.window_half),
             heading: HeadingWindow {
-                half_range_deg: heading_half,
+                half_range_deg: prediction.heading_half,
                 step_deg: None,
             },
             cost: CostConfig {
                 prior: Some(OffsetPrior {
                     offset: (position - origin).into(),
-                    sigma_m: prior_sigma_m,
+                    sigma_m: prediction.prior_sigma_m,
                 }),
                 ..self.config.localize.cost.clone()
             },
             ..self.config.localize.clone()
         };
         let localize_start = Instant::now();
-        let found = localize(&reference, &query, &localize_config).map_err(|e| {
+        let found = localize(&reference, query, &localize_config).map_err(|e| {
             if e.is_no_match() {
                 Error::AtScan {
                     scan_index: scan.scan_index,
-                    nodes: reference_ids.clone(),
+                    nodes: reference_ids.to_vec(),
                     source: Box::new(e),
                 }
             } else {
@@ -666,8 +750,7 @@ impl Slam {
         })?;
         let localize_ms = ms(localize_start);
         let mut world_from_sensor = world_from_query(&origin, &found);
-        let refinement =
-            crate::localize::RefinementSummary::new(found.refined, found.refinement.as_ref());
+        let refinement = RefinementSummary::new(found.refined, found.refinement.as_ref());
         let mut diagnostics = found.diagnostics;
         let mut doubts = found.doubts;
         // Along a direction the scans leave free (a ditch's or a corridor's axis), the match's
@@ -675,16 +758,37 @@ impl Slam {
         // reference's own origin (a forward-looking scan in a straight corridor came out 20 %
         // short at every step). There the prediction decides, and the edge carries the
         // prediction's uncertainty.
-        if motion.is_some() {
+        if prediction.has_motion {
             take_prediction_along(
                 &mut world_from_sensor,
                 &mut diagnostics,
                 &mut doubts,
                 &position,
-                prior_sigma_m,
+                prediction.prior_sigma_m,
             );
         }
-        let covariance = diagnostics
+        Ok(Matched {
+            world_from_sensor,
+            cost: found.cost,
+            refinement,
+            diagnostics,
+            doubts,
+            localize_ms,
+        })
+    }
+
+    /// Adds the matched scan as node `node_id`, with one edge from each reference node (together
+    /// they carry the match's information once), and fuses its points into the voxel map.
+    fn add_node(
+        &mut self,
+        scan: &ScanInput,
+        node_id: usize,
+        matched: &Matched,
+        reference_ids: &[usize],
+    ) -> Result<()> {
+        let world_from_sensor = matched.world_from_sensor;
+        let covariance = matched
+            .diagnostics
             .covariance
             .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
         let node = Node::from_scan(
@@ -697,7 +801,7 @@ impl Slam {
         )?;
         // One edge per reference node; together they carry the match's information once.
         let share = 1.0 / reference_ids.len() as f64;
-        for &r in &reference_ids {
+        for &r in reference_ids {
             let world_from_r = self.map.nodes[r].world_from_sensor;
             self.edges.push(Edge {
                 from: r,
@@ -710,8 +814,15 @@ impl Slam {
         self.voxels
             .insert_scan(&node.world_from_sensor, &node.sensor_points());
         self.map.nodes.push(node);
+        Ok(())
+    }
 
-        // 4. Loop closure.
+    /// Step 4, when loop closure is enabled: closes loops to node `node_id` and, when one was
+    /// accepted, optimizes the pose graph.
+    fn close_loops_and_optimize(
+        &mut self,
+        node_id: usize,
+    ) -> Result<(Vec<LoopClosure>, Option<OptimizationSummary>)> {
         let mut closures = Vec::new();
         let mut optimization = None;
         if self.config.loop_closure.enabled {
@@ -720,26 +831,7 @@ impl Slam {
                 optimization = Some(self.optimize_graph()?);
             }
         }
-        let pose = self.map.nodes[node_id].world_from_sensor;
-        Ok(StepReport {
-            scan_index: scan.scan_index,
-            node_id,
-            time_ms: ms(start),
-            localize_ms,
-            world_from_sensor: (&pose).into(),
-            predicted_world_from_sensor: (&predicted).into(),
-            heading_prior,
-            reference_nodes: references,
-            cost: Some(found.cost),
-            overlap_fraction: Some(diagnostics.overlap_fraction),
-            inlier_fraction: Some(diagnostics.inlier_fraction),
-            covariance: diagnostics.covariance,
-            trusted: doubts.is_empty(),
-            doubts,
-            refinement: Some(refinement),
-            loop_closures: closures,
-            optimization,
-        })
+        Ok((closures, optimization))
     }
 
     /// Proposes revisits of older places for node `to` and verifies them; accepted ones become
@@ -869,6 +961,38 @@ impl Slam {
         let information = 0.5 * (information + information.transpose());
         std::array::from_fn(|i| std::array::from_fn(|j| information[(i, j)]))
     }
+}
+
+/// Where a scan is expected before it is matched (step 1 of [`Slam::add_scan`]), and the
+/// search's window and prior around it.
+struct Prediction {
+    /// Whether the prediction moved the last pose (odometry or the last motion): then the
+    /// prediction decides along a direction the match leaves free.
+    has_motion: bool,
+    /// The predicted position, world frame.
+    position: Vec3,
+    /// The predicted attitude, and the pose of both.
+    attitude: Attitude,
+    predicted: Pose,
+    /// Where the heading came from, and the heading window's half-width, degrees.
+    heading_prior: HeadingPrior,
+    heading_half: f64,
+    /// The translation window's half-size and the prior's σ, metres.
+    window_half: [f64; 3],
+    prior_sigma_m: f64,
+}
+
+/// A scan's match against its reference nodes (step 3 of [`Slam::add_scan`]).
+struct Matched {
+    /// The sensor's pose in the world (the prediction's position along a free direction).
+    world_from_sensor: Pose,
+    /// The match's cost, refinement, diagnostics and doubts, for the report.
+    cost: f64,
+    refinement: RefinementSummary,
+    diagnostics: Diagnostics,
+    doubts: Vec<Doubt>,
+    /// Wall time of the localization, ms.
+    localize_ms: f64,
 }
 
 fn ms(start: Instant) -> f64 {
