@@ -72,19 +72,7 @@ pub fn relocalize(
         ));
     }
     if let Some(n) = &near {
-        if !n.position.iter().all(|v| v.is_finite()) {
-            return Err(Error::Invalid(format!(
-                "the position to relocalize near, {:?}, must be finite metres",
-                n.position.as_slice()
-            )));
-        }
-        if let Some(sigma_m) = n.sigma_m {
-            OffsetPrior {
-                offset: n.position.into(),
-                sigma_m,
-            }
-            .validate()?;
-        }
+        n.validate()?;
     }
     let near_position = near.map(|n| n.position);
     let level = attitude.unwrap_or_default();
@@ -92,26 +80,7 @@ pub fn relocalize(
     if query.known_cells() == 0 {
         return Err(Error::Invalid("the scan has no usable point".into()));
     }
-    let mut candidates: Vec<(usize, f64)> = match near_position {
-        Some(p) => map
-            .nodes
-            .iter()
-            .map(|n| (n.node_id, (n.position() - p).norm()))
-            .collect(),
-        None => {
-            let descriptor = Descriptor::from_levelled(query.points());
-            map.nodes
-                .iter()
-                .filter_map(|n| {
-                    let d =
-                        Descriptor::from_levelled(&n.points_levelled()).distance(&descriptor, 1)?;
-                    Some((n.node_id, d))
-                })
-                .collect()
-        }
-    };
-    candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
-    candidates.truncate(max_nodes.max(1));
+    let candidates = candidate_nodes(map, &query, near_position, max_nodes);
     let heading = if attitude.is_some() {
         config.heading_half_compass_deg
     } else {
@@ -123,22 +92,7 @@ pub fn relocalize(
         let origin = map.nodes[node_id].position();
         let reference = map.merged_reference(&[node_id], &origin, &config.sdem)?;
         let centre = near_position.map_or(Vec3::zeros(), |p| p - origin);
-        let prior = near.and_then(|n| n.sigma_m).map(|sigma_m| OffsetPrior {
-            offset: centre.into(),
-            sigma_m,
-        });
-        let localize_config = LocalizeOptions {
-            window: SearchWindow::around(&centre, config.window_half_no_odometry_m),
-            heading: HeadingWindow {
-                half_range_deg: heading,
-                step_deg: None,
-            },
-            cost: CostConfig {
-                prior,
-                ..config.localize.cost.clone()
-            },
-            ..config.localize.clone()
-        };
+        let localize_config = search_options(config, centre, near, heading);
         match localize(&reference, &query, &localize_config) {
             Ok(found)
                 if found.diagnostics.inlier_fraction >= config.loop_closure.min_inlier_fraction =>
@@ -182,6 +136,85 @@ pub fn relocalize(
         doubts,
         time_ms: ms(start),
     })
+}
+
+impl Near {
+    /// Refuses a position that is not finite, or a σ that is not a positive length.
+    fn validate(&self) -> Result<()> {
+        if !self.position.iter().all(|v| v.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "the position to relocalize near, {:?}, must be finite metres",
+                self.position.as_slice()
+            )));
+        }
+        if let Some(sigma_m) = self.sigma_m {
+            OffsetPrior {
+                offset: self.position.into(),
+                sigma_m,
+            }
+            .validate()?;
+        }
+        Ok(())
+    }
+}
+
+/// The nodes to try, with how near each lies to `near_position` or, without one, how unlike its
+/// place descriptor is the scan's; nearest or most alike first, at most `max_nodes` (at least
+/// one).
+fn candidate_nodes(
+    map: &Map,
+    query: &Sdem,
+    near_position: Option<Vec3>,
+    max_nodes: usize,
+) -> Vec<(usize, f64)> {
+    let mut candidates: Vec<(usize, f64)> = match near_position {
+        Some(p) => map
+            .nodes
+            .iter()
+            .map(|n| (n.node_id, (n.position() - p).norm()))
+            .collect(),
+        None => {
+            let descriptor = Descriptor::from_levelled(query.points());
+            map.nodes
+                .iter()
+                .filter_map(|n| {
+                    let d =
+                        Descriptor::from_levelled(&n.points_levelled()).distance(&descriptor, 1)?;
+                    Some((n.node_id, d))
+                })
+                .collect()
+        }
+    };
+    candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+    candidates.truncate(max_nodes.max(1));
+    candidates
+}
+
+/// The search at one node: a window of [`SlamOptions::window_half_no_odometry_m`] around
+/// `centre` (the offset from the node's origin), headings within `heading` degrees, and the
+/// prior of `near` when it has a σ.
+fn search_options(
+    config: &SlamOptions,
+    centre: Vec3,
+    near: Option<Near>,
+    heading: f64,
+) -> LocalizeOptions {
+    let prior = near.and_then(|n| n.sigma_m).map(|sigma_m| OffsetPrior {
+        offset: centre.into(),
+        sigma_m,
+    });
+    LocalizeOptions {
+        window: SearchWindow::around(&centre, config.window_half_no_odometry_m),
+        heading: HeadingWindow {
+            half_range_deg: heading,
+            step_deg: None,
+        },
+        cost: CostConfig {
+            prior,
+            ..config.localize.cost.clone()
+        },
+        ..config.localize.clone()
+    }
 }
 
 /// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): where `diagnostics` name
