@@ -498,13 +498,7 @@ pub fn refine(
     for iteration in 0..config.max_iterations.max(1) {
         iterations = iteration + 1;
         let fresh = associate;
-        // Anneal the kernel from wide to the configured scale over the first iterations, until
-        // the estimate settles.
-        let scale = if settled {
-            config.kernel_scale_m
-        } else {
-            config.kernel_scale_m * (1.0 + 3.0 * (-(iteration as f64) / 3.0).exp())
-        };
+        let scale = annealed_scale(config, iteration, settled);
         let r32 = rotation.matrix().cast::<f32>();
         let t32 = translation.cast::<f32>();
         let pose = (r32, t32);
@@ -527,31 +521,7 @@ pub fn refine(
         // The information reported is the scans' alone: the prediction steers the estimate
         // where they say nothing, and a pose graph holds the odometry as its own edge.
         last = Some((h, sigma_sq, inliers));
-        let (mut h, mut g) = (h, g);
-        if let Some(p) = prior {
-            // One more residual like the points': the kernel's scale at one σ of the prediction.
-            let weight = (config.kernel_scale_m / p.sigma_m).powi(2);
-            for a in 0..3 {
-                h[(a, a)] += weight;
-                g[a] += weight * (translation[a] - p.offset[a]);
-            }
-        }
-        let delta = if config.estimate_rotation {
-            h.cholesky().map(|c| -c.solve(&g))
-        } else {
-            let h3 = h.fixed_view::<3, 3>(0, 0).into_owned();
-            let g3 = g.fixed_rows::<3>(0).into_owned();
-            h3.cholesky().map(|c| {
-                let d = -c.solve(&g3);
-                Vector6::new(d.x, d.y, d.z, 0.0, 0.0, 0.0)
-            })
-        };
-        let Some(delta) = delta else {
-            return Err(Error::RefinementFailed {
-                reason: "refinement is degenerate: the surfaces constrain fewer than all axes"
-                    .into(),
-            });
-        };
+        let delta = solve_step(h, g, &translation, prior, config)?;
         let omega = Vec3::new(delta[3], delta[4], delta[5]);
         let step_rotation = Rotation3::new(omega);
         rotation = step_rotation * rotation;
@@ -573,6 +543,74 @@ pub fn refine(
         settled |= step < SETTLED_STEP;
     }
     let (h, sigma_sq, inliers) = last.expect("at least one iteration ran");
+    check_plausible(initial, &rotation, &translation, config)?;
+    Ok(Refinement {
+        transform: Isometry3::from_parts(
+            Translation3::from(translation),
+            UnitQuaternion::from_rotation_matrix(&rotation),
+        ),
+        iterations,
+        converged,
+        inliers,
+        rms_m: sigma_sq.sqrt(),
+        information: h / sigma_sq,
+    })
+}
+
+/// The kernel's scale at `iteration`: annealed from wide to the configured scale over the first
+/// iterations, until the estimate has `settled`.
+fn annealed_scale(config: &RefineConfig, iteration: usize, settled: bool) -> f64 {
+    if settled {
+        config.kernel_scale_m
+    } else {
+        config.kernel_scale_m * (1.0 + 3.0 * (-(iteration as f64) / 3.0).exp())
+    }
+}
+
+/// The Gauss-Newton update from the normal equations `h`, `g` (with the `prior` on the offset
+/// added, at the current `translation`), over all six axes or the translation alone.
+///
+/// # Errors
+/// [`Error::RefinementFailed`] when the system is degenerate.
+fn solve_step(
+    h: Matrix6<f64>,
+    g: Vector6<f64>,
+    translation: &Vec3,
+    prior: Option<&OffsetPrior>,
+    config: &RefineConfig,
+) -> Result<Vector6<f64>> {
+    let (mut h, mut g) = (h, g);
+    if let Some(p) = prior {
+        // One more residual like the points': the kernel's scale at one σ of the prediction.
+        let weight = (config.kernel_scale_m / p.sigma_m).powi(2);
+        for a in 0..3 {
+            h[(a, a)] += weight;
+            g[a] += weight * (translation[a] - p.offset[a]);
+        }
+    }
+    let delta = if config.estimate_rotation {
+        h.cholesky().map(|c| -c.solve(&g))
+    } else {
+        let h3 = h.fixed_view::<3, 3>(0, 0).into_owned();
+        let g3 = g.fixed_rows::<3>(0).into_owned();
+        h3.cholesky().map(|c| {
+            let d = -c.solve(&g3);
+            Vector6::new(d.x, d.y, d.z, 0.0, 0.0, 0.0)
+        })
+    };
+    delta.ok_or_else(|| Error::RefinementFailed {
+        reason: "refinement is degenerate: the surfaces constrain fewer than all axes".into(),
+    })
+}
+
+/// Refuses a refined pose (`rotation`, `translation`) that moved further from `initial` than
+/// the configuration finds plausible.
+fn check_plausible(
+    initial: &Isometry3<f64>,
+    rotation: &Rotation3<f64>,
+    translation: &Vec3,
+    config: &RefineConfig,
+) -> Result<()> {
     let rotation_change = (rotation * initial.rotation.to_rotation_matrix().transpose()).angle();
     let translation_change = (translation - initial.translation.vector).norm();
     if rotation_change.to_degrees() > config.max_rotation_deg
@@ -588,17 +626,7 @@ pub fn refine(
             ),
         });
     }
-    Ok(Refinement {
-        transform: Isometry3::from_parts(
-            Translation3::from(translation),
-            UnitQuaternion::from_rotation_matrix(&rotation),
-        ),
-        iterations,
-        converged,
-        inliers,
-        rms_m: sigma_sq.sqrt(),
-        information: h / sigma_sq,
-    })
+    Ok(())
 }
 
 #[cfg(test)]
