@@ -10,7 +10,9 @@
 use super::{check_points_writable, read_bytes, write_atomic};
 use crate::error::{Error, Result};
 use ply_rs_bw::parser::Parser;
-use ply_rs_bw::ply::{ElementDef, Encoding, Property, PropertyAccess, PropertyType, ScalarType};
+use ply_rs_bw::ply::{
+    ElementDef, Encoding, Header, Property, PropertyAccess, PropertyType, ScalarType,
+};
 use sdem::geometry::Vec3;
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
@@ -89,6 +91,13 @@ struct HeaderLayout {
     len: usize,
     lines: usize,
     element_lines: HashMap<String, usize>,
+}
+
+impl HeaderLayout {
+    /// The line that declares element `name`.
+    fn element_line(&self, name: &str) -> Option<usize> {
+        self.element_lines.get(name).copied()
+    }
 }
 
 /// Checks the header's lines for what `ply-rs-bw` does not guard against and finds its end.
@@ -209,7 +218,6 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
     }
     let layout = precheck_header(path, &bytes)?;
     let (header_len, header_lines) = (layout.len, layout.lines);
-    let element_line = |name: &str| layout.element_lines.get(name).copied();
     let mut header_bytes = bytes.get(..header_len).unwrap_or_default();
     let header = Parser::<XyzVertex>::new()
         .read_header(&mut header_bytes)
@@ -230,6 +238,26 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
              with properties x, y, z",
         )
     })?;
+    check_vertex_axes(path, vertex)?;
+    check_elements_fit(path, &header, &layout, body, bytes.len())?;
+
+    let vertices = match header.encoding {
+        Encoding::Ascii => return read_ascii_body(path, body, header_lines, &header.elements),
+        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
+            read_binary_vertices(path, &header, vertex, &layout, body, bytes.len())?
+        }
+    };
+    let mut points = Vec::with_capacity(vertices.len());
+    for (index, v) in vertices.iter().enumerate() {
+        if let Some(p) = finite_point(path, None, index, v.xyz)? {
+            points.push(p);
+        }
+    }
+    Ok(points)
+}
+
+/// Refuses a vertex element without x, y and z stored as float or double.
+fn check_vertex_axes(path: &Path, vertex: &ElementDef) -> Result<()> {
     for axis in ["x", "y", "z"] {
         match vertex.properties.get(axis).map(|p| &p.data_type) {
             Some(PropertyType::Scalar(ScalarType::Float | ScalarType::Double)) => {}
@@ -252,8 +280,19 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
             }
         }
     }
+    Ok(())
+}
 
-    // Every element up to the vertices must fit in what follows the header.
+/// Checks that every element up to the vertices fits in the `body` that follows the header
+/// (the file holds `file_len` bytes), so that a lying count is an error before anything is
+/// allocated.
+fn check_elements_fit(
+    path: &Path,
+    header: &Header,
+    layout: &HeaderLayout,
+    body: &[u8],
+    file_len: usize,
+) -> Result<()> {
     let mut needed = 0usize;
     for (name, def) in &header.elements {
         // An ASCII element takes at least its line break; a malformed short line is reported
@@ -279,57 +318,63 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
                 } else {
                     // The first element that does not fit, and where it starts.
                     let index = room / element_bytes.max(1);
-                    let offset = header_len + needed + index * element_bytes;
+                    let offset = layout.len + needed + index * element_bytes;
                     format!(
                         "the header declares {} '{name}' elements of at least {element_bytes} \
                          bytes each, but the file ends at byte offset {}: '{name}' element {index} \
                          (byte offset {offset}) is cut off; the file is truncated or the header is \
                          wrong",
-                        def.count,
-                        bytes.len()
+                        def.count, file_len
                     )
                 };
-                return Err(Error::parse(path, element_line(name), message));
+                return Err(Error::parse(path, layout.element_line(name), message));
             }
         }
         if name == "vertex" {
             break;
         }
     }
+    Ok(())
+}
 
-    let vertices = match header.encoding {
-        Encoding::Ascii => return read_ascii_body(path, body, header_lines, &header.elements),
-        Encoding::BinaryLittleEndian | Encoding::BinaryBigEndian => {
-            let mut reader = body;
-            // Where the reader stopped, as a byte offset in the file.
-            let at = |reader: &[u8]| bytes.len() - reader.len();
-            for (name, def) in &header.elements {
-                if name == "vertex" {
-                    break;
-                }
-                if !def.properties.is_empty() {
-                    Parser::<Skip>::new()
-                        .read_payload_for_element(&mut reader, def, &header)
-                        .map_err(|e| {
-                            truncated(path, element_line(name), name, def.count, at(reader), &e)
-                        })?;
-                }
-            }
-            Parser::<XyzVertex>::new()
-                .read_payload_for_element(&mut reader, vertex, &header)
-                .map_err(|e| {
-                    let line = element_line("vertex");
-                    truncated(path, line, "vertex", vertex.count, at(reader), &e)
-                })?
+/// Reads the binary `body` (of a file of `file_len` bytes): skips the elements before the
+/// `vertex` element and reads that.
+fn read_binary_vertices(
+    path: &Path,
+    header: &Header,
+    vertex: &ElementDef,
+    layout: &HeaderLayout,
+    body: &[u8],
+    file_len: usize,
+) -> Result<Vec<XyzVertex>> {
+    let mut reader = body;
+    // Where the reader stopped, as a byte offset in the file.
+    let at = |reader: &[u8]| file_len - reader.len();
+    for (name, def) in &header.elements {
+        if name == "vertex" {
+            break;
         }
-    };
-    let mut points = Vec::with_capacity(vertices.len());
-    for (index, v) in vertices.iter().enumerate() {
-        if let Some(p) = finite_point(path, None, index, v.xyz)? {
-            points.push(p);
+        if !def.properties.is_empty() {
+            Parser::<Skip>::new()
+                .read_payload_for_element(&mut reader, def, header)
+                .map_err(|e| {
+                    truncated(
+                        path,
+                        layout.element_line(name),
+                        name,
+                        def.count,
+                        at(reader),
+                        &e,
+                    )
+                })?;
         }
     }
-    Ok(points)
+    Parser::<XyzVertex>::new()
+        .read_payload_for_element(&mut reader, vertex, header)
+        .map_err(|e| {
+            let line = layout.element_line("vertex");
+            truncated(path, line, "vertex", vertex.count, at(reader), &e)
+        })
 }
 
 /// A message of `ply-rs-bw` (which spreads some over lines with tabs) on one line.
