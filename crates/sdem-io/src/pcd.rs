@@ -122,95 +122,8 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usize, usize)> 
         let mut tokens = line.split_whitespace();
         let key = tokens.next().unwrap_or_default();
         let values: Vec<&str> = tokens.collect();
-        let bad = |message: String| Error::parse(path, Some(line_no), message);
-        let duplicate = || bad(format!("{key} appears twice in the header"));
-        let single = |what: &str| -> Result<usize> {
-            match values.as_slice() {
-                [v] => parse_count(path, line_no, v, what),
-                _ => Err(bad(format!("{key} needs exactly one value"))),
-            }
-        };
-        match key {
-            "FIELDS" => {
-                if header.fields.is_some() {
-                    return Err(duplicate());
-                }
-                header.fields = Some(values.iter().map(|s| s.to_string()).collect());
-            }
-            "SIZE" => {
-                if header.sizes.is_some() {
-                    return Err(duplicate());
-                }
-                let mut sizes = Vec::new();
-                for v in &values {
-                    match *v {
-                        "1" | "2" | "4" | "8" => sizes.push(parse_count(path, line_no, v, "SIZE")?),
-                        _ => return Err(bad(format!("SIZE '{v}' must be 1, 2, 4 or 8"))),
-                    }
-                }
-                header.sizes = Some(sizes);
-            }
-            "TYPE" => {
-                if header.types.is_some() {
-                    return Err(duplicate());
-                }
-                let mut types = Vec::new();
-                for v in &values {
-                    match *v {
-                        "F" => types.push('F'),
-                        "I" => types.push('I'),
-                        "U" => types.push('U'),
-                        _ => return Err(bad(format!("TYPE '{v}' must be F, I or U"))),
-                    }
-                }
-                header.types = Some(types);
-            }
-            "COUNT" => {
-                if header.counts.is_some() {
-                    return Err(duplicate());
-                }
-                let mut counts = Vec::new();
-                for v in &values {
-                    let c = parse_count(path, line_no, v, "COUNT")?;
-                    if c == 0 || c > 1 << 20 {
-                        return Err(bad(format!("COUNT {c} must lie in 1..=1048576")));
-                    }
-                    counts.push(c);
-                }
-                header.counts = Some(counts);
-            }
-            "WIDTH" => {
-                if header.width.is_some() {
-                    return Err(duplicate());
-                }
-                header.width = Some(single("WIDTH")?);
-                header.width_line = Some(line_no);
-            }
-            "HEIGHT" => {
-                if header.height.is_some() {
-                    return Err(duplicate());
-                }
-                header.height = Some(single("HEIGHT")?);
-            }
-            "POINTS" => {
-                if header.points.is_some() {
-                    return Err(duplicate());
-                }
-                header.points = Some(single("POINTS")?);
-                header.points_line = Some(line_no);
-            }
-            "DATA" => {
-                let [mode] = values.as_slice() else {
-                    return Err(bad(
-                        "DATA needs exactly one value: ascii, binary or binary_compressed".into(),
-                    ));
-                };
-                header.data = Some(mode.to_string());
-                header.data_line = Some(line_no);
-                return Ok((header, start, line_no));
-            }
-            // VERSION, VIEWPOINT and keys of later PCD versions do not change x, y, z.
-            _ => {}
+        if header.take(path, line_no, key, &values)? {
+            return Ok((header, start, line_no));
         }
     }
     Err(Error::parse(
@@ -219,6 +132,134 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usize, usize)> 
         "the file ends here, inside the PCD header, which has no DATA line; the file is truncated \
          or not a PCD file",
     ))
+}
+
+impl PcdHeader {
+    /// Takes header line `line_no`, `key values…`; true at `DATA`, the header's last line.
+    fn take(&mut self, path: &Path, line_no: usize, key: &str, values: &[&str]) -> Result<bool> {
+        let bad = |message: String| Error::parse(path, Some(line_no), message);
+        let duplicate = || bad(format!("{key} appears twice in the header"));
+        let single = |what: &str| -> Result<usize> {
+            match values {
+                [v] => parse_count(path, line_no, v, what),
+                _ => Err(bad(format!("{key} needs exactly one value"))),
+            }
+        };
+        match key {
+            "FIELDS" => {
+                if self.fields.is_some() {
+                    return Err(duplicate());
+                }
+                self.fields = Some(values.iter().map(|s| s.to_string()).collect());
+            }
+            "SIZE" => {
+                if self.sizes.is_some() {
+                    return Err(duplicate());
+                }
+                self.sizes = Some(parse_sizes(path, line_no, values)?);
+            }
+            "TYPE" => {
+                if self.types.is_some() {
+                    return Err(duplicate());
+                }
+                self.types = Some(parse_types(path, line_no, values)?);
+            }
+            "COUNT" => {
+                if self.counts.is_some() {
+                    return Err(duplicate());
+                }
+                self.counts = Some(parse_counts(path, line_no, values)?);
+            }
+            "WIDTH" => {
+                if self.width.is_some() {
+                    return Err(duplicate());
+                }
+                self.width = Some(single("WIDTH")?);
+                self.width_line = Some(line_no);
+            }
+            "HEIGHT" => {
+                if self.height.is_some() {
+                    return Err(duplicate());
+                }
+                self.height = Some(single("HEIGHT")?);
+            }
+            "POINTS" => {
+                if self.points.is_some() {
+                    return Err(duplicate());
+                }
+                self.points = Some(single("POINTS")?);
+                self.points_line = Some(line_no);
+            }
+            "DATA" => {
+                let [mode] = values else {
+                    return Err(bad(
+                        "DATA needs exactly one value: ascii, binary or binary_compressed".into(),
+                    ));
+                };
+                self.data = Some(mode.to_string());
+                self.data_line = Some(line_no);
+                return Ok(true);
+            }
+            // VERSION, VIEWPOINT and keys of later PCD versions do not change x, y, z.
+            _ => {}
+        }
+        Ok(false)
+    }
+}
+
+/// The values of a `SIZE` line: 1, 2, 4 or 8 bytes each.
+fn parse_sizes(path: &Path, line_no: usize, values: &[&str]) -> Result<Vec<usize>> {
+    let mut sizes = Vec::new();
+    for v in values {
+        match *v {
+            "1" | "2" | "4" | "8" => sizes.push(parse_count(path, line_no, v, "SIZE")?),
+            _ => {
+                return Err(Error::parse(
+                    path,
+                    Some(line_no),
+                    format!("SIZE '{v}' must be 1, 2, 4 or 8"),
+                ))
+            }
+        }
+    }
+    Ok(sizes)
+}
+
+/// The values of a `TYPE` line: `F`, `I` or `U` each.
+fn parse_types(path: &Path, line_no: usize, values: &[&str]) -> Result<Vec<char>> {
+    let mut types = Vec::new();
+    for v in values {
+        match *v {
+            "F" => types.push('F'),
+            "I" => types.push('I'),
+            "U" => types.push('U'),
+            _ => {
+                return Err(Error::parse(
+                    path,
+                    Some(line_no),
+                    format!("TYPE '{v}' must be F, I or U"),
+                ))
+            }
+        }
+    }
+    Ok(types)
+}
+
+/// The values of a `COUNT` line: each in 1..=2^20.
+fn parse_counts(path: &Path, line_no: usize, values: &[&str]) -> Result<Vec<usize>> {
+    let mut counts = Vec::new();
+    for v in values {
+        let c = parse_count(path, line_no, v, "COUNT")?;
+        if c == 0 || c > 1 << 20 {
+            return Err(Error::parse(
+                path,
+                Some(line_no),
+                format!("COUNT {c} must lie in 1..=1048576"),
+            ));
+        }
+        counts.push(c);
+    }
+    Ok(counts)
 }
 
 /// Checks the header's consistency; returns the fields, the point count and the data mode.
