@@ -6,7 +6,7 @@ use super::draw::{
     INK, LABEL_SCALE, WHITE,
 };
 use image::{Rgb, RgbImage};
-use sdem::sdem::Sdem;
+use sdem::sdem::{Sdem, SdemConfig};
 
 /// Free space in the polar slice.
 const FREE: Rgb<u8> = Rgb([170, 215, 245]);
@@ -172,90 +172,17 @@ pub fn sdem_polar_slice(sdem: &Sdem, elevation_deg: f64, title_text: &str) -> Rg
         x_range: (-radius, radius),
         y_range: (-radius, radius),
     };
-    let (cx, cy) = (axes.px(0.0), axes.py(0.0));
-    let ppm = axes.x_scale();
-    let cell_of_azimuth = |az_deg: f64| -> Option<usize> {
-        let ia = ((az_deg - config.azimuth_min_deg) / res).floor() as i64;
-        (0..az_cells).contains(&ia).then_some(ia as usize)
+    let polar = Polar {
+        cx: axes.px(0.0),
+        cy: axes.py(0.0),
+        ppm: axes.x_scale(),
+        radius,
     };
-    for row in top..top + size {
-        for column in left..left + size {
-            let (x, y) = axes.data_at(column, row);
-            let rho = (x * x + y * y).sqrt();
-            if rho > radius {
-                continue;
-            }
-            let mut az = y.atan2(x).to_degrees();
-            if az >= 180.0 {
-                az -= 360.0;
-            }
-            let color = match cell_of_azimuth(az).map(|i| horizontal[i]) {
-                Some(Some(h)) if rho <= h => FREE,
-                Some(Some(_)) => WHITE,
-                _ => Canvas::unknown_at(column, row),
-            };
-            canvas.put(column, row, color);
-        }
-    }
-    // Rings and spokes.
-    let ring_step = super::draw::nice_step(radius, 4.0);
-    let mut r = ring_step;
-    while r <= radius + 1e-9 {
-        canvas.ring(cx, cy, r * ppm, 1.0, Rgb([120, 120, 120]));
-        r += ring_step;
-    }
-    for k in 0..12 {
-        let a = (k as f64 * 30.0).to_radians();
-        let end = (cx + radius * ppm * a.cos(), cy - radius * ppm * a.sin());
-        canvas.line((cx, cy), end, 1.0, Rgb([160, 160, 160]), Some((4.0, 4.0)));
-        let label_r = radius * ppm + 22.0;
-        let deg = if k <= 6 { k * 30 } else { k * 30 - 360 };
-        canvas.text(
-            (cx + label_r * a.cos()).round() as i64,
-            (cy - label_r * a.sin()).round() as i64,
-            &format!("{deg}°"),
-            LABEL_SCALE,
-            Anchor::Center,
-            INK,
-        );
-    }
-    // The boundary: a dot per known cell, joined where neighbours are both known.
-    let point_of = |ia: usize, h: f64| {
-        let az = (config.azimuth_min_deg + (ia as f64 + 0.5) * res).to_radians();
-        (cx + h * az.cos() * ppm, cy - h * az.sin() * ppm)
-    };
-    let n = horizontal.len();
-    let full = (config.azimuth_max_deg - config.azimuth_min_deg - 360.0).abs() < 1e-9;
-    for ia in 0..n {
-        let next = if ia + 1 < n {
-            Some(ia + 1)
-        } else if full {
-            Some(0)
-        } else {
-            None
-        };
-        if let (Some(h0), Some(Some(h1))) = (horizontal[ia], next.map(|j| horizontal[j])) {
-            // Join only where the surface is continuous (no jump past a quarter of the range).
-            if (h0 - h1).abs() < 0.25 * h0.max(h1) {
-                canvas.line(
-                    point_of(ia, h0),
-                    point_of(next.unwrap_or(0), h1),
-                    1.5,
-                    BOUNDARY,
-                    None,
-                );
-            }
-        }
-    }
-    for (ia, h) in horizontal.iter().enumerate() {
-        if let Some(h) = h {
-            if *h <= radius {
-                let (x, y) = point_of(ia, *h);
-                canvas.disc(x, y, 2.2, BOUNDARY);
-            }
-        }
-    }
+    paint_free_space(&mut canvas, &axes, config, &horizontal, radius);
+    let ring_step = rings_and_spokes(&mut canvas, &polar);
+    draw_boundary(&mut canvas, &polar, config, &horizontal);
     // Ring labels on the +x spoke, over the picture.
+    let (cx, cy, ppm) = (polar.cx, polar.cy, polar.ppm);
     let mut r = ring_step;
     while r <= radius + 1e-9 {
         canvas.text_boxed(
@@ -298,4 +225,133 @@ pub fn sdem_polar_slice(sdem: &Sdem, elevation_deg: f64, title_text: &str) -> Rg
         ],
     );
     canvas.image
+}
+
+/// The polar slice's plot: the sensor's pixel, pixels per metre, and the outer ring's radius,
+/// metres.
+struct Polar {
+    cx: f64,
+    cy: f64,
+    ppm: f64,
+    radius: f64,
+}
+
+/// Fills the disc of `radius` in `axes`: free space out to each azimuth cell's boundary point at
+/// its `horizontal` distance, white beyond, hatched where the cell is unknown.
+fn paint_free_space(
+    canvas: &mut Canvas,
+    axes: &Axes,
+    config: &SdemConfig,
+    horizontal: &[Option<f64>],
+    radius: f64,
+) {
+    let res = config.resolution_deg;
+    let az_cells = horizontal.len() as i64;
+    let cell_of_azimuth = |az_deg: f64| -> Option<usize> {
+        let ia = ((az_deg - config.azimuth_min_deg) / res).floor() as i64;
+        (0..az_cells).contains(&ia).then_some(ia as usize)
+    };
+    for row in axes.top..axes.top + axes.height {
+        for column in axes.left..axes.left + axes.width {
+            let (x, y) = axes.data_at(column, row);
+            let rho = (x * x + y * y).sqrt();
+            if rho > radius {
+                continue;
+            }
+            let mut az = y.atan2(x).to_degrees();
+            if az >= 180.0 {
+                az -= 360.0;
+            }
+            let color = match cell_of_azimuth(az).map(|i| horizontal[i]) {
+                Some(Some(h)) if rho <= h => FREE,
+                Some(Some(_)) => WHITE,
+                _ => Canvas::unknown_at(column, row),
+            };
+            canvas.put(column, row, color);
+        }
+    }
+}
+
+/// Draws the rings (unlabelled) and the labelled spokes every 30°; returns the rings' spacing,
+/// metres.
+fn rings_and_spokes(canvas: &mut Canvas, polar: &Polar) -> f64 {
+    let Polar {
+        cx,
+        cy,
+        ppm,
+        radius,
+    } = *polar;
+    let ring_step = super::draw::nice_step(radius, 4.0);
+    let mut r = ring_step;
+    while r <= radius + 1e-9 {
+        canvas.ring(cx, cy, r * ppm, 1.0, Rgb([120, 120, 120]));
+        r += ring_step;
+    }
+    for k in 0..12 {
+        let a = (k as f64 * 30.0).to_radians();
+        let end = (cx + radius * ppm * a.cos(), cy - radius * ppm * a.sin());
+        canvas.line((cx, cy), end, 1.0, Rgb([160, 160, 160]), Some((4.0, 4.0)));
+        let label_r = radius * ppm + 22.0;
+        let deg = if k <= 6 { k * 30 } else { k * 30 - 360 };
+        canvas.text(
+            (cx + label_r * a.cos()).round() as i64,
+            (cy - label_r * a.sin()).round() as i64,
+            &format!("{deg}°"),
+            LABEL_SCALE,
+            Anchor::Center,
+            INK,
+        );
+    }
+    ring_step
+}
+
+/// The boundary: a dot per known cell within the plot, joined where neighbours are both known.
+fn draw_boundary(
+    canvas: &mut Canvas,
+    polar: &Polar,
+    config: &SdemConfig,
+    horizontal: &[Option<f64>],
+) {
+    let Polar {
+        cx,
+        cy,
+        ppm,
+        radius,
+    } = *polar;
+    let res = config.resolution_deg;
+    let point_of = |ia: usize, h: f64| {
+        let az = (config.azimuth_min_deg + (ia as f64 + 0.5) * res).to_radians();
+        (cx + h * az.cos() * ppm, cy - h * az.sin() * ppm)
+    };
+    let n = horizontal.len();
+    let full = (config.azimuth_max_deg - config.azimuth_min_deg - 360.0).abs() < 1e-9;
+    for ia in 0..n {
+        let next = if ia + 1 < n {
+            Some(ia + 1)
+        } else if full {
+            Some(0)
+        } else {
+            None
+        };
+        if let (Some(h0), Some(Some(h1))) = (horizontal[ia], next.map(|j| horizontal[j])) {
+            // Join only where the surface is continuous (no jump past a quarter of the range).
+            if (h0 - h1).abs() < 0.25 * h0.max(h1) {
+                canvas.line(
+                    point_of(ia, h0),
+                    point_of(next.unwrap_or(0), h1),
+                    1.5,
+                    BOUNDARY,
+                    None,
+                );
+            }
+        }
+    }
+    for (ia, h) in horizontal.iter().enumerate() {
+        if let Some(h) = h {
+            if *h <= radius {
+                let (x, y) = point_of(ia, *h);
+                canvas.disc(x, y, 2.2, BOUNDARY);
+            }
+        }
+    }
 }
