@@ -121,70 +121,15 @@ fn no_negative_zero(value: f64, decimals: i32) -> f64 {
 /// * `slice` — from [`sample_cost_slice`].
 /// * `title` — a line above the picture.
 pub fn cost_surface(slice: &CostSlice, title_text: &str) -> RgbImage {
-    let (nx, ny) = (slice.x_m.len().max(1), slice.y_m.len().max(1));
-    let first = |v: &[f64]| v.first().copied().unwrap_or(0.0);
-    let last = |v: &[f64]| v.last().copied().unwrap_or(1.0);
-    let step_x = if nx > 1 {
-        (last(&slice.x_m) - first(&slice.x_m)) / (nx - 1) as f64
-    } else {
-        0.01
-    };
-    let step_y = if ny > 1 {
-        (last(&slice.y_m) - first(&slice.y_m)) / (ny - 1) as f64
-    } else {
-        0.01
-    };
-    let x_range = (
-        first(&slice.x_m) - step_x / 2.0,
-        last(&slice.x_m) + step_x / 2.0,
-    );
-    let y_range = (
-        first(&slice.y_m) - step_y / 2.0,
-        last(&slice.y_m) + step_y / 2.0,
-    );
+    let cells = SliceCells::of(slice);
     let (left, top) = (130, 90);
-    let axes = Axes::equal(left, top, 720, 720, x_range, y_range);
+    let axes = Axes::equal(left, top, 720, 720, cells.x_range, cells.y_range);
     let mut canvas = Canvas::new(
         (left + axes.width + 220) as u32,
         (top + axes.height + 100) as u32,
     );
-    let rms_cm: Vec<Option<f64>> = slice
-        .costs
-        .iter()
-        .map(|c| c.map(|c| c.max(0.0).sqrt() * 100.0))
-        .collect();
-    let mut known: Vec<f64> = rms_cm.iter().flatten().copied().collect();
-    let lo = quantile(&mut known, 0.0).unwrap_or(0.0);
-    let hi = quantile(&mut known, 1.0).unwrap_or(1.0).max(lo + 1e-3);
-    for row in top..top + axes.height {
-        for column in left..left + axes.width {
-            let (x, y) = axes.data_at(column, row);
-            let ix = (((x - x_range.0) / step_x.max(1e-12)).floor() as i64).clamp(0, nx as i64 - 1)
-                as usize;
-            let iy = (((y - y_range.0) / step_y.max(1e-12)).floor() as i64).clamp(0, ny as i64 - 1)
-                as usize;
-            let color = match rms_cm.get(iy * nx + ix).copied().flatten() {
-                Some(v) => viridis((v - lo) / (hi - lo)),
-                None => Canvas::unknown_at(column, row),
-            };
-            canvas.put(column, row, color);
-        }
-    }
-    // The optimum: a white cross in a ring, outlined dark so it shows on any colour.
-    let (ox, oy) = (axes.px(slice.optimum[0]), axes.py(slice.optimum[1]));
-    for (color, width) in [(INK, 5.0), (WHITE, 2.5)] {
-        canvas.ring(ox, oy, 12.0, width, color);
-        canvas.line((ox - 20.0, oy), (ox - 7.0, oy), width, color, None);
-        canvas.line((ox + 7.0, oy), (ox + 20.0, oy), width, color, None);
-        canvas.line((ox, oy - 20.0), (ox, oy - 7.0), width, color, None);
-        canvas.line((ox, oy + 7.0), (ox, oy + 20.0), width, color, None);
-    }
-    let minimum = slice.minimum();
-    if let Some((_, [mx, my])) = minimum {
-        let (px, py) = (axes.px(mx).round() as i64, axes.py(my).round() as i64);
-        canvas.rect_outline(px - 4, py - 4, px + 5, py + 5, WHITE);
-        canvas.rect_outline(px - 5, py - 5, px + 6, py + 6, INK);
-    }
+    let (lo, hi) = paint_costs(&mut canvas, &axes, slice, &cells);
+    let minimum = mark_optimum_and_minimum(&mut canvas, &axes, slice);
     axes.draw_frame(
         &mut canvas,
         "candidate x offset (m)",
@@ -213,40 +158,7 @@ pub fn cost_surface(slice: &CostSlice, title_text: &str) -> RgbImage {
         viridis,
         "rms diff (cm)",
     );
-    let note_y = top + axes.height - 90;
-    let note_x = left + axes.width + 20;
-    canvas.text(
-        note_x,
-        note_y,
-        "circle+cross:",
-        LABEL_SCALE,
-        Anchor::Left,
-        INK,
-    );
-    canvas.text(
-        note_x,
-        note_y + 20,
-        " the optimum",
-        LABEL_SCALE,
-        Anchor::Left,
-        INK,
-    );
-    canvas.text(
-        note_x,
-        note_y + 44,
-        "square: lowest",
-        LABEL_SCALE,
-        Anchor::Left,
-        INK,
-    );
-    canvas.text(
-        note_x,
-        note_y + 64,
-        " sample",
-        LABEL_SCALE,
-        Anchor::Left,
-        INK,
-    );
+    marker_notes(&mut canvas, left + axes.width + 20, top + axes.height - 90);
     if minimum.is_none() {
         canvas.text_boxed(
             left + axes.width / 2,
@@ -258,4 +170,126 @@ pub fn cost_surface(slice: &CostSlice, title_text: &str) -> RgbImage {
         );
     }
     canvas.image
+}
+
+/// The slice's samples as cells: their counts and spacing along x and y, and the data ranges
+/// they cover (half a step beyond the outer samples).
+struct SliceCells {
+    nx: usize,
+    ny: usize,
+    step_x: f64,
+    step_y: f64,
+    x_range: (f64, f64),
+    y_range: (f64, f64),
+}
+
+impl SliceCells {
+    fn of(slice: &CostSlice) -> Self {
+        let (nx, ny) = (slice.x_m.len().max(1), slice.y_m.len().max(1));
+        let first = |v: &[f64]| v.first().copied().unwrap_or(0.0);
+        let last = |v: &[f64]| v.last().copied().unwrap_or(1.0);
+        let step_x = if nx > 1 {
+            (last(&slice.x_m) - first(&slice.x_m)) / (nx - 1) as f64
+        } else {
+            0.01
+        };
+        let step_y = if ny > 1 {
+            (last(&slice.y_m) - first(&slice.y_m)) / (ny - 1) as f64
+        } else {
+            0.01
+        };
+        let x_range = (
+            first(&slice.x_m) - step_x / 2.0,
+            last(&slice.x_m) + step_x / 2.0,
+        );
+        let y_range = (
+            first(&slice.y_m) - step_y / 2.0,
+            last(&slice.y_m) + step_y / 2.0,
+        );
+        Self {
+            nx,
+            ny,
+            step_x,
+            step_y,
+            x_range,
+            y_range,
+        }
+    }
+}
+
+/// Paints each pixel of `axes` with its cell's RMS range difference (cm) on viridis, hatched
+/// where the candidate was not scored; returns the colour scale's ends.
+fn paint_costs(
+    canvas: &mut Canvas,
+    axes: &Axes,
+    slice: &CostSlice,
+    cells: &SliceCells,
+) -> (f64, f64) {
+    let SliceCells {
+        nx,
+        ny,
+        step_x,
+        step_y,
+        x_range,
+        y_range,
+    } = *cells;
+    let rms_cm: Vec<Option<f64>> = slice
+        .costs
+        .iter()
+        .map(|c| c.map(|c| c.max(0.0).sqrt() * 100.0))
+        .collect();
+    let mut known: Vec<f64> = rms_cm.iter().flatten().copied().collect();
+    let lo = quantile(&mut known, 0.0).unwrap_or(0.0);
+    let hi = quantile(&mut known, 1.0).unwrap_or(1.0).max(lo + 1e-3);
+    for row in axes.top..axes.top + axes.height {
+        for column in axes.left..axes.left + axes.width {
+            let (x, y) = axes.data_at(column, row);
+            let ix = (((x - x_range.0) / step_x.max(1e-12)).floor() as i64).clamp(0, nx as i64 - 1)
+                as usize;
+            let iy = (((y - y_range.0) / step_y.max(1e-12)).floor() as i64).clamp(0, ny as i64 - 1)
+                as usize;
+            let color = match rms_cm.get(iy * nx + ix).copied().flatten() {
+                Some(v) => viridis((v - lo) / (hi - lo)),
+                None => Canvas::unknown_at(column, row),
+            };
+            canvas.put(column, row, color);
+        }
+    }
+    (lo, hi)
+}
+
+/// Marks the optimum (a white cross in a ring, outlined dark so it shows on any colour) and the
+/// lowest sample (a small square); returns that sample, `None` when none was scored.
+fn mark_optimum_and_minimum(
+    canvas: &mut Canvas,
+    axes: &Axes,
+    slice: &CostSlice,
+) -> Option<(f64, [f64; 2])> {
+    let (ox, oy) = (axes.px(slice.optimum[0]), axes.py(slice.optimum[1]));
+    for (color, width) in [(INK, 5.0), (WHITE, 2.5)] {
+        canvas.ring(ox, oy, 12.0, width, color);
+        canvas.line((ox - 20.0, oy), (ox - 7.0, oy), width, color, None);
+        canvas.line((ox + 7.0, oy), (ox + 20.0, oy), width, color, None);
+        canvas.line((ox, oy - 20.0), (ox, oy - 7.0), width, color, None);
+        canvas.line((ox, oy + 7.0), (ox, oy + 20.0), width, color, None);
+    }
+    let minimum = slice.minimum();
+    if let Some((_, [mx, my])) = minimum {
+        let (px, py) = (axes.px(mx).round() as i64, axes.py(my).round() as i64);
+        canvas.rect_outline(px - 4, py - 4, px + 5, py + 5, WHITE);
+        canvas.rect_outline(px - 5, py - 5, px + 6, py + 6, INK);
+    }
+    minimum
+}
+
+/// What the two markers mean, in four lines from `(note_x, note_y)`.
+fn marker_notes(canvas: &mut Canvas, note_x: i64, note_y: i64) {
+    for (dy, text) in [
+        (0, "circle+cross:"),
+        (20, " the optimum"),
+        (44, "square: lowest"),
+        (64, " sample"),
+    ] {
+        canvas.text(note_x, note_y + dy, text, LABEL_SCALE, Anchor::Left, INK);
+    }
 }
