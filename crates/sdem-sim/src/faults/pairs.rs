@@ -7,14 +7,15 @@ use super::{Fault, FaultConfig, Injected, FAULT_STREAM_SALT};
 use crate::benchmark::{
     draw_query_pose, localize_pair, random_unit, symmetric, BenchPair, PairResult,
 };
-use crate::sim::{self, wrap_angle, Scene, Solid};
+use crate::sim::{self, wrap_angle, OrientedBox, Scene, Solid};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use sdem::error::{Error, Result};
-use sdem::geometry::{Attitude, Vec3};
+use sdem::geometry::{Attitude, Pose, Vec3};
 use sdem::localize::{CostConfig, HeadingWindow, LocalizeOptions, OffsetPrior, SearchWindow};
 use sdem::sdem::SdemConfig;
+use sdem::sensor::Sweep;
 
 /// A pair with faults, the robot's prior, and what was injected.
 #[derive(Debug, Clone, PartialEq)]
@@ -92,45 +93,20 @@ fn draw_fault_pair(
     index: usize,
     rng: &mut ChaCha8Rng,
 ) -> Result<FaultPair> {
-    let has = |f: Fault| faults.contains(&f);
+    let draw = PairDraw {
+        scene,
+        faults,
+        config,
+        index,
+    };
     let sensor = &config.pairs.sensor;
     let reference_stop = rng.random_range(0..stops.len());
     let stop = &stops[reference_stop];
     let world_from_reference = stop.world_from_sensor(&sensor.lift)?;
-    let mut pose_config = config.pairs.clone();
-    if has(Fault::Tilt) {
-        pose_config.tilt_max_deg = config.tilt_max_deg;
-    }
-    let world_from_query = draw_query_pose(scene, &world_from_reference, &pose_config, rng)
-        .ok_or_else(|| {
-            Error::Invalid(format!(
-                "fault pair {index}: no query origin near stop {reference_stop} has enough \
-                 clearance"
-            ))
-        })?;
+    let world_from_query = draw.query_pose(&world_from_reference, reference_stop, rng)?;
     let mut injected = Injected::default();
-
-    let (mut reference_scene, mut query_scene) = (scene.clone(), scene.clone());
-    let mut moved = Vec::new();
-    if has(Fault::Rubble) {
-        moved = place_moved_rubble(
-            scene,
-            &world_from_reference.translation.vector,
-            &world_from_query,
-            config,
-            rng,
-        )
-        .ok_or_else(|| {
-            Error::Invalid(format!(
-                "fault pair {index}: no room for {} pieces of rubble near the query",
-                config.rubble_pieces
-            ))
-        })?;
-        for (before, after) in &moved {
-            reference_scene.add_solid(Solid::Box(before.clone()));
-            query_scene.add_solid(Solid::Box(after.clone()));
-        }
-    }
+    let (reference_scene, query_scene, moved) =
+        draw.scenes_with_rubble(&world_from_reference, &world_from_query, rng)?;
     let mut reference = sim::scan(
         &reference_scene,
         sensor,
@@ -145,7 +121,7 @@ fn draw_fault_pair(
         stop.lift_slide_m,
         rng,
     );
-    if has(Fault::Rubble) {
+    if draw.has(Fault::Rubble) {
         injected.rubble_returns =
             returns_on(
                 &reference,
@@ -153,48 +129,15 @@ fn draw_fault_pair(
                 moved.iter().map(|m| &m.0),
             ) + returns_on(&query, &world_from_query, moved.iter().map(|m| &m.1));
     }
-    if has(Fault::Person) {
-        let person =
-            place_person(scene, &world_from_query, config.person_walk_m, rng).ok_or_else(|| {
-                Error::Invalid(format!(
-                    "fault pair {index}: no room for a walking person near the query"
-                ))
-            })?;
-        injected.person_returns =
-            add_walking_person(&mut query, &world_from_query, &person, sensor, rng);
-    }
-    if has(Fault::Dust) {
-        injected.dust_returns = add_dust(&mut reference, config.dust_fraction, sensor, rng)
-            + add_dust(&mut query, config.dust_fraction, sensor, rng);
-    }
-    if has(Fault::Missing) {
-        injected.lost_returns = drop_returns(
-            &mut reference,
-            config.missing_fraction,
-            config.missing_run_max,
-            rng,
-        ) + drop_returns(
-            &mut query,
-            config.missing_fraction,
-            config.missing_run_max,
-            rng,
-        );
-    }
+    draw.corrupt_returns(
+        &mut reference,
+        &mut query,
+        &world_from_query,
+        &mut injected,
+        rng,
+    )?;
     let reading = query.mean_attitude();
-    if has(Fault::Compass) {
-        injected.compass_error_deg = symmetric(rng, config.compass_error_max_deg);
-    }
-    if has(Fault::GyroDrift) {
-        injected.gyro_error_deg = [
-            symmetric(rng, config.gyro_error_max_deg),
-            symmetric(rng, config.gyro_error_max_deg),
-        ];
-    }
-    let query_attitude = Attitude::new(
-        reading.roll + injected.gyro_error_deg[0].to_radians(),
-        reading.pitch + injected.gyro_error_deg[1].to_radians(),
-        wrap_angle(reading.yaw + injected.compass_error_deg.to_radians()),
-    );
+    let query_attitude = draw.misread_attitude(reading, &mut injected, rng);
     let pair = BenchPair {
         reference_points: reference.points_in_sensor(),
         reference_attitude: reference.mean_attitude(),
@@ -215,6 +158,139 @@ fn draw_fault_pair(
         predicted_offset,
         injected,
     })
+}
+
+/// The pieces of rubble moved between the scans: each where the reference saw it, then where
+/// the query sees it.
+type MovedRubble = Vec<(OrientedBox, OrientedBox)>;
+
+/// What drawing fault pair `index` reads: the scene, the faults to inject and their settings.
+struct PairDraw<'a> {
+    scene: &'a Scene,
+    faults: &'a [Fault],
+    config: &'a FaultConfig,
+    index: usize,
+}
+
+impl PairDraw<'_> {
+    fn has(&self, f: Fault) -> bool {
+        self.faults.contains(&f)
+    }
+
+    /// The query's pose near the reference stop (tilted further with [`Fault::Tilt`]).
+    fn query_pose(
+        &self,
+        world_from_reference: &Pose,
+        reference_stop: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Pose> {
+        let mut pose_config = self.config.pairs.clone();
+        if self.has(Fault::Tilt) {
+            pose_config.tilt_max_deg = self.config.tilt_max_deg;
+        }
+        draw_query_pose(self.scene, world_from_reference, &pose_config, rng).ok_or_else(|| {
+            Error::Invalid(format!(
+                "fault pair {}: no query origin near stop {reference_stop} has enough clearance",
+                self.index
+            ))
+        })
+    }
+
+    /// The scenes the two scans see: with [`Fault::Rubble`], pieces of rubble placed near the
+    /// query where the reference saw them and moved before the query; with each moved piece's
+    /// place before and after.
+    fn scenes_with_rubble(
+        &self,
+        world_from_reference: &Pose,
+        world_from_query: &Pose,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<(Scene, Scene, MovedRubble)> {
+        let (mut reference_scene, mut query_scene) = (self.scene.clone(), self.scene.clone());
+        let mut moved = Vec::new();
+        if self.has(Fault::Rubble) {
+            moved = place_moved_rubble(
+                self.scene,
+                &world_from_reference.translation.vector,
+                world_from_query,
+                self.config,
+                rng,
+            )
+            .ok_or_else(|| {
+                Error::Invalid(format!(
+                    "fault pair {}: no room for {} pieces of rubble near the query",
+                    self.index, self.config.rubble_pieces
+                ))
+            })?;
+            for (before, after) in &moved {
+                reference_scene.add_solid(Solid::Box(before.clone()));
+                query_scene.add_solid(Solid::Box(after.clone()));
+            }
+        }
+        Ok((reference_scene, query_scene, moved))
+    }
+
+    /// Injects the faults that change returns: a walking person in the query, dust and lost
+    /// returns in both scans; counts them in `injected`.
+    fn corrupt_returns(
+        &self,
+        reference: &mut Sweep,
+        query: &mut Sweep,
+        world_from_query: &Pose,
+        injected: &mut Injected,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<()> {
+        let (config, sensor) = (self.config, &self.config.pairs.sensor);
+        if self.has(Fault::Person) {
+            let person = place_person(self.scene, world_from_query, config.person_walk_m, rng)
+                .ok_or_else(|| {
+                    Error::Invalid(format!(
+                        "fault pair {}: no room for a walking person near the query",
+                        self.index
+                    ))
+                })?;
+            injected.person_returns =
+                add_walking_person(query, world_from_query, &person, sensor, rng);
+        }
+        if self.has(Fault::Dust) {
+            injected.dust_returns = add_dust(reference, config.dust_fraction, sensor, rng)
+                + add_dust(query, config.dust_fraction, sensor, rng);
+        }
+        if self.has(Fault::Missing) {
+            injected.lost_returns =
+                drop_returns(
+                    reference,
+                    config.missing_fraction,
+                    config.missing_run_max,
+                    rng,
+                ) + drop_returns(query, config.missing_fraction, config.missing_run_max, rng);
+        }
+        Ok(())
+    }
+
+    /// The query's attitude reading: its true mean `reading` with the compass and gyro errors
+    /// of [`Fault::Compass`] and [`Fault::GyroDrift`], recorded in `injected`.
+    fn misread_attitude(
+        &self,
+        reading: Attitude,
+        injected: &mut Injected,
+        rng: &mut ChaCha8Rng,
+    ) -> Attitude {
+        let config = self.config;
+        if self.has(Fault::Compass) {
+            injected.compass_error_deg = symmetric(rng, config.compass_error_max_deg);
+        }
+        if self.has(Fault::GyroDrift) {
+            injected.gyro_error_deg = [
+                symmetric(rng, config.gyro_error_max_deg),
+                symmetric(rng, config.gyro_error_max_deg),
+            ];
+        }
+        Attitude::new(
+            reading.roll + injected.gyro_error_deg[0].to_radians(),
+            reading.pitch + injected.gyro_error_deg[1].to_radians(),
+            wrap_angle(reading.yaw + injected.compass_error_deg.to_radians()),
+        )
+    }
 }
 
 /// The prediction's standard deviation is the odometry's error fraction of the predicted motion,
