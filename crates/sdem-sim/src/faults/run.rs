@@ -12,7 +12,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 use sdem::error::{Error, Result};
 use sdem::geometry::{Attitude, Pose, Vec3};
-use sdem::sensor::SensorConfig;
+use sdem::sensor::{SensorConfig, Sweep};
 use std::borrow::Cow;
 
 /// Simulates a run like [`sim::simulate_run`] (same scene, stops, noise and seed) with `faults`
@@ -50,47 +50,19 @@ pub fn simulate_run_with_faults(
                 .into(),
         ));
     }
-    let has = |f: Fault| faults.contains(&f);
+    let draw = RunDraw {
+        scene,
+        sensor,
+        seed,
+        faults,
+        config,
+    };
     let poses = stops
         .iter()
         .map(|s| s.world_from_sensor(&sensor.lift))
         .collect::<Result<Vec<Pose>>>()?;
-    let stop_rng = |k: usize| {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ FAULT_STREAM_SALT);
-        rng.set_stream(k as u64);
-        rng
-    };
     // Block j (placed for stop j) lies at `before` in sweeps 0..j and at `after` from j on.
-    let mut blocks: Vec<(usize, OrientedBox, OrientedBox)> = Vec::new();
-    if has(Fault::Rubble) {
-        let one = FaultConfig {
-            rubble_pieces: 1,
-            ..config.clone()
-        };
-        for j in 1..stops.len() {
-            let mut rng = stop_rng(j);
-            let previous = poses[j - 1].translation.vector;
-            for _ in 0..20 {
-                let Some(mut piece) =
-                    place_moved_rubble(scene, &previous, &poses[j], &one, &mut rng)
-                else {
-                    break;
-                };
-                let (before, after) = piece.remove(0);
-                let clear_of_route = poses.iter().all(|p| {
-                    let o = p.translation.vector;
-                    // The sensor and the robot's body below it.
-                    [o, o - Vec3::new(0.0, 0.0, 0.3)].iter().all(|q| {
-                        before.distance_to(q) > KEEP_CLEAR_M && after.distance_to(q) > KEEP_CLEAR_M
-                    })
-                });
-                if clear_of_route {
-                    blocks.push((j, before, after));
-                    break;
-                }
-            }
-        }
-    }
+    let blocks = draw.route_rubble(&poses);
     let placed_at = |k: usize| {
         blocks
             .iter()
@@ -115,47 +87,121 @@ pub fn simulate_run_with_faults(
     }
     let mut bias = [0.0f64; 2];
     for (k, stop) in run.iter_mut().enumerate() {
-        let mut rng = stop_rng(k);
-        // A stream apart from the rubble's placement, which used stream k's start.
-        rng.set_word_pos(1 << 40);
-        let sweep = &mut stop.sweep;
-        if has(Fault::Person) {
-            // Where nobody fits (a stop deep in the ditch), the sweep goes without.
-            if let Some(person) = place_person(scene, &poses[k], config.person_walk_m, &mut rng) {
-                injected[k].person_returns =
-                    add_walking_person(sweep, &poses[k], &person, sensor, &mut rng);
+        draw.inject_at_stop(k, &mut stop.sweep, &poses[k], &mut bias, &mut injected[k]);
+    }
+    Ok((run, injected))
+}
+
+/// What injecting faults into a run reads: the scene, the sensor, the seed, the faults and their
+/// settings.
+struct RunDraw<'a> {
+    scene: &'a Scene,
+    sensor: &'a SensorConfig,
+    seed: u64,
+    faults: &'a [Fault],
+    config: &'a FaultConfig,
+}
+
+impl RunDraw<'_> {
+    fn has(&self, f: Fault) -> bool {
+        self.faults.contains(&f)
+    }
+
+    /// Stop `k`'s own random stream.
+    fn stop_rng(&self, k: usize) -> ChaCha8Rng {
+        let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ FAULT_STREAM_SALT);
+        rng.set_stream(k as u64);
+        rng
+    }
+
+    /// With [`Fault::Rubble`], for each stop `j` after the first, a block in its view that lay
+    /// elsewhere before it (`(j, before, after)`), kept clear of every stop's sensor and body;
+    /// none for a stop where no such block turns up in 20 draws.
+    fn route_rubble(&self, poses: &[Pose]) -> Vec<(usize, OrientedBox, OrientedBox)> {
+        let mut blocks = Vec::new();
+        if !self.has(Fault::Rubble) {
+            return blocks;
+        }
+        let one = FaultConfig {
+            rubble_pieces: 1,
+            ..self.config.clone()
+        };
+        for j in 1..poses.len() {
+            let mut rng = self.stop_rng(j);
+            let previous = poses[j - 1].translation.vector;
+            for _ in 0..20 {
+                let Some(mut piece) =
+                    place_moved_rubble(self.scene, &previous, &poses[j], &one, &mut rng)
+                else {
+                    break;
+                };
+                let (before, after) = piece.remove(0);
+                let clear_of_route = poses.iter().all(|p| {
+                    let o = p.translation.vector;
+                    // The sensor and the robot's body below it.
+                    [o, o - Vec3::new(0.0, 0.0, 0.3)].iter().all(|q| {
+                        before.distance_to(q) > KEEP_CLEAR_M && after.distance_to(q) > KEEP_CLEAR_M
+                    })
+                });
+                if clear_of_route {
+                    blocks.push((j, before, after));
+                    break;
+                }
             }
         }
-        if has(Fault::Dust) {
-            injected[k].dust_returns = add_dust(sweep, config.dust_fraction, sensor, &mut rng);
+        blocks
+    }
+
+    /// Injects the faults into stop `k`'s `sweep` (taken at `pose`): a walking person, dust and
+    /// lost returns, and the compass error and the gyro's drifting `bias` in its attitude
+    /// readings; records them in `injected`.
+    fn inject_at_stop(
+        &self,
+        k: usize,
+        sweep: &mut Sweep,
+        pose: &Pose,
+        bias: &mut [f64; 2],
+        injected: &mut Injected,
+    ) {
+        let (config, sensor) = (self.config, self.sensor);
+        let mut rng = self.stop_rng(k);
+        // A stream apart from the rubble's placement, which used stream k's start.
+        rng.set_word_pos(1 << 40);
+        if self.has(Fault::Person) {
+            // Where nobody fits (a stop deep in the ditch), the sweep goes without.
+            if let Some(person) = place_person(self.scene, pose, config.person_walk_m, &mut rng) {
+                injected.person_returns =
+                    add_walking_person(sweep, pose, &person, sensor, &mut rng);
+            }
         }
-        if has(Fault::Missing) {
-            injected[k].lost_returns = drop_returns(
+        if self.has(Fault::Dust) {
+            injected.dust_returns = add_dust(sweep, config.dust_fraction, sensor, &mut rng);
+        }
+        if self.has(Fault::Missing) {
+            injected.lost_returns = drop_returns(
                 sweep,
                 config.missing_fraction,
                 config.missing_run_max,
                 &mut rng,
             );
         }
-        if has(Fault::Compass) {
-            injected[k].compass_error_deg = symmetric(&mut rng, config.compass_error_max_deg);
+        if self.has(Fault::Compass) {
+            injected.compass_error_deg = symmetric(&mut rng, config.compass_error_max_deg);
         }
-        if has(Fault::GyroDrift) {
+        if self.has(Fault::GyroDrift) {
             let limit = config.gyro_error_max_deg;
-            for b in &mut bias {
+            for b in bias.iter_mut() {
                 let step: f64 = rng.sample(StandardNormal);
                 *b = (*b + 0.5 * step).clamp(-limit, limit);
             }
-            injected[k].gyro_error_deg = bias;
+            injected.gyro_error_deg = *bias;
         }
-        let i = &injected[k];
         for line in &mut sweep.lines {
             line.attitude = Attitude::new(
-                line.attitude.roll + i.gyro_error_deg[0].to_radians(),
-                line.attitude.pitch + i.gyro_error_deg[1].to_radians(),
-                wrap_angle(line.attitude.yaw + i.compass_error_deg.to_radians()),
+                line.attitude.roll + injected.gyro_error_deg[0].to_radians(),
+                line.attitude.pitch + injected.gyro_error_deg[1].to_radians(),
+                wrap_angle(line.attitude.yaw + injected.compass_error_deg.to_radians()),
             );
         }
     }
-    Ok((run, injected))
 }
