@@ -377,7 +377,7 @@ fn compare_errors(args: &Args, poses: &[Pose]) -> Result<Option<TrajectoryErrors
             poses.len()
         );
     }
-    Ok(Some(trajectory_errors(poses, &reference[..poses.len()])?))
+    Ok(Some(trajectory_errors(&reference[..poses.len()], poses)?))
 }
 
 /// The median of `v` (the upper one of an even count), 0 when empty.
@@ -405,7 +405,7 @@ fn make_report(
         pictures,
     } = outputs;
     let truth = match &dataset.truth {
-        Some(t) => Some(trajectory_errors(&poses, &t[..poses.len()])?),
+        Some(t) => Some(trajectory_errors(&t[..poses.len()], &poses)?),
         None => None,
     };
     let compare = compare_errors(args, &poses)?;

@@ -17,8 +17,8 @@ fn benches(c: &mut Criterion) {
          stages, converged {}",
         graph.world_from_node.len(),
         graph.edges.len(),
-        position_rmse(&truth, &graph.world_from_node),
-        position_rmse(&truth, &world_from_node),
+        position_rmse(&truth, &graph.world_from_node).unwrap(),
+        position_rmse(&truth, &world_from_node).unwrap(),
         report.iterations,
         report.kernel_stages,
         report.converged

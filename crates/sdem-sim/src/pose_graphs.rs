@@ -183,8 +183,8 @@ pub fn bench_1000_nodes() -> Result<PoseGraphBench> {
         nodes: graph.world_from_node.len(),
         edges: graph.edges.len(),
         time_ms,
-        ate_before_m: position_rmse(&truth, &graph.world_from_node),
-        ate_after_m: position_rmse(&truth, &world_from_node),
+        ate_before_m: position_rmse(&truth, &graph.world_from_node)?,
+        ate_after_m: position_rmse(&truth, &world_from_node)?,
         report,
     })
 }

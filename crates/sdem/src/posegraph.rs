@@ -264,18 +264,25 @@ pub fn edge_residual(edge: &Edge, world_from_from: &Pose, world_from_to: &Pose) 
 }
 
 /// Position root-mean-square error (metres) of `estimate` against `truth`, node by node, with no
-/// alignment (both share the gauge node's pose). Over the shorter of the two lists; 0 if empty.
-pub fn position_rmse(truth: &[Pose], estimate: &[Pose]) -> f64 {
-    let n = truth.len().min(estimate.len());
-    if n == 0 {
-        return 0.0;
+/// alignment (both share the gauge node's pose).
+///
+/// # Errors
+/// [`Error::Invalid`] when the two lists differ in length or are empty.
+pub fn position_rmse(truth: &[Pose], estimate: &[Pose]) -> Result<f64> {
+    let n = truth.len();
+    if n != estimate.len() || n == 0 {
+        return Err(Error::Invalid(format!(
+            "cannot compare {} estimated positions with {} true ones",
+            estimate.len(),
+            n
+        )));
     }
     let sum: f64 = truth
         .iter()
         .zip(estimate)
         .map(|(t, e)| (t.translation.vector - e.translation.vector).norm_squared())
         .sum();
-    (sum / n as f64).sqrt()
+    Ok((sum / n as f64).sqrt())
 }
 
 fn pose_is_valid(pose: &Pose) -> bool {

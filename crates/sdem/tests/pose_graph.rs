@@ -67,9 +67,9 @@ fn noise_free_graph_is_a_fixed_point() {
 #[test]
 fn drifting_loop_is_closed() {
     let (graph, truth) = synthetic_loop(100, 2, &drifting());
-    let before = position_rmse(&truth, &graph.world_from_node);
+    let before = position_rmse(&truth, &graph.world_from_node).unwrap();
     let (world_from_node, report) = optimize(&graph, 0, &OptimizeConfig::default()).unwrap();
-    let after = position_rmse(&truth, &world_from_node);
+    let after = position_rmse(&truth, &world_from_node).unwrap();
     let rotation_after = rotation_rmse_deg(&truth, &world_from_node);
     eprintln!(
         "ATE {before:.3} m -> {after:.3} m, rotation {:.3}° -> {rotation_after:.3}°, {} \
@@ -95,7 +95,7 @@ fn wrong_loop_closure_is_down_weighted() {
     let config = drifting();
     let (mut graph, truth) = synthetic_loop(100, 5, &config);
     let (reference, _) = optimize(&graph, 0, &OptimizeConfig::default()).unwrap();
-    let reference_ate = position_rmse(&truth, &reference);
+    let reference_ate = position_rmse(&truth, &reference).unwrap();
     // A false match 11 stops apart that claims an offset 2 m off the truth.
     let (from, to) = (5, 90);
     let true_from_to = truth[from].inverse() * truth[to];
@@ -111,7 +111,7 @@ fn wrong_loop_closure_is_down_weighted() {
     });
     let wrong = graph.edges.len() - 1;
     let (world_from_node, report) = optimize(&graph, 0, &OptimizeConfig::default()).unwrap();
-    let after = position_rmse(&truth, &world_from_node);
+    let after = position_rmse(&truth, &world_from_node).unwrap();
     let weights: Vec<f64> = graph
         .edges
         .iter()
@@ -122,7 +122,7 @@ fn wrong_loop_closure_is_down_weighted() {
     eprintln!(
         "ATE {:.3} m -> {after:.3} m (good closures only {reference_ate:.3} m), loop-closure \
          weights {weights:?}",
-        position_rmse(&truth, &graph.world_from_node)
+        position_rmse(&truth, &graph.world_from_node).unwrap()
     );
     assert!(report.converged);
     assert!(
@@ -145,7 +145,7 @@ fn wrong_loop_closure_is_down_weighted() {
         ..Default::default()
     };
     let (dragged, _) = optimize(&graph, 0, &plain).unwrap();
-    let dragged_ate = position_rmse(&truth, &dragged);
+    let dragged_ate = position_rmse(&truth, &dragged).unwrap();
     assert!(dragged_ate > after + 0.1, "{dragged_ate} m vs {after} m");
 }
 
@@ -162,8 +162,8 @@ fn gauge_node_does_not_move() {
         let correction = truth[fixed] * poses[fixed].inverse();
         poses.iter().map(|p| correction * p).collect()
     };
-    let before = position_rmse(&truth, &aligned(&graph.world_from_node));
-    let after = position_rmse(&truth, &aligned(&world_from_node));
+    let before = position_rmse(&truth, &aligned(&graph.world_from_node)).unwrap();
+    let after = position_rmse(&truth, &aligned(&world_from_node)).unwrap();
     assert!(after < before / 2.0, "{before} m -> {after} m");
 }
 

@@ -137,7 +137,7 @@ fn the_simulated_loop_is_closed_and_the_map_stays_within_2_cm() {
             worst(&final_errors) <= 0.02,
             "seed {seed}: the nodes end off by {final_errors:.3?} m"
         );
-        let errors = trajectory_errors(&poses, &run.truth).unwrap();
+        let errors = trajectory_errors(&run.truth, &poses).unwrap();
         assert!(errors.ate_max_m <= 0.02, "seed {seed}: {errors:?}");
         assert!(
             worst(&motion_errors) <= 0.01,
@@ -346,7 +346,7 @@ fn trajectory_errors_ignore_a_rigid_offset_and_see_a_bent_path() {
         Attitude::from_degrees(0.0, 0.0, 30.0),
     );
     let moved: Vec<Pose> = path.iter().map(|p| offset * p).collect();
-    let e = trajectory_errors(&moved, &path).unwrap();
+    let e = trajectory_errors(&path, &moved).unwrap();
     assert!(
         e.ate_rmse_m < 1e-9 && e.rpe_translation_rmse_m < 1e-9,
         "{e:?}"
@@ -357,9 +357,9 @@ fn trajectory_errors_ignore_a_rigid_offset_and_see_a_bent_path() {
         bent[9].translation.vector + Vec3::new(0.0, 0.1, 0.0),
         Attitude::default(),
     );
-    let e = trajectory_errors(&bent, &path).unwrap();
+    let e = trajectory_errors(&path, &bent).unwrap();
     assert!(e.ate_max_m > 0.05 && e.ate_max_m < 0.1, "{e:?}");
-    assert!(trajectory_errors(&bent[..3], &path).is_err());
+    assert!(trajectory_errors(&path, &bent[..3]).is_err());
 }
 
 #[test]

@@ -30,11 +30,13 @@ pub struct TrajectoryErrors {
     pub rotation_errors_deg: Vec<f64>,
 }
 
-/// Compares `estimate` with `reference` (e.g. ground truth).
+/// Compares `estimate` with `reference` (ground truth, or another method's poses), pose by
+/// pose. The arguments come in the order of [`crate::geometry::pose_error`]'s: the reference
+/// first.
 ///
 /// # Errors
 /// Different lengths or no pose.
-pub fn trajectory_errors(estimate: &[Pose], reference: &[Pose]) -> Result<TrajectoryErrors> {
+pub fn trajectory_errors(reference: &[Pose], estimate: &[Pose]) -> Result<TrajectoryErrors> {
     if estimate.len() != reference.len() || estimate.is_empty() {
         return Err(Error::Invalid(format!(
             "cannot compare {} estimated poses with {} reference poses",
