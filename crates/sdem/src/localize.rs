@@ -543,8 +543,8 @@ fn refine_best(
             &config.refinement,
         ) {
             Ok(r) => {
-                rotation = r.transform.rotation;
-                let t = r.transform.translation.vector;
+                rotation = r.reference_level_from_query_level.rotation;
+                let t = r.reference_level_from_query_level.translation.vector;
                 refinement = Some(r);
                 (t, RefineOutcome::SixDof)
             }

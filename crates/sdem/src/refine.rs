@@ -109,9 +109,8 @@ impl RefineConfig {
 /// The result of a refinement.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Refinement {
-    /// `reference_level_from_query_level`: carries query-levelled points into the reference's
-    /// levelled frame.
-    pub transform: Isometry3<f64>,
+    /// Carries query-levelled points into the reference's levelled frame.
+    pub reference_level_from_query_level: Isometry3<f64>,
     /// Gauss-Newton iterations run.
     pub iterations: usize,
     /// True when the last update was below the convergence threshold.
@@ -545,7 +544,7 @@ pub fn refine(
     let (h, sigma_sq, inliers) = last.expect("at least one iteration ran");
     check_plausible(initial, &rotation, &translation, config)?;
     Ok(Refinement {
-        transform: Isometry3::from_parts(
+        reference_level_from_query_level: Isometry3::from_parts(
             Translation3::from(translation),
             UnitQuaternion::from_rotation_matrix(&rotation),
         ),
