@@ -24,10 +24,14 @@
 //! The module's files: this one holds the configuration and the loop, `relocalize` finding a scan
 //! in a saved map, `trajectory` the errors of an estimated trajectory against a reference one.
 
+mod options;
 mod relocalize;
+mod step;
 mod trajectory;
 
+pub use options::SlamOptions;
 pub use relocalize::{relocalize, Near, Relocalization};
+pub use step::{HeadingPrior, OptimizationSummary, Step, StepReport, StepStatus};
 pub use trajectory::{trajectory_errors, TrajectoryErrors};
 
 use crate::doubt::Doubt;
@@ -37,154 +41,14 @@ use crate::localize::{
     localize, CostConfig, Diagnostics, LocalizeOptions, OffsetPrior, RefinementSummary,
     SearchWindow,
 };
-use crate::map::{
-    verify_loop_closure, world_from_query, Descriptor, LoopClosure, LoopClosureConfig, Map, Node,
-};
-use crate::posegraph::{optimize, Edge, EdgeKind, OptimizeConfig, PoseGraph};
-use crate::sdem::{Sdem, SdemConfig};
+use crate::map::{verify_loop_closure, world_from_query, Descriptor, LoopClosure, Map, Node};
+use crate::posegraph::{optimize, Edge, EdgeKind, PoseGraph};
+use crate::sdem::Sdem;
 use crate::search::HeadingWindow;
-use crate::voxel::{VoxelConfig, VoxelMap};
+use crate::voxel::VoxelMap;
 use nalgebra::{Matrix3, Matrix6};
 use relocalize::take_prediction_along;
-use serde::{Deserialize, Serialize};
 use std::time::Instant;
-
-/// Everything the loop needs; written beside the results as `config.toml`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct SlamOptions {
-    /// The S-DEM grid.
-    pub sdem: SdemConfig,
-    /// The search and refinement (the window and heading are set per scan from the fields below).
-    pub localize: LocalizeOptions,
-    /// Half-size of the window around an odometry prediction, metres.
-    pub window_half_m: [f64; 3],
-    /// Half-size of the window when there is no odometry (the robot may have moved anywhere
-    /// nearby), metres.
-    pub window_half_no_odometry_m: [f64; 3],
-    /// Standard deviation of an odometry prediction, metres, weighed into the match as
-    /// [`crate::cost::OffsetPrior`] (it decides only what the scans leave open, such as the
-    /// position along a featureless ditch).
-    pub prior_sigma_m: f64,
-    /// Standard deviation of the prediction without odometry (the last motion repeated), metres.
-    pub prior_sigma_no_odometry_m: f64,
-    /// Heading searched around an odometry prediction, ± degrees.
-    pub heading_half_deg: f64,
-    /// Heading searched around a compass reading when there is no odometry, ± degrees.
-    pub heading_half_compass_deg: f64,
-    /// Heading searched around the last node's heading with neither, ± degrees.
-    pub heading_half_no_prior_deg: f64,
-    /// Reference nodes lie within this of the predicted position, metres.
-    pub reference_radius_m: f64,
-    /// At most this many reference nodes are merged.
-    pub max_reference_nodes: usize,
-    /// A node is a reference only when at least this many of the new scan's cells see it.
-    pub min_reference_overlap_cells: usize,
-    /// Floor on the standard deviation of an edge's translation, metres: the matcher's
-    /// covariance assumes independent residuals and is optimistic.
-    pub edge_sigma_floor_m: f64,
-    /// Floor on the standard deviation of an edge's rotation, degrees.
-    pub edge_sigma_floor_deg: f64,
-    /// Loop closure.
-    pub loop_closure: LoopClosureConfig,
-    /// The pose-graph optimizer.
-    pub optimize: OptimizeConfig,
-    /// The fused occupancy map.
-    pub voxel: VoxelConfig,
-}
-
-impl Default for SlamOptions {
-    fn default() -> Self {
-        Self {
-            sdem: SdemConfig::default(),
-            // A 2 cm grid finds the basin and the 6-DoF refinement the bottom (sub-millimetre on
-            // the seeded pairs of `sdem bench`), at an eighth of the 1 cm grid's candidates.
-            localize: LocalizeOptions {
-                step_m: 0.02,
-                runner_up: false,
-                ..Default::default()
-            },
-            window_half_m: [0.15, 0.15, 0.08],
-            window_half_no_odometry_m: [0.5, 0.5, 0.15],
-            prior_sigma_m: 0.05,
-            prior_sigma_no_odometry_m: 0.2,
-            heading_half_deg: 3.0,
-            heading_half_compass_deg: 8.0,
-            heading_half_no_prior_deg: 15.0,
-            reference_radius_m: 4.0,
-            max_reference_nodes: 3,
-            min_reference_overlap_cells: 300,
-            edge_sigma_floor_m: 0.005,
-            edge_sigma_floor_deg: 0.1,
-            loop_closure: LoopClosureConfig::default(),
-            optimize: OptimizeConfig::default(),
-            voxel: VoxelConfig::default(),
-        }
-    }
-}
-
-impl SlamOptions {
-    /// Checks the values the loop itself uses (the search, S-DEM and voxel settings check
-    /// themselves when used).
-    pub fn validate(&self) -> Result<()> {
-        self.sdem.validate()?;
-        self.voxel.validate()?;
-        let halves = self
-            .window_half_m
-            .iter()
-            .chain(&self.window_half_no_odometry_m)
-            .chain(&self.loop_closure.window_half_m);
-        for &h in halves {
-            if !(h.is_finite() && h >= 0.0) {
-                return Err(Error::Invalid(format!(
-                    "window half-size {h} m must be a finite number >= 0"
-                )));
-            }
-        }
-        for (name, v) in [
-            ("prior_sigma_m", self.prior_sigma_m),
-            ("prior_sigma_no_odometry_m", self.prior_sigma_no_odometry_m),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::Invalid(format!(
-                    "{name} = {v} m must be a positive number"
-                )));
-            }
-        }
-        for (name, v) in [
-            ("heading_half_deg", self.heading_half_deg),
-            ("heading_half_compass_deg", self.heading_half_compass_deg),
-            ("heading_half_no_prior_deg", self.heading_half_no_prior_deg),
-        ] {
-            if !(v.is_finite() && (0.0..=180.0).contains(&v)) {
-                return Err(Error::Invalid(format!(
-                    "{name} = {v} must lie in 0..=180 degrees"
-                )));
-            }
-        }
-        if !(self.reference_radius_m.is_finite() && self.reference_radius_m > 0.0) {
-            return Err(Error::Invalid(format!(
-                "reference_radius_m = {} must be a positive distance",
-                self.reference_radius_m
-            )));
-        }
-        if self.max_reference_nodes == 0 {
-            return Err(Error::Invalid(
-                "max_reference_nodes must be at least 1".into(),
-            ));
-        }
-        if !(self.edge_sigma_floor_m.is_finite()
-            && self.edge_sigma_floor_m > 0.0
-            && self.edge_sigma_floor_deg.is_finite()
-            && self.edge_sigma_floor_deg > 0.0)
-        {
-            return Err(Error::Invalid(
-                "edge_sigma_floor_m and edge_sigma_floor_deg must be positive".into(),
-            ));
-        }
-        Ok(())
-    }
-}
 
 /// One scan as the loop receives it.
 #[derive(Debug, Clone)]
@@ -218,79 +82,6 @@ impl Odometry {
     }
 }
 
-/// Where the heading prior came from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum HeadingPrior {
-    /// The first scan: its compass reading (or 0) defines the world's heading.
-    First,
-    /// The odometry's relative motion from the last node.
-    Odometry,
-    /// The compass reading.
-    Compass,
-    /// The last node's heading turned by the last motion (no odometry, no compass).
-    ConstantVelocity,
-    /// The last node's heading.
-    LastNode,
-}
-
-/// What happened to one scan.
-#[derive(Debug, Clone, Serialize)]
-pub struct StepReport {
-    /// Index of the scan in its dataset.
-    pub scan_index: usize,
-    /// The node it became.
-    pub node_id: usize,
-    /// Wall time of the whole step (localization, loop closure, optimization, map update), ms.
-    pub time_ms: f64,
-    /// Wall time of the localization alone, ms.
-    pub localize_ms: f64,
-    /// The estimated pose of the scan's sensor in the world when the step ended, as
-    /// `{x, y, z, roll_deg, …}`.
-    pub world_from_sensor: crate::geometry::PoseRecord,
-    /// The prediction the search started from.
-    pub predicted_world_from_sensor: crate::geometry::PoseRecord,
-    /// Where the heading prior came from.
-    pub heading_prior: HeadingPrior,
-    /// Reference nodes merged, with the query cells each one saw.
-    pub reference_nodes: Vec<(usize, usize)>,
-    /// Eq. (1) at the best grid candidate, m² (`None` for the first scan).
-    pub cost: Option<f64>,
-    /// Overlap fraction of the match.
-    pub overlap_fraction: Option<f64>,
-    /// Inlier fraction of the match.
-    pub inlier_fraction: Option<f64>,
-    /// Covariance of `[x, y, z, roll, pitch, yaw]` from the match (world axes), as its edges
-    /// carry it: along a direction the scans leave free, widened by the prediction's variance.
-    pub covariance: Option<[[f64; 6]; 6]>,
-    /// Every reason not to trust the match (see [`crate::localize::Localization::doubts`]);
-    /// empty for the first scan.
-    pub doubts: Vec<Doubt>,
-    /// No doubt about the match: the step's pose rests on the scans.
-    pub trusted: bool,
-    /// How the match's refinement went (`None` for the first scan).
-    pub refinement: Option<crate::localize::RefinementSummary>,
-    /// Loop closures checked at this scan, accepted or not.
-    pub loop_closures: Vec<LoopClosure>,
-    /// Pose-graph optimization run at this scan: iterations and time, ms.
-    pub optimization: Option<OptimizationSummary>,
-}
-
-/// One pose-graph optimization, summarized.
-#[derive(Debug, Clone, Serialize)]
-pub struct OptimizationSummary {
-    /// Iterations run.
-    pub iterations: usize,
-    /// Robust cost before and after.
-    pub initial_cost: f64,
-    /// Robust cost after.
-    pub final_cost: f64,
-    /// Wall time, ms.
-    pub time_ms: f64,
-    /// The largest move of a node, metres.
-    pub max_node_shift_m: f64,
-}
-
 /// The loop's state: the map, the pose graph's edges and the fused voxel map.
 #[derive(Debug, Clone)]
 pub struct Slam {
@@ -307,31 +98,6 @@ pub struct Slam {
     last_odom_from_sensor: Option<Pose>,
     /// The index [`Slam::add`] gives the next scan.
     next_scan_index: usize,
-}
-
-/// How a stop went, in one word.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum StepStatus {
-    /// The first scan: it defines the world frame.
-    First,
-    /// Matched against the map with no doubt.
-    Tracked,
-    /// Matched, but the match has doubts ([`StepReport::doubts`]); its pose is the best guess.
-    Doubtful,
-}
-
-/// One stop added by [`Slam::add`]: where the sensor stood, how the match went, and the full
-/// report `sdem slam` writes for it.
-#[derive(Debug, Clone)]
-pub struct Step {
-    /// The pose of the scan's sensor in the world when the step ended (later loop closures can
-    /// move it: see [`Slam::poses`]).
-    pub world_from_sensor: Pose,
-    /// First, tracked, or doubtful.
-    pub status: StepStatus,
-    /// The localization's figures, doubts, loop closures and times.
-    pub report: StepReport,
 }
 
 impl Slam {
