@@ -1,0 +1,129 @@
+//! Scans that cannot be localized, or only doubtfully, through the crate's root API: each gives
+//! a clear error or a result with its doubt, never a panic, never a confident wrong pose.
+
+use nalgebra::{Isometry3, Point3, Vector3};
+use sdem::{Attitude, Error, LocalizeOptions, Scan};
+
+/// Points on the walls, floor and ceiling of a 3.5 × 3 × 1.5 m room with a pillar, sensor frame.
+fn room() -> Vec<Point3<f64>> {
+    let mut points = Vec::new();
+    for i in -40..=40 {
+        for j in -40..=40 {
+            let (u, v) = (i as f64 * 0.05, j as f64 * 0.05);
+            for p in [
+                [2.0, u, v],
+                [-1.5, u, v],
+                [u, 1.7, v],
+                [u, -1.3, v],
+                [u, v, 1.1],
+                [u, v, -0.4],
+            ] {
+                points.push(Point3::new(p[0], p[1], p[2]));
+            }
+            let (s, h) = (i as f64 * 0.15 / 40.0, j as f64 * 0.75 / 40.0 + 0.35);
+            for p in [
+                [0.85, 0.8 + s],
+                [1.15, 0.8 + s],
+                [1.0 + s, 0.65],
+                [1.0 + s, 0.95],
+            ] {
+                points.push(Point3::new(p[0], p[1], h));
+            }
+        }
+    }
+    points
+}
+
+fn level() -> Option<Attitude> {
+    Some(Attitude::default())
+}
+
+#[test]
+fn too_few_points_is_an_error_saying_how_many() {
+    let few: Vec<Point3<f64>> = room().into_iter().step_by(2000).collect();
+    match Scan::from_points(&few, level()) {
+        Err(Error::TooFewPoints { usable, needed }) => {
+            assert!(
+                usable < needed && needed == sdem::scan::MIN_KNOWN_CELLS,
+                "{usable} {needed}"
+            )
+        }
+        other => panic!("expected TooFewPoints, got {other:?}"),
+    }
+    assert!(matches!(
+        Scan::from_points(&[], None),
+        Err(Error::TooFewPoints { usable: 0, .. })
+    ));
+}
+
+#[test]
+fn non_finite_input_is_named_nan_points_are_no_return() {
+    let mut points = room();
+    points[17] = Point3::new(1.0, f64::INFINITY, 0.0);
+    match Scan::from_points(&points, level()) {
+        Err(Error::InvalidInput { what, .. }) => assert_eq!(what, "point 17"),
+        other => panic!("expected InvalidInput, got {other:?}"),
+    }
+    points[17] = Point3::new(f64::NAN, 0.0, 0.0);
+    let scan = Scan::from_points(&points, level()).unwrap();
+    assert_eq!(scan.points_in_sensor().len(), points.len() - 1);
+    let bad = Attitude::from_degrees(f64::NAN, 0.0, 0.0);
+    match Scan::from_points(&room(), Some(bad)) {
+        Err(Error::InvalidInput { what, .. }) => assert_eq!(what, "attitude"),
+        other => panic!("expected InvalidInput, got {other:?}"),
+    }
+}
+
+#[test]
+fn the_reference_again_is_where_it_was() {
+    let scan = Scan::from_points(&room(), level()).unwrap();
+    let found = sdem::localize(&scan, &scan, &LocalizeOptions::default()).unwrap();
+    assert!(found.trusted, "{:?}", found.doubts);
+    let moved = found.reference_from_query.translation.vector.norm();
+    let turned = found.reference_from_query.rotation.angle().to_degrees();
+    assert!(moved < 1e-3 && turned < 0.01, "{moved} m, {turned}°");
+}
+
+#[test]
+fn a_floor_alone_is_never_a_confident_wrong_pose() {
+    // Only the floor, a 4 m patch of it: its edges are all that fixes x, y and the heading.
+    // Whatever comes back is either right, or says why it may not be.
+    let floor: Vec<Point3<f64>> = room().into_iter().filter(|p| p.z < -0.39).collect();
+    let reference = Scan::from_points(&floor, level()).unwrap();
+    for (x, y, yaw_deg) in [(0.2, 0.1, 6.0f64), (0.45, -0.45, 9.0), (-0.3, 0.25, -8.0)] {
+        let truth = Isometry3::new(Vector3::new(x, y, 0.0), Vector3::z() * yaw_deg.to_radians());
+        let seen: Vec<Point3<f64>> = floor.iter().map(|p| truth.inverse() * p).collect();
+        let query = Scan::from_points(&seen, level()).unwrap();
+        match sdem::localize(&reference, &query, &LocalizeOptions::default()) {
+            Ok(found) if found.trusted => {
+                let off = found.reference_from_query.translation.vector - truth.translation.vector;
+                let turned = found
+                    .reference_from_query
+                    .rotation
+                    .angle_to(&truth.rotation);
+                assert!(
+                    off.norm() < 0.01 && turned.to_degrees() < 0.5,
+                    "trusted but {:.1} mm and {:.2}° off",
+                    off.norm() * 1e3,
+                    turned.to_degrees()
+                );
+            }
+            Ok(found) => assert!(!found.doubts.is_empty()),
+            Err(e) => assert!(e.is_no_match(), "{e}"),
+        }
+    }
+}
+
+#[test]
+fn scans_on_different_grids_are_refused() {
+    let fine = Scan::from_points(&room(), level()).unwrap();
+    let coarse = sdem::SdemConfig {
+        resolution_deg: 2.0,
+        ..Default::default()
+    };
+    let coarse = Scan::with_grid(&room(), level(), &coarse).unwrap();
+    assert!(matches!(
+        sdem::localize(&fine, &coarse, &LocalizeOptions::default()),
+        Err(Error::Invalid(_))
+    ));
+}
