@@ -83,4 +83,5 @@ pub use geometry::{Attitude, Pose};
 pub use localize::{HeadingWindow, Localization, LocalizeOptions, SearchMode, SearchWindow};
 pub use scan::{localize, Scan};
 pub use sdem::SdemConfig;
+pub use sensor::SensorConfig;
 pub use slam::{Odometry, Slam, SlamOptions, Step, StepStatus};

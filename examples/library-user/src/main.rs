@@ -3,7 +3,7 @@
 //! when a result is off the truth.
 
 use nalgebra::{Isometry3, Point3};
-use sdem::{Attitude, LocalizeOptions, Scan, Slam, SlamOptions, StepStatus};
+use sdem::{Attitude, LocalizeOptions, Scan, SensorConfig, Slam, SlamOptions, StepStatus};
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim;
 use std::process::ExitCode;
@@ -25,7 +25,7 @@ fn main() -> ExitCode {
 fn run() -> Result<(), Box<dyn std::error::Error>> {
     // A simulated run through a collapsed building, with the true pose of every stop.
     let scene = sim::collapsed_building(SEED);
-    let sensor = sdem::sensor::SensorConfig::default();
+    let sensor = SensorConfig::default();
     let stops = sim::collapsed_building_stops(&scene, SEED, STOPS, &sensor.lift)?;
     let run = sim::simulate_run(&scene, &stops, &sensor, SEED)?;
     let points = |k: usize| -> Vec<Point3<f64>> {
