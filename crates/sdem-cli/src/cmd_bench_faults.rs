@@ -179,6 +179,7 @@ fn reason_kind(doubt: &Doubt) -> &'static str {
         Doubt::FlatCovariance { .. } | Doubt::FlatCost { .. } => "flat cost",
         Doubt::FewInliers { .. } => "thin match",
         Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. } => "other",
+        Doubt::AttitudeCorrected { .. } => "attitude corrected",
     }
 }
 

@@ -61,6 +61,15 @@ pub enum Doubt {
     },
     /// The optimum lies on the search window's edge: the true pose may lie outside the window.
     OnWindowEdge,
+    /// The match tilted one scan against the other by more than the attitude readings allow
+    /// (three standard deviations of their roll and pitch): a gyro reading, or the match, is
+    /// wrong.
+    AttitudeCorrected {
+        /// The tilt between the two levelled frames that the match found, degrees.
+        tilt_deg: f64,
+        /// What the readings allow, degrees.
+        three_sigma_deg: f64,
+    },
     /// Along a direction the scans leave free, the position was taken from the prediction
     /// (odometry or the last motion), not from the scans.
     TakenFromPrediction {
@@ -73,12 +82,14 @@ pub enum Doubt {
 
 impl Doubt {
     /// Whether this doubt concerns the match's shape (a repeated or flat cost, too few points,
-    /// a failed refinement), as opposed to where the search looked or what the loop did with
-    /// the result. Such a match is `ambiguous` in [`crate::localize::Diagnostics`].
+    /// a failed refinement), as opposed to where the search looked, what the attitude readings
+    /// allow, or what the loop did with the result. Such a match is `ambiguous` in [`crate::localize::Diagnostics`].
     pub fn is_ambiguity(&self) -> bool {
         !matches!(
             self,
-            Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. }
+            Doubt::OnWindowEdge
+                | Doubt::TakenFromPrediction { .. }
+                | Doubt::AttitudeCorrected { .. }
         )
     }
 
@@ -91,6 +102,7 @@ impl Doubt {
             Doubt::FewInliers { .. } => "few_inliers",
             Doubt::RefinementFailed { .. } => "refinement_failed",
             Doubt::OnWindowEdge => "on_window_edge",
+            Doubt::AttitudeCorrected { .. } => "attitude_corrected",
             Doubt::TakenFromPrediction { .. } => "taken_from_prediction",
         }
     }
@@ -156,6 +168,15 @@ impl fmt::Display for Doubt {
             Doubt::OnWindowEdge => write!(
                 f,
                 "the optimum lies on the search window's edge: the true pose may lie outside it"
+            ),
+            Doubt::AttitudeCorrected {
+                tilt_deg,
+                three_sigma_deg,
+            } => write!(
+                f,
+                "the match tilts the scans {tilt_deg:.2}° against each other, beyond the \
+                 {three_sigma_deg:.2}° their roll and pitch readings allow: a reading or the \
+                 match is wrong"
             ),
             Doubt::TakenFromPrediction {
                 direction: v,
@@ -232,6 +253,14 @@ mod tests {
             ),
             (Doubt::OnWindowEdge, "on_window_edge", false),
             (
+                Doubt::AttitudeCorrected {
+                    tilt_deg: 4.0,
+                    three_sigma_deg: 2.1,
+                },
+                "attitude_corrected",
+                false,
+            ),
+            (
                 Doubt::TakenFromPrediction {
                     direction: [1.0, 0.0, 0.0],
                     shift_m: 0.04,
@@ -250,7 +279,9 @@ mod tests {
             let expected = match doubt {
                 Doubt::OnWindowEdge => 0,
                 Doubt::RefinementFailed { .. } => 1,
-                Doubt::FewInliers { .. } | Doubt::TakenFromPrediction { .. } => 2,
+                Doubt::FewInliers { .. }
+                | Doubt::TakenFromPrediction { .. }
+                | Doubt::AttitudeCorrected { .. } => 2,
                 Doubt::RunnerUp { .. } | Doubt::FlatCovariance { .. } => 3,
                 Doubt::FlatCost { .. } => 4,
             };

@@ -14,7 +14,8 @@ pub type Vec3 = Vector3<f64>;
 /// A rigid transform `a_from_b`.
 pub type Pose = Isometry3<f64>;
 
-/// The attitude of a body relative to the gravity-aligned world axes, in radians.
+/// The attitude of a body relative to the gravity-aligned world axes, in radians, as a
+/// measurement: the angles and how far a reading of them can be off ([`AttitudeSigma`]).
 ///
 /// `R = Rz(yaw) · Ry(pitch) · Rx(roll)`: roll about x, then pitch about y, then yaw about z, all
 /// about the fixed world axes.
@@ -26,12 +27,62 @@ pub struct Attitude {
     pub pitch: f64,
     /// Rotation about z (compass heading, counter-clockwise from +x), radians.
     pub yaw: f64,
+    /// The reading's standard deviations (not stored in files: a reading read back takes the
+    /// defaults).
+    #[serde(skip)]
+    pub sigma: AttitudeSigma,
+}
+
+/// How far an attitude reading can be off: standard deviations, radians.
+///
+/// The defaults: 0.5° for roll and pitch (a gyro levelled by gravity) and 3.5° for the heading
+/// (a compass near steel; two readings at 3σ then differ by up to ±15°).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeSigma {
+    /// σ of roll and of pitch, radians.
+    pub roll_pitch: f64,
+    /// σ of the heading (yaw), radians.
+    pub yaw: f64,
+}
+
+impl Default for AttitudeSigma {
+    fn default() -> Self {
+        Self {
+            roll_pitch: 0.5f64.to_radians(),
+            yaw: 3.5f64.to_radians(),
+        }
+    }
 }
 
 impl Attitude {
     /// An attitude from angles in radians.
     pub fn new(roll: f64, pitch: f64, yaw: f64) -> Self {
-        Self { roll, pitch, yaw }
+        Self {
+            roll,
+            pitch,
+            yaw,
+            sigma: AttitudeSigma::default(),
+        }
+    }
+
+    /// The same reading with its standard deviations, degrees: `roll_pitch_deg` for roll and for
+    /// pitch, `yaw_deg` for the heading.
+    ///
+    /// # Example
+    /// ```
+    /// use sdem::Attitude;
+    /// // A gyro good to 0.2°, a compass near steel good to 20° only.
+    /// let reading = Attitude::from_degrees(1.0, -2.0, 90.0).with_sigma_deg(0.2, 20.0);
+    /// assert!((reading.sigma.yaw.to_degrees() - 20.0).abs() < 1e-12);
+    /// ```
+    pub fn with_sigma_deg(self, roll_pitch_deg: f64, yaw_deg: f64) -> Self {
+        Self {
+            sigma: AttitudeSigma {
+                roll_pitch: roll_pitch_deg.to_radians(),
+                yaw: yaw_deg.to_radians(),
+            },
+            ..self
+        }
     }
 
     /// An attitude from angles in degrees.
@@ -67,7 +118,7 @@ impl Attitude {
     /// The attitude of a rotation `world_from_body`.
     pub fn from_rotation(rotation: &Rotation3<f64>) -> Self {
         let (roll, pitch, yaw) = rotation.euler_angles();
-        Self { roll, pitch, yaw }
+        Self::new(roll, pitch, yaw)
     }
 
     /// The attitude of a unit quaternion `world_from_body`.
@@ -78,6 +129,13 @@ impl Attitude {
     /// True when all three angles are finite numbers.
     pub fn is_finite(&self) -> bool {
         self.roll.is_finite() && self.pitch.is_finite() && self.yaw.is_finite()
+    }
+
+    /// Whether the standard deviations are positive numbers.
+    pub fn sigma_is_valid(&self) -> bool {
+        [self.sigma.roll_pitch, self.sigma.yaw]
+            .iter()
+            .all(|s| s.is_finite() && *s > 0.0)
     }
 }
 

@@ -79,7 +79,7 @@ pub mod voxel;
 
 pub use doubt::Doubt;
 pub use error::{Error, Result};
-pub use geometry::{Attitude, Pose};
+pub use geometry::{Attitude, AttitudeSigma, Pose};
 pub use localize::{HeadingWindow, Localization, LocalizeOptions, SearchMode, SearchWindow};
 pub use scan::{localize, Scan};
 pub use sdem::SdemConfig;

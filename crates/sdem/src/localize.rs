@@ -359,6 +359,9 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
         refined.error.as_deref(),
         &mut cost_at,
     );
+    if let Some(doubt) = attitude_corrected(&refined.rotation, reference_attitude, query_attitude) {
+        doubts.push(doubt);
+    }
     let on_window_edge = grid.on_edge(grid_index, full_turn);
     if on_window_edge {
         doubts.push(Doubt::OnWindowEdge);
@@ -784,6 +787,22 @@ fn cost_shape(
             *flat = Some([v.x, v.y, v.z]);
         }
     }
+}
+
+/// A doubt when the match tilted the query's levelled frame against the reference's by more than
+/// the two attitude readings' roll and pitch allow (3σ of their difference): one of the gyros, or
+/// the match, is wrong.
+fn attitude_corrected(
+    level_rotation: &UnitQuaternion<f64>,
+    reference: &Attitude,
+    query: &Attitude,
+) -> Option<Doubt> {
+    let tilt = (level_rotation * Vector3::z()).angle(&Vector3::z());
+    let sigma = reference.sigma.roll_pitch.hypot(query.sigma.roll_pitch);
+    (tilt > 3.0 * sigma).then(|| Doubt::AttitudeCorrected {
+        tilt_deg: tilt.to_degrees(),
+        three_sigma_deg: 3.0 * sigma.to_degrees(),
+    })
 }
 
 /// A covariance over `[x, y, z, rx, ry, rz]` on the levelled reference's axes, expressed on the

@@ -73,6 +73,15 @@ impl Scan {
                 problem: format!("{:?} is not finite", a.to_degrees()),
             });
         }
+        if let Some(a) = attitude.filter(|a| !a.sigma_is_valid()) {
+            return Err(Error::InvalidInput {
+                what: "attitude's standard deviations".into(),
+                problem: format!(
+                    "{:?} (radians) must be positive numbers",
+                    [a.sigma.roll_pitch, a.sigma.yaw]
+                ),
+            });
+        }
         if let Some(i) = points_in_sensor
             .iter()
             .position(|p| p.iter().any(|v| v.is_infinite()))
@@ -123,9 +132,12 @@ impl Scan {
 /// Localizes `query` against `reference`: where the query's sensor stood, in the reference
 /// sensor's frame (Nagatani et al. 2003, Sec. III-C, searched exactly and refined in 6-DoF).
 ///
-/// The attitudes come from the scans. When both have one, the search covers the options'
-/// translation window and heading window around the compass readings. A scan without one is
-/// taken as level, and the heading is then searched over a full turn.
+/// The attitudes come from the scans, with their uncertainty ([`Attitude::sigma`]). When both
+/// have one, the search covers the options' translation window and, around the compass
+/// readings, three standard deviations of the two headings' difference (the options' heading
+/// window gives only the step). A scan without one is taken as level, and the heading is then
+/// searched over a full turn. A match that tilts one scan against the other beyond what the
+/// roll and pitch readings allow carries the doubt [`crate::Doubt::AttitudeCorrected`].
 ///
 /// # Returns
 /// The pose [`Localization::reference_from_query`] with its cost, runner-up, covariance and
@@ -166,15 +178,17 @@ pub fn localize(reference: &Scan, query: &Scan, options: &LocalizeOptions) -> Re
                 .into(),
         ));
     }
-    if reference.attitude.is_some() && query.attitude.is_some() {
-        return crate::localize::localize(&reference.sdem, &query.sdem, options);
-    }
-    let unknown_heading = LocalizeOptions {
+    let half_range_deg = match (reference.attitude, query.attitude) {
+        // Three standard deviations of the two headings' difference.
+        (Some(r), Some(q)) => (3.0 * r.sigma.yaw.hypot(q.sigma.yaw).to_degrees()).min(180.0),
+        _ => 180.0,
+    };
+    let options = LocalizeOptions {
         heading: HeadingWindow {
-            half_range_deg: 180.0,
+            half_range_deg,
             ..options.heading
         },
         ..options.clone()
     };
-    crate::localize::localize(&reference.sdem, &query.sdem, &unknown_heading)
+    crate::localize::localize(&reference.sdem, &query.sdem, &options)
 }

@@ -1,8 +1,9 @@
 //! Scans that cannot be localized, or only doubtfully, through the crate's root API: each gives
-//! a clear error or a result with its doubt, never a panic, never a confident wrong pose.
+//! a clear error or a result with its doubt, never a panic, never a confident wrong pose. And the
+//! attitude readings' uncertainty: what the search covers, and a doubt where a match goes beyond.
 
 use nalgebra::{Isometry3, Point3, Vector3};
-use sdem::{Attitude, Error, LocalizeOptions, Scan};
+use sdem::{Attitude, Doubt, Error, LocalizeOptions, Scan};
 
 /// Points on the walls, floor and ceiling of a 3.5 × 3 × 1.5 m room with a pillar, sensor frame.
 fn room() -> Vec<Point3<f64>> {
@@ -125,5 +126,99 @@ fn scans_on_different_grids_are_refused() {
     assert!(matches!(
         sdem::localize(&fine, &coarse, &LocalizeOptions::default()),
         Err(Error::Invalid(_))
+    ));
+}
+
+/// The room seen from `truth` (the query's pose in the reference's frame).
+fn seen_from(truth: &Isometry3<f64>) -> Vec<Point3<f64>> {
+    room().iter().map(|p| truth.inverse() * p).collect()
+}
+
+#[test]
+fn a_roll_reading_off_beyond_its_sigma_is_a_doubt_within_it_is_not() {
+    // The query stands level, 10 cm on; its gyro says 2.5° of roll (the default σ of 0.5° for
+    // roll and pitch allows 2.1° between two readings at 3σ).
+    let truth = Isometry3::translation(0.1, 0.0, 0.0);
+    let reference = Scan::from_points(&room(), level()).unwrap();
+    let wrong_roll = Attitude::from_degrees(2.5, 0.0, 0.0);
+    let query = Scan::from_points(&seen_from(&truth), Some(wrong_roll)).unwrap();
+    let found = sdem::localize(&reference, &query, &LocalizeOptions::default()).unwrap();
+    assert!(!found.trusted);
+    let tilt = found.doubts.iter().find_map(|d| match d {
+        Doubt::AttitudeCorrected { tilt_deg, .. } => Some(*tilt_deg),
+        _ => None,
+    });
+    assert!(
+        tilt.is_some_and(|t| (t - 2.5).abs() < 0.25),
+        "{:?}",
+        found.doubts
+    );
+    // The match itself is right: the refinement took the roll out.
+    let off = (found.reference_from_query.translation.vector - truth.translation.vector).norm();
+    assert!(off < 0.005, "{off} m");
+    // A gyro said to be good to 2° allows it: no doubt about the attitude (this box-shaped room
+    // may still leave a runner-up close).
+    let query = Scan::from_points(
+        &seen_from(&truth),
+        Some(wrong_roll.with_sigma_deg(2.0, 3.5)),
+    )
+    .unwrap();
+    let found = sdem::localize(&reference, &query, &LocalizeOptions::default()).unwrap();
+    let attitude_doubt = |d: &Doubt| matches!(d, Doubt::AttitudeCorrected { .. });
+    assert!(
+        !found.doubts.iter().any(attitude_doubt),
+        "{:?}",
+        found.doubts
+    );
+}
+
+#[test]
+fn the_heading_search_covers_what_the_compass_sigma_allows() {
+    // The query turned 20° while its compass reads 0°; a 4 cm grid keeps the search short.
+    let truth = Isometry3::new(
+        Vector3::new(0.12, 0.04, 0.0),
+        Vector3::z() * 20f64.to_radians(),
+    );
+    let seen = seen_from(&truth);
+    let options = LocalizeOptions {
+        step_m: 0.04,
+        ..Default::default()
+    };
+    let found_with = |sigma_yaw_deg: f64| {
+        let reading = Some(Attitude::default().with_sigma_deg(0.5, sigma_yaw_deg));
+        let reference = Scan::from_points(&room(), reading).unwrap();
+        let query = Scan::from_points(&seen, reading).unwrap();
+        sdem::localize(&reference, &query, &options)
+    };
+    // σ 1° each: ±4.2° searched; σ 3.5° each: ±14.8°; the truth outside both. Neither may come
+    // back as a trusted wrong pose.
+    let mut candidates = Vec::new();
+    for sigma_yaw_deg in [1.0, 3.5] {
+        match found_with(sigma_yaw_deg) {
+            Ok(found) => {
+                let turned = found
+                    .reference_from_query
+                    .rotation
+                    .angle_to(&truth.rotation);
+                assert!(
+                    !found.trusted || turned.to_degrees() < 0.5,
+                    "σ {sigma_yaw_deg}°: trusted {:.1}° off",
+                    turned.to_degrees()
+                );
+                candidates.push(found.candidates_total);
+            }
+            Err(e) => assert!(e.is_no_match(), "{e}"),
+        }
+    }
+    // The window follows the standard deviation: 3.5 times as wide, about as many more headings.
+    if let [narrow, wide] = candidates[..] {
+        let ratio = wide as f64 / narrow as f64;
+        assert!((2.5..4.5).contains(&ratio), "{narrow} → {wide} candidates");
+    }
+    // A standard deviation that is no number is refused.
+    let bad = Attitude::default().with_sigma_deg(f64::NAN, 3.5);
+    assert!(matches!(
+        Scan::from_points(&seen, Some(bad)),
+        Err(Error::InvalidInput { .. })
     ));
 }
