@@ -67,38 +67,7 @@ impl Scan {
         attitude: Option<Attitude>,
         grid: &SdemConfig,
     ) -> Result<Self> {
-        if let Some(a) = attitude.filter(|a| !a.is_finite()) {
-            return Err(Error::InvalidInput {
-                what: "attitude".into(),
-                problem: format!("{:?} is not finite", a.to_degrees()),
-            });
-        }
-        if let Some(a) = attitude.filter(|a| !a.sigma_is_valid()) {
-            return Err(Error::InvalidInput {
-                what: "attitude's standard deviations".into(),
-                problem: format!(
-                    "{:?} (radians) must be positive numbers",
-                    [a.sigma.roll_pitch, a.sigma.yaw]
-                ),
-            });
-        }
-        if let Some(i) = points_in_sensor
-            .iter()
-            .position(|p| p.iter().any(|v| v.is_infinite()))
-        {
-            return Err(Error::InvalidInput {
-                what: format!("point {i}"),
-                problem: format!(
-                    "{:?} has an infinite coordinate (NaN means no return; infinity means \
-                     nothing)",
-                    points_in_sensor[i]
-                ),
-            });
-        }
-        let points: Vec<Vec3> = (points_in_sensor.iter())
-            .filter(|p| p.iter().all(|v| v.is_finite()))
-            .map(|p| p.coords)
-            .collect();
+        let points = checked_input(points_in_sensor, attitude.as_ref())?;
         let sdem = Sdem::from_points(&points, &attitude.unwrap_or_default(), grid)?;
         if sdem.known_cells() < MIN_KNOWN_CELLS {
             return Err(Error::TooFewPoints {
@@ -127,6 +96,48 @@ impl Scan {
     pub fn sdem(&self) -> &Sdem {
         &self.sdem
     }
+}
+
+/// Checks a scan as it comes (see [`Scan::from_points`]) and returns its finite points: an
+/// infinite coordinate or a non-finite attitude (or standard deviation) is [`Error::InvalidInput`]
+/// naming which; NaN points are no return and are dropped. [`crate::Slam::add`] checks its
+/// input with this too.
+pub(crate) fn checked_input(
+    points_in_sensor: &[Point3<f64>],
+    attitude: Option<&Attitude>,
+) -> Result<Vec<Vec3>> {
+    if let Some(a) = attitude.filter(|a| !a.is_finite()) {
+        return Err(Error::InvalidInput {
+            what: "attitude".into(),
+            problem: format!("{:?} is not finite", a.to_degrees()),
+        });
+    }
+    if let Some(a) = attitude.filter(|a| !a.sigma_is_valid()) {
+        return Err(Error::InvalidInput {
+            what: "attitude's standard deviations".into(),
+            problem: format!(
+                "{:?} (radians) must be positive numbers",
+                [a.sigma.roll_pitch, a.sigma.yaw]
+            ),
+        });
+    }
+    if let Some(i) = points_in_sensor
+        .iter()
+        .position(|p| p.iter().any(|v| v.is_infinite()))
+    {
+        return Err(Error::InvalidInput {
+            what: format!("point {i}"),
+            problem: format!(
+                "{:?} has an infinite coordinate (NaN means no return; infinity means \
+                 nothing)",
+                points_in_sensor[i]
+            ),
+        });
+    }
+    Ok((points_in_sensor.iter())
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .map(|p| p.coords)
+        .collect())
 }
 
 /// Localizes `query` against `reference`: where the query's sensor stood, in the reference

@@ -73,6 +73,18 @@ fn non_finite_input_is_named_nan_points_are_no_return() {
         Err(Error::InvalidInput { what, .. }) => assert_eq!(what, "attitude"),
         other => panic!("expected InvalidInput, got {other:?}"),
     }
+    // The incremental loop checks its input the same way, and stays empty.
+    let mut slam = sdem::Slam::new(sdem::SlamOptions::default()).unwrap();
+    points[17] = Point3::new(1.0, f64::INFINITY, 0.0);
+    match slam.add(&points, level(), None) {
+        Err(Error::InvalidInput { what, .. }) => assert_eq!(what, "point 17"),
+        other => panic!("expected InvalidInput, got {other:?}"),
+    }
+    assert!(matches!(
+        slam.add(&room(), Some(bad), None),
+        Err(Error::InvalidInput { .. })
+    ));
+    assert!(slam.poses().is_empty());
 }
 
 #[test]

@@ -201,13 +201,7 @@ impl Slam {
         attitude: Option<Attitude>,
         odom_from_sensor: Option<Pose>,
     ) -> Result<Step> {
-        if let Some(a) = attitude.filter(|a| !a.is_finite()) {
-            return Err(Error::InvalidInput {
-                what: "attitude".into(),
-                problem: format!("{:?} is not finite", a.to_degrees()),
-            });
-        }
-        let points: Vec<Vec3> = points_in_sensor.iter().map(|p| p.coords).collect();
+        let points = crate::scan::checked_input(points_in_sensor, attitude.as_ref())?;
         let odometry = odom_from_sensor.zip(self.last_odom_from_sensor).map(
             |(odom_from_sensor, odom_from_previous_sensor)| Odometry {
                 odom_from_sensor,
