@@ -70,6 +70,17 @@ pub enum Doubt {
         /// What the readings allow, degrees.
         three_sigma_deg: f64,
     },
+    /// The attitude was unknown, and a rotation other than the one returned, found from the
+    /// surface orientations, compares almost as well: the scene looks alike turned (a
+    /// rectangular room, a corridor, a single plane).
+    AnotherRotation {
+        /// The angle between the two rotations, degrees.
+        angle_deg: f64,
+        /// The other rotation's cost (eq. 1), m².
+        cost: f64,
+        /// The optimum's cost, m².
+        best_cost: f64,
+    },
     /// Along a direction the scans leave free, the position was taken from the prediction
     /// (odometry or the last motion), not from the scans.
     TakenFromPrediction {
@@ -103,6 +114,7 @@ impl Doubt {
             Doubt::RefinementFailed { .. } => "refinement_failed",
             Doubt::OnWindowEdge => "on_window_edge",
             Doubt::AttitudeCorrected { .. } => "attitude_corrected",
+            Doubt::AnotherRotation { .. } => "another_rotation",
             Doubt::TakenFromPrediction { .. } => "taken_from_prediction",
         }
     }
@@ -177,6 +189,14 @@ impl fmt::Display for Doubt {
                 "the match tilts the scans {tilt_deg:.2}° against each other, beyond the \
                  {three_sigma_deg:.2}° their roll and pitch readings allow: a reading or the \
                  match is wrong"
+            ),
+            Doubt::AnotherRotation {
+                angle_deg,
+                cost,
+                best_cost,
+            } => write!(
+                f,
+                "the scans compare almost as well turned {angle_deg:.0}° from the pose found                  ({cost:.3e} m² against {best_cost:.3e} m²): the scene looks alike turned"
             ),
             Doubt::TakenFromPrediction {
                 direction: v,
@@ -253,6 +273,15 @@ mod tests {
             ),
             (Doubt::OnWindowEdge, "on_window_edge", false),
             (
+                Doubt::AnotherRotation {
+                    angle_deg: 180.0,
+                    cost: 1.05e-3,
+                    best_cost: 1e-3,
+                },
+                "another_rotation",
+                true,
+            ),
+            (
                 Doubt::AttitudeCorrected {
                     tilt_deg: 4.0,
                     three_sigma_deg: 2.1,
@@ -282,7 +311,9 @@ mod tests {
                 Doubt::FewInliers { .. }
                 | Doubt::TakenFromPrediction { .. }
                 | Doubt::AttitudeCorrected { .. } => 2,
-                Doubt::RunnerUp { .. } | Doubt::FlatCovariance { .. } => 3,
+                Doubt::RunnerUp { .. }
+                | Doubt::FlatCovariance { .. }
+                | Doubt::AnotherRotation { .. } => 3,
                 Doubt::FlatCost { .. } => 4,
             };
             assert_eq!(fields, expected, "{json}");

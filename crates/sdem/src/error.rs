@@ -57,6 +57,17 @@ pub enum Error {
         /// The truncation distance, metres.
         truncation_m: f64,
     },
+    /// The attitude of a scan is unknown, and too few of its cells show a surface whose
+    /// orientation can be measured to find the rotation between the scans from them.
+    #[error(
+        "without an attitude reading the rotation between the scans comes from their surfaces' \
+         orientations, and the {which} shows no surface whose orientation can be measured \
+         (isolated returns); give the scans' attitude readings"
+    )]
+    NoSurfaces {
+        /// `"reference"` or `"query"`.
+        which: &'static str,
+    },
     /// The continuous refinement could not be solved (too few points paired, a degenerate
     /// problem, a step beyond its bounds).
     #[error("{reason}")]
@@ -95,6 +106,7 @@ impl Error {
             Error::NoOverlap { .. }
             | Error::NoMatch { .. }
             | Error::RefinementFailed { .. }
+            | Error::NoSurfaces { .. }
             | Error::NotFound { .. } => true,
             Error::AtScan { source, .. } => source.is_no_match(),
             _ => false,

@@ -66,6 +66,7 @@ pub mod cost;
 pub mod doubt;
 pub mod error;
 pub mod geometry;
+pub mod global;
 pub mod localize;
 pub mod map;
 pub mod posegraph;

@@ -286,6 +286,24 @@ impl RefinementSummary {
 /// assert!((found.offset - Vec3::new(0.1, 0.0, 0.0)).norm() < 0.01);
 /// ```
 pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Result<Localization> {
+    // Unreachable error: with no cap a search that finds nothing is an error below.
+    localize_below(reference, query, config, f64::INFINITY)?.ok_or(Error::NoMatch {
+        matched: 0,
+        compared: 0,
+        needed: 0,
+        truncation_m: config.cost.truncation_m,
+    })
+}
+
+/// [`localize`], but only a candidate costing at most `cap` counts: `Ok(None)` when the window
+/// holds none. The exact search prunes every box whose bound exceeds the cap, so a search that
+/// cannot beat a cost already found elsewhere (another rotation hypothesis) ends early.
+pub(crate) fn localize_below(
+    reference: &Sdem,
+    query: &Sdem,
+    config: &LocalizeOptions,
+    cap: f64,
+) -> Result<Option<Localization>> {
     let start = std::time::Instant::now();
     let (reference_attitude, query_attitude) = (reference.attitude(), query.attitude());
     validate(config)?;
@@ -311,7 +329,11 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
         reference,
         config,
         full_turn,
+        cap,
     );
+    if best.is_none() && cap.is_finite() {
+        return Ok(None);
+    }
     let best = best_candidate(&mut correlator, &grid, best, config)?;
     let (cost, grid_index, grid_offset, grid_heading) = (
         best.cost,
@@ -369,7 +391,7 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
     let covariance = diagnostics
         .covariance
         .map(|c| in_query_frame(&Matrix6::from_fn(|i, j| c[i][j]), &level_from_query));
-    Ok(Localization {
+    Ok(Some(Localization {
         reference_from_query: level_from_reference.inverse() * level_from_query,
         covariance,
         runner_up: diagnostics.runner_up_cost,
@@ -390,7 +412,7 @@ pub fn localize(reference: &Sdem, query: &Sdem, config: &LocalizeOptions) -> Res
         trusted: doubts.is_empty(),
         doubts,
         time: start.elapsed(),
-    })
+    }))
 }
 
 /// Rejects a configuration [`localize`] cannot run: an invalid cost, refinement or heading
@@ -429,21 +451,13 @@ fn search_and_fit_normals(
     reference: &Sdem,
     config: &LocalizeOptions,
     full_turn: bool,
+    cap: f64,
 ) -> (SearchResult, Option<SurfaceNormals>) {
     // The exact search sets aside what may cost up to the ambiguity ratio × the best, so the
     // runner-up search continues from there instead of bounding the window again.
     let reserve_ratio = config.runner_up.then_some(config.ambiguous_cost_ratio);
     rayon::join(
-        || {
-            run_search(
-                evaluator,
-                prepared,
-                config,
-                full_turn,
-                f64::INFINITY,
-                reserve_ratio,
-            )
-        },
+        || run_search(evaluator, prepared, config, full_turn, cap, reserve_ratio),
         || {
             config
                 .refine

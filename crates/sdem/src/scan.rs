@@ -15,7 +15,8 @@ pub const MIN_KNOWN_CELLS: usize = 100;
 ///
 /// The attitude belongs to the scan: the S-DEM is levelled by it, and a localization reads it
 /// from here, so it is given once and cannot disagree with itself. With no attitude
-/// (`None`) the scan is taken as level and its heading as unknown.
+/// (`None`) the scan's tilt (up to [`crate::global::MAX_UNKNOWN_TILT`], 30°) and heading are
+/// unknown, and a localization searches them ([`crate::global`]).
 ///
 /// # Example
 /// ```
@@ -144,11 +145,14 @@ pub(crate) fn checked_input(
 /// sensor's frame (Nagatani et al. 2003, Sec. III-C, searched exactly and refined in 6-DoF).
 ///
 /// The attitudes come from the scans, with their uncertainty ([`Attitude::sigma`]). When both
-/// have one, the search covers the options' translation window and, around the compass
-/// readings, three standard deviations of the two headings' difference (the options' heading
-/// window gives only the step). A scan without one is taken as level, and the heading is then
-/// searched over a full turn. A match that tilts one scan against the other beyond what the
-/// roll and pitch readings allow carries the doubt [`crate::Doubt::AttitudeCorrected`].
+/// have one whose roll and pitch agree within [`LEVEL_TOLERANCE`] at three σ, the search covers
+/// the options' translation window and, around the compass readings, three standard deviations
+/// of the two headings' difference (the options' heading window gives only the step); a match
+/// that tilts one scan against the other beyond what the readings allow carries the doubt
+/// [`crate::Doubt::AttitudeCorrected`]. Otherwise (a scan without a reading, or readings too
+/// uncertain) the rotation is searched too: hypotheses from the scans' surface orientations,
+/// each verified by the exact search ([`crate::global::localize_unlevelled`]); a rotation that
+/// compares almost as well as the one returned is the doubt [`crate::Doubt::AnotherRotation`].
 ///
 /// # Returns
 /// The pose [`Localization::reference_from_query`] with its cost, runner-up, covariance and
@@ -189,9 +193,17 @@ pub fn localize(reference: &Scan, query: &Scan, options: &LocalizeOptions) -> Re
                 .into(),
         ));
     }
+    if let Some(prior) = crate::global::rotation_prior(
+        reference.attitude.as_ref(),
+        query.attitude.as_ref(),
+        LEVEL_TOLERANCE,
+    ) {
+        return crate::global::localize_unlevelled(reference, query, options, &prior);
+    }
     let half_range_deg = match (reference.attitude, query.attitude) {
         // Three standard deviations of the two headings' difference.
         (Some(r), Some(q)) => (3.0 * r.sigma.yaw.hypot(q.sigma.yaw).to_degrees()).min(180.0),
+        // Unreachable: without a reading the rotation is searched above.
         _ => 180.0,
     };
     let options = LocalizeOptions {
@@ -203,3 +215,9 @@ pub fn localize(reference: &Scan, query: &Scan, options: &LocalizeOptions) -> Re
     };
     crate::localize::localize(&reference.sdem, &query.sdem, &options)
 }
+
+/// Roll and pitch readings whose difference is within this at three standard deviations are
+/// taken as they are: the levelled search and the 6-DoF refinement absorb such a tilt. Beyond
+/// it, the rotation is searched ([`crate::global`]). Radians (3°: the default readings, 0.5°
+/// each, stay levelled).
+pub const LEVEL_TOLERANCE: f64 = 3.0 * std::f64::consts::PI / 180.0;
