@@ -122,6 +122,34 @@ fn take_degrees(
     Ok(Some((degrees, line)))
 }
 
+/// A σ key inside a `[table]` (written below `[lift]`, where TOML puts it into that table) is a
+/// parse error at its line that says where it belongs.
+fn misplaced_sigma(path: &Path, text: &str, root: &toml::de::DeTable<'_>) -> Result<()> {
+    for (table, value) in root.iter() {
+        let Some(inner) = value.get_ref().as_table() else {
+            continue;
+        };
+        for (key, _) in inner.iter() {
+            let name: &str = key.get_ref();
+            if name == ATTITUDE_SIGMA_ROLL_PITCH_KEY || name == ATTITUDE_SIGMA_YAW_KEY {
+                let line = 1 + text
+                    .get(..key.span().start)
+                    .map_or(0, |t| count_newlines(t.as_bytes()));
+                return Err(Error::parse(
+                    path,
+                    Some(line),
+                    format!(
+                        "{name} is inside [{}]; write it at the top of the file, before any \
+                         [table]",
+                        table.get_ref()
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Reads `sensor.toml`: the sensor model ([`SensorConfig`]'s keys; unknown keys are errors,
 /// missing keys take the defaults, then [`SensorConfig::validate`]) and the attitude readings'
 /// standard deviations, degrees, at the top of the file (before any `[table]`):
@@ -163,6 +191,7 @@ pub fn read_sensor_file(path: &Path) -> Result<SensorFile> {
         ));
     }
     let mut root = toml::de::DeTable::parse(&text).map_err(|e| toml_error(path, &text, e, KEYS))?;
+    misplaced_sigma(path, &text, root.get_ref())?;
     let roll_pitch = take_degrees(path, &text, root.get_mut(), ATTITUDE_SIGMA_ROLL_PITCH_KEY)?;
     let yaw = take_degrees(path, &text, root.get_mut(), ATTITUDE_SIGMA_YAW_KEY)?;
     let sensor = SensorConfig::deserialize(toml::de::Deserializer::from(root))
@@ -351,9 +380,14 @@ mod tests {
             assert!(msg.contains(key) && msg.contains(why), "{text:?}: {msg}");
             assert!(!msg.contains('\n'), "one line: {msg:?}");
         }
-        // In a table it is the table's unknown key, not a σ.
-        let err = read("[lift]\nattitude_sigma_yaw_deg = 3.5\n").unwrap_err();
-        assert!(err.to_string().contains("sensor.toml:2:"), "{err}");
+        // In a table (appended below [lift]) it is refused, saying where it belongs.
+        let err = read("[lift]\nlink_length_m = 0.5\nattitude_sigma_yaw_deg = 3.5\n").unwrap_err();
+        let msg = err.to_string();
+        assert!(
+            msg.contains("sensor.toml:3:") && msg.contains("inside [lift]"),
+            "{msg}"
+        );
+        assert!(msg.contains("before any [table]"), "{msg}");
         // The sensor model's own errors keep their lines with σ keys above them.
         let err = read("attitude_sigma_yaw_deg = 3.5\nmax_rnage_m = 8.0\n").unwrap_err();
         assert!(err.to_string().contains("sensor.toml:2:"), "{err}");
