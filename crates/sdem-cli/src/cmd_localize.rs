@@ -53,7 +53,7 @@ pub struct Args {
     /// 3σ of the two readings' difference; a match that tilts the scans beyond 3σ of roll and
     /// pitch is a doubt [default: attitude.csv's σ columns, else sensor.toml's
     /// attitude_sigma_roll_pitch_deg / attitude_sigma_yaw_deg, else 0.5,3.5].
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_name = "RP,YAW")]
     attitude_sigma_deg: Option<String>,
     /// Without attitude.csv: take both scans as level (roll = pitch = yaw = 0, with the σ of
     /// sensor.toml or --attitude-sigma-deg) instead of searching their attitude. For a scanner
@@ -93,7 +93,12 @@ pub struct Args {
     /// Override the heading window: search ± this many degrees around the two compass readings'
     /// difference, whatever their σ (0 trusts the compass; 180 is a full turn). Needs attitude
     /// readings (attitude.csv, or --assume-level) [default: 3σ of the readings' difference].
-    #[arg(long, allow_hyphen_values = true, conflicts_with = "map")]
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        conflicts_with = "map",
+        value_name = "DEG"
+    )]
     heading_window: Option<f64>,
     /// Heading step, degrees [default: matched to the scan's extent and --step].
     #[arg(long, allow_hyphen_values = true)]

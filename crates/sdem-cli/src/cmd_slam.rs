@@ -26,7 +26,7 @@ pub struct Args {
     /// How far the attitude readings can be off, standard deviations in degrees:
     /// ROLL_PITCH,YAW (e.g. 0.5,20 for a compass near steel). Overrides attitude.csv's and
     /// sensor.toml's σ for every reading; needs attitude.csv.
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_name = "RP,YAW")]
     attitude_sigma_deg: Option<String>,
     /// The output folder: poses.txt, poses.tum, report.json, map.ply, map.sdemvox, config.toml,
     /// the saved map in map/, pictures and viewer.html.
