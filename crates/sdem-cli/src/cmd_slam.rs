@@ -167,7 +167,7 @@ fn parse_sigma(args: &Args, dataset: &Dataset) -> Result<Option<AttitudeSigma>> 
             args.dataset.display()
         );
     }
-    crate::cmd_localize::parse_attitude_sigma(text).map(Some)
+    crate::attitude_args::parse_attitude_sigma(text).map(Some)
 }
 
 const MAP_DIR: &str = "map";
