@@ -1,18 +1,23 @@
 //! `sdem localize`: one scan against another.
 
+use crate::attitude_args::{
+    attitude_assumption, attitudes_of, parse_attitude_sigma, AttitudeAssumption, AttitudeFlags,
+    AttitudeKind, Attitudes,
+};
 use crate::output::{
     doubts_json, elapsed_ms, estimate_label, pose_line, print_doubts, print_json,
     with_doubt_messages, Outcome,
 };
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
-use sdem::geometry::{pose_error, Pose, PoseRecord};
+use sdem::geometry::{pose_error, Attitude, AttitudeSigma, Pose, PoseRecord};
 use sdem::localize::{
-    localize, Diagnostics, HeadingWindow, Localization, LocalizeOptions, OffsetPrior,
-    RefineOutcome, RefinementSummary, SearchMode, SearchWindow,
+    Diagnostics, HeadingWindow, Localization, LocalizeOptions, OffsetPrior, RefineOutcome,
+    RefinementSummary, SearchMode, SearchWindow,
 };
-use sdem::sdem::{Sdem, SdemConfig};
+use sdem::sdem::SdemConfig;
 use sdem::slam::Near;
+use sdem::Scan;
 use sdem_io::Dataset;
 use serde::Serialize;
 use serde_json::Value;
@@ -22,9 +27,11 @@ use std::time::Instant;
 /// Arguments of `sdem localize`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The dataset folder (scans/, optional attitude.csv and poses_truth.txt). Without
-    /// attitude.csv both scans take the level attitude (roll = pitch = yaw = 0): widen
-    /// --heading-window when the scans may differ in heading.
+    /// The dataset folder (scans/, optional attitude.csv, sensor.toml and poses_truth.txt).
+    /// With attitude.csv the heading is searched over 3σ of the two readings' difference (σ
+    /// from attitude.csv's σ columns, sensor.toml's attitude_sigma_*_deg, or 0.5° roll/pitch and
+    /// 3.5° heading). Without it the attitude is unknown: roll, pitch and heading are searched
+    /// (or give --assume-level).
     #[arg(required_unless_present = "map")]
     dataset: Option<PathBuf>,
     /// Index of the reference scan (the map).
@@ -44,6 +51,19 @@ pub struct Args {
     /// level, heading searched ±15°].
     #[arg(long, requires = "map", allow_hyphen_values = true)]
     attitude: Option<String>,
+    /// How far the attitude readings can be off, standard deviations in degrees:
+    /// ROLL_PITCH,YAW (e.g. 0.5,20 for a compass near steel). Overrides attitude.csv's and
+    /// sensor.toml's σ for both scans (with --map: for --attitude). The heading is searched over
+    /// 3σ of the two readings' difference; a match that tilts the scans beyond 3σ of roll and
+    /// pitch is a doubt [default: attitude.csv's σ columns, else sensor.toml's
+    /// attitude_sigma_roll_pitch_deg / attitude_sigma_yaw_deg, else 0.5,3.5].
+    #[arg(long, allow_hyphen_values = true, value_name = "RP,YAW")]
+    attitude_sigma_deg: Option<String>,
+    /// Without attitude.csv: take both scans as level (roll = pitch = yaw = 0, with the σ of
+    /// sensor.toml or --attitude-sigma-deg) instead of searching their attitude. For a scanner
+    /// known to stand level; faster than the search, wrong when it is not level.
+    #[arg(long, conflicts_with = "map")]
+    assume_level: bool,
     /// With --map: where the scan was taken, roughly, x,y,z in metres in the map's frame
     /// [default: the nodes whose place descriptors look most like the scan's].
     #[arg(long, requires = "map", allow_hyphen_values = true)]
@@ -74,10 +94,16 @@ pub struct Args {
     /// (projective), or the paper's z-buffered virtual S-DEM (virtual; not with branch-and-bound).
     #[arg(long, value_enum, default_value_t = Cost::Projective)]
     cost: Cost,
-    /// Heading searched around the compass reading, ± degrees (0 trusts the compass; 180 is a
-    /// full turn).
-    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
-    heading_window: f64,
+    /// Override the heading window: search ± this many degrees around the two compass readings'
+    /// difference, whatever their σ (0 trusts the compass; 180 is a full turn). Needs attitude
+    /// readings (attitude.csv, or --assume-level) [default: 3σ of the readings' difference].
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        conflicts_with = "map",
+        value_name = "DEG"
+    )]
+    heading_window: Option<f64>,
     /// Heading step, degrees [default: matched to the scan's extent and --step].
     #[arg(long, allow_hyphen_values = true)]
     heading_step: Option<f64>,
@@ -149,6 +175,8 @@ struct Report {
     reference: usize,
     query: usize,
     reference_from_query: PoseRecord,
+    /// What was assumed about the two scans' attitudes and how far the search went.
+    attitude: AttitudeAssumption,
     heading_correction_deg: f64,
     cost: f64,
     rms_m: f64,
@@ -176,7 +204,11 @@ struct Report {
 }
 
 /// Parses `N` comma-separated finite numbers given to `flag`; `form` names them in messages.
-fn parse_numbers<const N: usize>(flag: &str, text: &str, form: &str) -> Result<[f64; N]> {
+pub(crate) fn parse_numbers<const N: usize>(
+    flag: &str,
+    text: &str,
+    form: &str,
+) -> Result<[f64; N]> {
     let values: Vec<f64> = text
         .split(',')
         .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
@@ -208,18 +240,21 @@ fn parse_prior(text: &str) -> Result<OffsetPrior> {
 
 /// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.
 fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
-    let folder = if map.join(sdem_io::MAP_MANIFEST).exists() {
-        map.to_path_buf()
-    } else {
-        map.join("map")
-    };
-    let saved = sdem_io::load_map(&folder)?;
-    let scan = args.scan.as_ref().context("--map needs --scan FILE")?;
-    let points = sdem_io::read_points(scan)?;
+    // The flags first, then the files.
+    let sigma = parse_sigma(args)?;
     let attitude = match &args.attitude {
         Some(text) => {
             let [r, p, y] = parse_triple("--attitude", text)?;
-            Some(sdem::geometry::Attitude::from_degrees(r, p, y))
+            let reading = Attitude::from_degrees(r, p, y);
+            Some(Attitude {
+                sigma: sigma.unwrap_or(reading.sigma),
+                ..reading
+            })
+        }
+        None if sigma.is_some() => {
+            bail!(
+                "--attitude-sigma-deg describes the --attitude reading; give --attitude R,P,Y too"
+            )
         }
         None => None,
     };
@@ -237,6 +272,14 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         }
         (None, None) => None,
     };
+    let folder = if map.join(sdem_io::MAP_MANIFEST).exists() {
+        map.to_path_buf()
+    } else {
+        map.join("map")
+    };
+    let saved = sdem_io::load_map(&folder)?;
+    let scan = args.scan.as_ref().context("--map needs --scan FILE")?;
+    let points = sdem_io::read_points(scan)?;
     // The map's own search settings (its config.toml), not this command's --step.
     let found = sdem::slam::relocalize(&saved.map, &saved.config, &points, attitude, near, 3)
         .with_context(|| format!("{} in the map {}", scan.display(), folder.display()))?;
@@ -301,18 +344,20 @@ pub fn run(args: Args) -> Result<Outcome> {
     };
     let config = localize_config(&args)?;
     let pair = (reference_index, query_index);
-    let (found, time_ms) = localize_scans(&dataset, pair, &sdem_config, &config)?;
+    let attitudes = attitudes_of(&dataset, &dataset_path, pair, &attitude_flags(&args)?)?;
+    let (found, time_ms) = localize_scans(&dataset, pair, &attitudes, &sdem_config, &config)?;
     let truth = dataset
         .truth
         .as_ref()
         .map(|t| t[reference_index].inverse() * t[query_index]);
-    let report = make_report(pair, &found, &config, time_ms, truth.as_ref());
+    let report = make_report(pair, &found, &attitudes, &config, time_ms, truth.as_ref());
     let outcome = Outcome::of(found.trusted, args.accept_doubtful);
     if args.json {
         print_json(&report)?;
         return Ok(outcome);
     }
     print_estimate(&report, &found, truth.as_ref());
+    println!("  attitude: {}", report.attitude.summary);
     print_fit(&report, &found.diagnostics, &config);
     print_search(&report, &config);
     print_doubts("  ", &found.doubts);
@@ -322,11 +367,10 @@ pub fn run(args: Args) -> Result<Outcome> {
 
 /// The search's settings from the arguments, checked.
 fn localize_config(args: &Args) -> Result<LocalizeOptions> {
-    if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
-        bail!(
-            "--heading-window {} must lie in 0..=180 degrees (0 trusts the compass)",
-            args.heading_window
-        );
+    if let Some(window) = args.heading_window {
+        if !(window.is_finite() && (0.0..=180.0).contains(&window)) {
+            bail!("--heading-window {window} must lie in 0..=180 degrees (0 trusts the compass)");
+        }
     }
     if let Some(step) = args.heading_step {
         if !(step.is_finite() && step > 0.0) {
@@ -355,8 +399,12 @@ fn localize_config(args: &Args) -> Result<LocalizeOptions> {
     Ok(LocalizeOptions {
         window: args.window.unwrap_or_else(SearchWindow::paper),
         step_m: args.step,
+        // Without --heading-window, sdem::localize sets the range from the readings' σ (or
+        // searches the whole rotation); the step is ours.
         heading: HeadingWindow {
-            half_range_deg: args.heading_window,
+            half_range_deg: args
+                .heading_window
+                .unwrap_or(HeadingWindow::default().half_range_deg),
             step_deg: args.heading_step,
         },
         mode,
@@ -370,30 +418,90 @@ fn localize_config(args: &Args) -> Result<LocalizeOptions> {
     })
 }
 
-/// Localizes scan `query` of the dataset against scan `reference`; returns the result and the
-/// time it took (building the two S-DEMs and the search), milliseconds.
+/// `--attitude-sigma-deg`, parsed, when given.
+fn parse_sigma(args: &Args) -> Result<Option<AttitudeSigma>> {
+    args.attitude_sigma_deg
+        .as_deref()
+        .map(parse_attitude_sigma)
+        .transpose()
+}
+
+/// The attitude flags, checked.
+fn attitude_flags(args: &Args) -> Result<AttitudeFlags> {
+    Ok(AttitudeFlags {
+        sigma: parse_sigma(args)?,
+        assume_level: args.assume_level,
+        heading_window_deg: args.heading_window,
+    })
+}
+
+/// Reads scan `index` of the dataset: its points in the sensor frame.
+fn load_points(dataset: &Dataset, index: usize) -> Result<Vec<nalgebra::Point3<f64>>> {
+    Ok(dataset
+        .load_scan(index)?
+        .into_iter()
+        .map(nalgebra::Point3::from)
+        .collect())
+}
+
+/// Scan `index` of the dataset as a [`Scan`] with its attitude (checked: finite points and
+/// attitude, enough points in the S-DEM).
+fn make_scan(
+    dataset: &Dataset,
+    index: usize,
+    points: &[nalgebra::Point3<f64>],
+    attitude: Option<Attitude>,
+    sdem_config: &SdemConfig,
+) -> Result<Scan> {
+    Scan::with_grid(points, attitude, sdem_config)
+        .with_context(|| format!("scan {index} ({})", dataset.scan_paths[index].display()))
+}
+
+/// Localizes scan `query` of the dataset against scan `reference` with `attitudes`; returns the
+/// result and the time it took (building the two S-DEMs and the search), milliseconds.
+///
+/// With `--heading-window` the S-DEM-level search runs with that heading range (what
+/// `sdem::localize` runs with 3σ of the readings' difference); otherwise `sdem::localize`,
+/// which searches the heading over the readings' σ, or the whole rotation when the attitude is
+/// unknown.
 fn localize_scans(
     dataset: &Dataset,
     (reference_index, query_index): (usize, usize),
+    attitudes: &Attitudes,
     sdem_config: &SdemConfig,
     config: &LocalizeOptions,
 ) -> Result<(Localization, f64)> {
-    // Without attitude.csv: the level attitude (checked in range above).
-    let reference_attitude = dataset
-        .attitude_or_level(reference_index)
-        .unwrap_or_default();
-    let query_attitude = dataset.attitude_or_level(query_index).unwrap_or_default();
-    let reference_points = dataset.load_scan(reference_index)?;
-    let query_points = dataset.load_scan(query_index)?;
+    let reference_points = load_points(dataset, reference_index)?;
+    let query_points = load_points(dataset, query_index)?;
     let start = Instant::now();
     // The two S-DEMs side by side, as `sdem bench` builds a pair's.
-    let (reference, query) = Sdem::pair_from_points(
-        (&reference_points, &reference_attitude),
-        (&query_points, &query_attitude),
-        sdem_config,
-    )?;
-    let found = localize(&reference, &query, config)
-        .with_context(|| format!("scan {query_index} against scan {reference_index}"))?;
+    let (reference, query) = rayon::join(
+        || {
+            let attitude = attitudes.reference;
+            make_scan(
+                dataset,
+                reference_index,
+                &reference_points,
+                attitude,
+                sdem_config,
+            )
+        },
+        || {
+            make_scan(
+                dataset,
+                query_index,
+                &query_points,
+                attitudes.query,
+                sdem_config,
+            )
+        },
+    );
+    let (reference, query) = (reference?, query?);
+    let found = match attitudes.heading_window_deg {
+        Some(_) => sdem::localize::localize(reference.sdem(), query.sdem(), config),
+        None => sdem::localize(&reference, &query, config),
+    }
+    .with_context(|| format!("scan {query_index} against scan {reference_index}"))?;
     Ok((found, elapsed_ms(start)))
 }
 
@@ -402,6 +510,7 @@ fn localize_scans(
 fn make_report(
     (reference, query): (usize, usize),
     found: &Localization,
+    attitudes: &Attitudes,
     config: &LocalizeOptions,
     time_ms: f64,
     truth: Option<&Pose>,
@@ -411,6 +520,7 @@ fn make_report(
         reference,
         query,
         reference_from_query: PoseRecord::from(&found.reference_from_query),
+        attitude: attitude_assumption(attitudes),
         heading_correction_deg: found.heading_correction.to_degrees(),
         cost: found.cost,
         rms_m: found.cost.sqrt(),
@@ -458,10 +568,14 @@ fn print_estimate(report: &Report, found: &Localization, truth: Option<&Pose>) {
         ),
         _ => format!("{:?}", found.refined),
     };
-    println!(
-        "  heading correction {:+.2}° to the compass; refined: {refined}",
-        report.heading_correction_deg
-    );
+    if report.attitude.source == AttitudeKind::Unknown {
+        println!("  refined: {refined}");
+    } else {
+        println!(
+            "  heading correction {:+.2}° to the compass; refined: {refined}",
+            report.heading_correction_deg
+        );
+    }
 }
 
 /// Prints how well the scans fit: the cost and overlap, the runner-up, the weakest direction.

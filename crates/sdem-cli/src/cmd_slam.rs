@@ -1,8 +1,8 @@
 //! `sdem slam`: the stop-and-go loop over a dataset folder, saving the map after every scan.
 
-use crate::output::{elapsed_ms, pose_line, print_json, with_doubt_messages, Outcome};
+use crate::output::{degrees, elapsed_ms, pose_line, print_json, with_doubt_messages, Outcome};
 use anyhow::{bail, Context, Result};
-use sdem::geometry::{Pose, Vec3};
+use sdem::geometry::{Attitude, AttitudeSigma, Pose, Vec3};
 use sdem::slam::{
     trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport, TrajectoryErrors,
 };
@@ -18,8 +18,16 @@ use std::time::Instant;
 /// Arguments of `sdem slam`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The dataset folder (scans/, optional attitude.csv, odometry.txt, poses_truth.txt).
+    /// The dataset folder (scans/, optional attitude.csv, odometry.txt, poses_truth.txt,
+    /// sensor.toml). Each attitude reading goes to the loop with its σ (attitude.csv's σ
+    /// columns, else sensor.toml's attitude_sigma_*_deg, else 0.5° roll/pitch and 3.5° heading).
+    /// Without attitude.csv the attitude is unknown: each scan's prior is the last estimate.
     dataset: PathBuf,
+    /// How far the attitude readings can be off, standard deviations in degrees:
+    /// ROLL_PITCH,YAW (e.g. 0.5,20 for a compass near steel). Overrides attitude.csv's and
+    /// sensor.toml's σ for every reading; needs attitude.csv.
+    #[arg(long, allow_hyphen_values = true, value_name = "RP,YAW")]
+    attitude_sigma_deg: Option<String>,
     /// The output folder: poses.txt, poses.tum, report.json, map.ply, map.sdemvox, config.toml,
     /// the saved map in map/, pictures and viewer.html.
     #[arg(long)]
@@ -77,6 +85,9 @@ struct Report {
     free_voxels: usize,
     map_points: usize,
     pictures: Vec<PathBuf>,
+    /// Where the attitudes came from: `readings` (attitude.csv) or `unknown`, the readings' σ
+    /// and where it came from, in figures and words.
+    attitude: SlamAttitude,
     /// No step of the map has doubts.
     trusted: bool,
     /// Steps whose match has doubts (their poses are best guesses).
@@ -88,6 +99,75 @@ struct Report {
     #[serde(skip_serializing_if = "Option::is_none")]
     compare: Option<TrajectoryErrors>,
     steps: Vec<Value>,
+}
+
+/// What the loop was told about the attitudes (the `attitude` of report.json).
+#[derive(Serialize)]
+struct SlamAttitude {
+    /// `readings` (attitude.csv) or `unknown` (none: each scan's prior is the last estimate).
+    source: &'static str,
+    /// The σ of the readings, degrees, when it is one for all (sensor.toml's, the default's,
+    /// or --attitude-sigma-deg's); null when attitude.csv gives each row its own, or unknown.
+    sigma_roll_pitch_deg: Option<f64>,
+    /// The heading's σ, degrees, as `sigma_roll_pitch_deg`.
+    sigma_yaw_deg: Option<f64>,
+    /// Where the σ comes from: `attitude.csv`, `sensor.toml`, `the default`,
+    /// `--attitude-sigma-deg`; null when unknown.
+    sigma_from: Option<&'static str>,
+    /// All of it in words.
+    summary: String,
+}
+
+/// What the loop is told about the attitudes, with `sigma` (from --attitude-sigma-deg) over
+/// the dataset's.
+fn slam_attitude(dataset: &Dataset, sigma: Option<AttitudeSigma>) -> SlamAttitude {
+    if dataset.attitudes.is_none() {
+        return SlamAttitude {
+            source: "unknown",
+            sigma_roll_pitch_deg: None,
+            sigma_yaw_deg: None,
+            sigma_from: None,
+            summary: "unknown (no attitude.csv): each scan's prior is the last estimate, the \
+                      heading searched wider"
+                .to_string(),
+        };
+    }
+    let (one_sigma, from) = match (sigma, dataset.attitude_sigma_from) {
+        (Some(s), _) => (Some(s), "--attitude-sigma-deg"),
+        (None, sdem_io::SigmaSource::AttitudeCsv) => (None, "attitude.csv"),
+        (None, from) => (Some(dataset.attitude_sigma), from.describe()),
+    };
+    let summary = match one_sigma {
+        Some(s) => format!(
+            "from attitude.csv, compass σ {}°, roll/pitch σ {}° ({from})",
+            degrees(s.yaw.to_degrees()),
+            degrees(s.roll_pitch.to_degrees())
+        ),
+        None => "from attitude.csv, each reading with its own σ (attitude.csv)".to_string(),
+    };
+    SlamAttitude {
+        source: "readings",
+        sigma_roll_pitch_deg: one_sigma.map(|s| s.roll_pitch.to_degrees()),
+        sigma_yaw_deg: one_sigma.map(|s| s.yaw.to_degrees()),
+        sigma_from: Some(from),
+        summary,
+    }
+}
+
+/// Parses `--attitude-sigma-deg ROLL_PITCH,YAW` (degrees), checked as sensor.toml's σ is; it
+/// needs attitude.csv.
+fn parse_sigma(args: &Args, dataset: &Dataset) -> Result<Option<AttitudeSigma>> {
+    let Some(text) = &args.attitude_sigma_deg else {
+        return Ok(None);
+    };
+    if dataset.attitudes.is_none() {
+        bail!(
+            "--attitude-sigma-deg: {} has no attitude.csv, so there is no reading for a σ to \
+             describe; add attitude.csv, or drop the flag",
+            args.dataset.display()
+        );
+    }
+    crate::attitude_args::parse_attitude_sigma(text).map(Some)
 }
 
 const MAP_DIR: &str = "map";
@@ -117,6 +197,7 @@ struct Outputs {
 pub fn run(args: Args) -> Result<Outcome> {
     let start = Instant::now();
     let dataset = Dataset::open(&args.dataset)?;
+    let sigma = parse_sigma(&args, &dataset)?;
     let map_dir = args.out.join(MAP_DIR);
     prepare_out(&args, &map_dir)?;
     let mut run = if args.resume {
@@ -125,9 +206,10 @@ pub fn run(args: Args) -> Result<Outcome> {
         start_fresh(&args, &dataset)?
     };
     write_config(&args.out, run.slam.config())?;
-    let total = map_scans(&args, &dataset, &map_dir, &mut run)?;
+    let total = map_scans(&args, &dataset, sigma, &map_dir, &mut run)?;
     let outputs = write_outputs(&args, &run.slam)?;
-    let report = make_report(&args, &dataset, run, total, outputs, start)?;
+    let attitude = slam_attitude(&dataset, sigma);
+    let report = make_report(&args, &dataset, run, total, outputs, attitude, start)?;
     let report_text = serde_json::to_vec_pretty(&report).context("cannot encode the report")?;
     write_atomic(&args.out.join(REPORT_FILE), |w| w.write_all(&report_text))?;
     if args.json {
@@ -216,7 +298,13 @@ fn write_config(out: &Path, config: &SlamOptions) -> Result<()> {
 
 /// The loop: maps every scan not mapped yet (up to `--max-scans`), saving the map and the step
 /// log after each. Returns the number of scans to be mapped in all.
-fn map_scans(args: &Args, dataset: &Dataset, map_dir: &Path, run: &mut Run) -> Result<usize> {
+fn map_scans(
+    args: &Args,
+    dataset: &Dataset,
+    sigma: Option<AttitudeSigma>,
+    map_dir: &Path,
+    run: &mut Run,
+) -> Result<usize> {
     let total = args.max_scans.unwrap_or(dataset.len()).min(dataset.len());
     let first = run.slam.map.nodes.len();
     if first > total {
@@ -224,7 +312,7 @@ fn map_scans(args: &Args, dataset: &Dataset, map_dir: &Path, run: &mut Run) -> R
     }
     let bar = crate::progress::bar((total - first) as u64, args.json, "scans");
     for index in first..total {
-        let step = map_scan(dataset, &mut run.slam, map_dir, index)?;
+        let step = map_scan(dataset, sigma, &mut run.slam, map_dir, index)?;
         if !args.json {
             bar.suspend(|| eprintln!("{}", step_line(index, total, &step)));
         }
@@ -250,9 +338,11 @@ fn saved_note(index: usize, map_dir: &Path) -> String {
     }
 }
 
-/// Reads scan `index` of the dataset and adds it to the map.
+/// Reads scan `index` of the dataset and adds it to the map, with its attitude reading and the
+/// reading's σ (`sigma` over the dataset's), or none.
 fn map_scan(
     dataset: &Dataset,
+    sigma: Option<AttitudeSigma>,
     slam: &mut Slam,
     map_dir: &Path,
     index: usize,
@@ -263,7 +353,10 @@ fn map_scan(
             saved_note(index, map_dir)
         )
     })?;
-    let attitude = dataset.attitudes.as_ref().map(|a| a[index]);
+    let attitude = dataset.attitude(index).map(|a| Attitude {
+        sigma: sigma.unwrap_or(a.sigma),
+        ..a
+    });
     let odometry = match (&dataset.odometry, index) {
         (Some(odometry), i) if i > 0 => Some(Odometry {
             odom_from_sensor: odometry[i],
@@ -397,6 +490,7 @@ fn make_report(
     run: Run,
     total: usize,
     outputs: Outputs,
+    attitude: SlamAttitude,
     start: Instant,
 ) -> Result<Report> {
     let Outputs {
@@ -447,6 +541,7 @@ fn make_report(
         free_voxels,
         map_points: cloud.len(),
         pictures,
+        attitude,
         trusted: doubtful_scans.is_empty(),
         doubtful_steps: doubtful_scans.len(),
         doubtful_scans,
@@ -466,6 +561,7 @@ fn print_text(args: &Args, report: &Report) {
         report.loop_closures_accepted,
         report.loop_closures_rejected
     );
+    println!("attitude: {}", report.attitude.summary);
     print_doubtful_steps(args, report);
     if let Some(t) = &report.truth {
         println!(

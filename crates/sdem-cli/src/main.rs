@@ -4,6 +4,7 @@
 //! `sdem` library. Errors go to stderr as one line. The exit status says how it ended (see
 //! [`EXIT_STATUS`]).
 
+mod attitude_args;
 mod bench_tally;
 mod cmd_bench;
 mod cmd_bench_faults;

@@ -92,6 +92,12 @@ pub fn pose_line(pose: &Pose) -> String {
     )
 }
 
+/// Degrees as short text, at most two decimals: `3.5`, `14.85`, `20`.
+pub fn degrees(value: f64) -> String {
+    let text = format!("{value:.2}");
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
 /// Milliseconds elapsed since `start`.
 pub fn elapsed_ms(start: std::time::Instant) -> f64 {
     start.elapsed().as_secs_f64() * 1e3

@@ -482,60 +482,86 @@ fn simulate_writes_seeded_odometry() {
 // Datasets without attitude.csv
 // ---------------------------------------------------------------------------------------------
 
-/// A dataset without attitude.csv opens; localize takes the level attitude (its help says so):
-/// the same pose as with an attitude.csv of level readings.
+/// A dataset without attitude.csv opens; localize takes its attitude as unknown and says so
+/// (text and JSON), refuses the flags that need a compass reading, and with --assume-level
+/// takes both scans as level: the same pose as with an attitude.csv of level readings.
 #[test]
-fn localize_without_attitude_uses_level_attitude() {
+fn localize_without_attitude_is_unknown_or_assumed_level() {
     let dir = TempDir::new().unwrap();
     let help = run_ok(dir.path(), &["localize", "--help"]);
-    assert!(help.contains("level attitude"), "{help}");
+    assert!(
+        help.contains("the attitude is unknown") && help.contains("--assume-level"),
+        "{help}"
+    );
 
     let ds = dir.path().join("ds");
     run_ok(
         dir.path(),
         &["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"],
     );
-    let localize = || {
-        run_json(
-            dir.path(),
-            &[
-                "localize",
-                s(&ds),
-                "--reference",
-                "0",
-                "--query",
-                "1",
-                "--window",
-                "0.2:0.5,-0.1:0.1,-0.1:0.1",
-                "--step",
-                "0.05",
-                "--heading-window",
-                "0",
-                "--no-runner-up",
-                "--accept-doubtful",
-                "--json",
-            ],
-        )["reference_from_query"]
-            .clone()
-    };
+    let base = [
+        "localize",
+        s(&ds),
+        "--reference",
+        "0",
+        "--query",
+        "1",
+        "--window",
+        "0.2:0.5,-0.1:0.1,-0.1:0.1",
+        "--step",
+        "0.05",
+        "--no-runner-up",
+        "--accept-doubtful",
+        "--json",
+    ];
+    let localize = |extra: &[&str]| run_json(dir.path(), &[&base[..], extra].concat());
     write(
         &ds.join("attitude.csv"),
         "index,roll_deg,pitch_deg,yaw_deg\n0,0,0,0\n1,0,0,0\n",
     );
-    let with_level_readings = localize();
+    let with_level_readings = localize(&["--heading-window", "0"]);
+    assert_eq!(with_level_readings["attitude"]["source"], "readings");
+    assert_eq!(with_level_readings["attitude"]["sigma_from"], "the default");
     std::fs::remove_file(ds.join("attitude.csv")).unwrap();
-    let without_attitude = localize();
-    assert!(without_attitude.is_object(), "{without_attitude}");
+    let assumed_level = localize(&["--heading-window", "0", "--assume-level"]);
+    let attitude = &assumed_level["attitude"];
+    assert_eq!(attitude["source"], "assumed_level", "{attitude}");
+    assert_eq!(attitude["heading_searched_deg"], 0.0, "{attitude}");
+    assert_eq!(attitude["roll_pitch_searched"], false, "{attitude}");
+    let (a, b) = (
+        &assumed_level["reference_from_query"],
+        &with_level_readings["reference_from_query"],
+    );
     // The same search and refinement; only the parallel sums' order may move the last digit.
     for key in ["x", "y", "z", "roll_deg", "pitch_deg", "yaw_deg"] {
-        let (a, b) = (
-            without_attitude[key].as_f64(),
-            with_level_readings[key].as_f64(),
-        );
+        let (a, b) = (a[key].as_f64().unwrap(), b[key].as_f64().unwrap());
         assert!(
-            (a.unwrap() - b.unwrap()).abs() < 1e-9,
-            "{key}: {without_attitude} against {with_level_readings}"
+            (a - b).abs() < 1e-9,
+            "{key}: {assumed_level} against {with_level_readings}"
         );
+    }
+
+    // Unknown: the whole rotation is searched, and the output says so.
+    let unknown = localize(&[]);
+    let attitude = &unknown["attitude"];
+    assert_eq!(attitude["source"], "unknown", "{attitude}");
+    assert_eq!(attitude["roll_pitch_searched"], true, "{attitude}");
+    assert_eq!(attitude["heading_searched_deg"], 180.0, "{attitude}");
+    assert!(
+        attitude["reference"].is_null() && attitude["sigma_from"].is_null(),
+        "{attitude}"
+    );
+    let text = common::run(dir.path(), &base[..base.len() - 1]).stdout;
+    assert!(
+        text.contains("attitude: unknown (no attitude.csv): roll/pitch and heading searched"),
+        "{text}"
+    );
+    assert!(!text.contains("to the compass"), "{text}");
+
+    // Flags that describe a compass reading need one.
+    for flag in [["--heading-window", "5"], ["--attitude-sigma-deg", "0.5,3"]] {
+        let m = run_err(dir.path(), &[&base[..base.len() - 1], &flag[..]].concat());
+        assert!(m.contains(flag[0]) && m.contains("no attitude.csv"), "{m}");
     }
 
     // A present attitude.csv with the wrong row count is still an error naming it.

@@ -1,12 +1,31 @@
 //! `attitude.csv`: the gyro/compass reading at each stop, degrees.
 
-use super::{fmt_f64, numbered_lines, parse_count, parse_finite, read_text, write_atomic};
+use super::{
+    attitude_sigma_from_degrees, fmt_f64, numbered_lines, parse_count, parse_finite, read_text,
+    write_atomic,
+};
 use crate::error::{Error, Result};
-use sdem::geometry::Attitude;
+use sdem::geometry::{Attitude, AttitudeSigma};
 use std::path::Path;
 
 /// The header line of `attitude.csv`, exactly.
 pub const ATTITUDE_HEADER: &str = "index,roll_deg,pitch_deg,yaw_deg";
+
+/// The header line of an `attitude.csv` whose readings carry their own standard deviations,
+/// degrees: roll and pitch's, and the heading's.
+pub const ATTITUDE_HEADER_WITH_SIGMA: &str =
+    "index,roll_deg,pitch_deg,yaw_deg,roll_pitch_sigma_deg,yaw_sigma_deg";
+
+/// The readings of an `attitude.csv` ([`read_attitude_readings`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AttitudeReadings {
+    /// One reading per row, angles in radians, each with its standard deviations.
+    pub attitudes: Vec<Attitude>,
+    /// Whether the file gives each reading's standard deviations (the six-column header
+    /// [`ATTITUDE_HEADER_WITH_SIGMA`]); otherwise every reading has the default given to
+    /// [`read_attitude_readings`].
+    pub sigma_per_row: bool,
+}
 
 /// The largest roll or pitch magnitude, degrees, that a gyro reading can have. A tilt sensor
 /// reports angles within one turn, so a larger value is in another unit (hundredths of a degree,
@@ -31,8 +50,11 @@ pub(super) fn tilt_reading_problem(roll_deg: f64, pitch_deg: f64) -> Option<Stri
 
 /// Writes `attitude.csv`: the header [`ATTITUDE_HEADER`], then `index,roll,pitch,yaw` per scan
 /// with the angles in degrees, written so that they read back to the same degrees bit-for-bit.
-/// A non-finite angle, or a roll or pitch beyond [`MAX_TILT_READING_DEG`], is an
-/// [`Error::Invalid`].
+/// When a reading's standard deviations ([`Attitude::sigma`]) are not the defaults, every row
+/// carries them too, in degrees, under [`ATTITUDE_HEADER_WITH_SIGMA`]; files of readings with
+/// the default σ stay in the four-column form that older readers know.
+/// A non-finite angle, a roll or pitch beyond [`MAX_TILT_READING_DEG`], or an invalid σ (see
+/// [`crate::attitude_sigma_from_degrees`]) is an [`Error::Invalid`].
 ///
 /// # Example
 /// ```
@@ -56,44 +78,95 @@ pub fn write_attitude_csv(path: &Path, attitudes: &[Attitude]) -> Result<()> {
             )));
         }
         let [roll, pitch, _] = a.to_degrees();
-        if let Some(why) = tilt_reading_problem(roll, pitch) {
+        let sigma = attitude_sigma_from_degrees(
+            a.sigma.roll_pitch.to_degrees(),
+            a.sigma.yaw.to_degrees(),
+            "roll_pitch_sigma_deg",
+            "yaw_sigma_deg",
+        );
+        if let Some(why) = tilt_reading_problem(roll, pitch).or(sigma.err()) {
             return Err(Error::Invalid(format!(
                 "refusing to write {}: attitude {i}: {why}",
                 path.display()
             )));
         }
     }
+    let with_sigma = attitudes
+        .iter()
+        .any(|a| a.sigma != AttitudeSigma::default());
     write_atomic(path, |w| {
-        writeln!(w, "{ATTITUDE_HEADER}")?;
+        let header = if with_sigma {
+            ATTITUDE_HEADER_WITH_SIGMA
+        } else {
+            ATTITUDE_HEADER
+        };
+        writeln!(w, "{header}")?;
         for (index, a) in attitudes.iter().enumerate() {
             let [roll, pitch, yaw] = a.to_degrees();
-            writeln!(
+            write!(
                 w,
                 "{index},{},{},{}",
                 fmt_f64(roll),
                 fmt_f64(pitch),
                 fmt_f64(yaw)
             )?;
+            if with_sigma {
+                write!(
+                    w,
+                    ",{},{}",
+                    fmt_f64(a.sigma.roll_pitch.to_degrees()),
+                    fmt_f64(a.sigma.yaw.to_degrees())
+                )?;
+            }
+            writeln!(w)?;
         }
         Ok(())
     })
 }
 
-/// Reads `attitude.csv` (see [`write_attitude_csv`]); angles come back in radians. The header
-/// must be exactly [`ATTITUDE_HEADER`]; each row needs 4 fields, an index counting 0, 1, 2, …,
-/// finite angles, and a roll and pitch within [`MAX_TILT_READING_DEG`]; blank lines are skipped.
-/// Any violation, and a file without rows, is an error naming the file and line.
+/// Reads `attitude.csv` (see [`read_attitude_readings`]); angles come back in radians, each
+/// reading with the standard deviations of its row, or [`AttitudeSigma::default`] when the file
+/// has none.
 pub fn read_attitude_csv(path: &Path) -> Result<Vec<Attitude>> {
+    read_attitude_readings(path, AttitudeSigma::default()).map(|r| r.attitudes)
+}
+
+/// Reads `attitude.csv` (see [`write_attitude_csv`]); angles come back in radians. The header
+/// must be exactly [`ATTITUDE_HEADER`] or [`ATTITUDE_HEADER_WITH_SIGMA`]; each row needs 4 fields
+/// (6 with σ), an index counting 0, 1, 2, …, finite angles, a roll and pitch within
+/// [`MAX_TILT_READING_DEG`], and valid standard deviations (positive, roll/pitch at most 90°,
+/// yaw at most 180°); blank lines are skipped. Any violation, and a file without rows, is an
+/// error naming the file and line. A file without σ columns gives every reading
+/// `default_sigma` (the σ `sensor.toml` states, or [`AttitudeSigma::default`]).
+///
+/// # Example
+/// ```
+/// let dir = tempfile::tempdir()?;
+/// let path = dir.path().join("attitude.csv");
+/// std::fs::write(&path, "index,roll_deg,pitch_deg,yaw_deg,roll_pitch_sigma_deg,yaw_sigma_deg\n\
+///                        0,0.5,-1,90,0.2,20\n")?;
+/// let read = sdem_io::read_attitude_readings(&path, Default::default())?;
+/// assert!(read.sigma_per_row);
+/// assert!((read.attitudes[0].sigma.yaw.to_degrees() - 20.0).abs() < 1e-12);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub fn read_attitude_readings(
+    path: &Path,
+    default_sigma: AttitudeSigma,
+) -> Result<AttitudeReadings> {
     let text = read_text(path)?;
     let mut lines = numbered_lines(&text).filter(|(_, l)| !l.trim().is_empty());
-    match lines.next() {
-        Some((_, header)) if header.trim() == ATTITUDE_HEADER => {}
+    let sigma_per_row = match lines.next() {
+        Some((_, header)) if header.trim() == ATTITUDE_HEADER => false,
+        Some((_, header)) if header.trim() == ATTITUDE_HEADER_WITH_SIGMA => true,
         Some((line_no, header)) => {
             return Err(Error::parse(
                 path,
                 Some(line_no),
                 format!(
-                    "the header is '{}'; it must be exactly '{ATTITUDE_HEADER}'",
+                    "the header is '{}'; it must be exactly '{ATTITUDE_HEADER}', or \
+                     '{ATTITUDE_HEADER_WITH_SIGMA}' when each reading gives its standard \
+                     deviations",
                     header.trim()
                 ),
             ))
@@ -107,19 +180,30 @@ pub fn read_attitude_csv(path: &Path) -> Result<Vec<Attitude>> {
             ),
             ))
         }
-    }
+    };
+    let form = if sigma_per_row {
+        ATTITUDE_HEADER_WITH_SIGMA
+    } else {
+        ATTITUDE_HEADER
+    };
     let mut attitudes = Vec::new();
     for (line_no, line) in lines {
         let fields: Vec<&str> = line.split(',').map(str::trim).collect();
-        let [index, roll, pitch, yaw] = fields.as_slice() else {
-            return Err(Error::parse(
-                path,
-                Some(line_no),
-                format!(
-                    "{} fields on this line; each row is 'index,roll_deg,pitch_deg,yaw_deg'",
-                    fields.len()
-                ),
-            ));
+        let (index, roll, pitch, yaw, sigma) = match (fields.as_slice(), sigma_per_row) {
+            ([index, roll, pitch, yaw], false) => (index, roll, pitch, yaw, None),
+            ([index, roll, pitch, yaw, rp_sigma, yaw_sigma], true) => {
+                (index, roll, pitch, yaw, Some((rp_sigma, yaw_sigma)))
+            }
+            _ => {
+                return Err(Error::parse(
+                    path,
+                    Some(line_no),
+                    format!(
+                        "{} fields on this line; each row is '{form}', as the header says",
+                        fields.len()
+                    ),
+                ))
+            }
         };
         let expected = attitudes.len();
         let index = parse_count(path, line_no, index, "index")?;
@@ -139,7 +223,24 @@ pub fn read_attitude_csv(path: &Path) -> Result<Vec<Attitude>> {
         if let Some(why) = tilt_reading_problem(roll, pitch) {
             return Err(Error::parse(path, Some(line_no), why));
         }
-        attitudes.push(Attitude::from_degrees(roll, pitch, yaw));
+        let sigma = match sigma {
+            None => default_sigma,
+            Some((rp_sigma, yaw_sigma)) => {
+                let rp_sigma = parse_finite(path, line_no, rp_sigma, "roll_pitch_sigma_deg")?;
+                let yaw_sigma = parse_finite(path, line_no, yaw_sigma, "yaw_sigma_deg")?;
+                attitude_sigma_from_degrees(
+                    rp_sigma,
+                    yaw_sigma,
+                    "roll_pitch_sigma_deg",
+                    "yaw_sigma_deg",
+                )
+                .map_err(|why| Error::parse(path, Some(line_no), why))?
+            }
+        };
+        attitudes.push(Attitude {
+            sigma,
+            ..Attitude::from_degrees(roll, pitch, yaw)
+        });
     }
     if attitudes.is_empty() {
         return Err(Error::parse(
@@ -148,7 +249,10 @@ pub fn read_attitude_csv(path: &Path) -> Result<Vec<Attitude>> {
             "the file has a header but no rows; write one row per scan",
         ));
     }
-    Ok(attitudes)
+    Ok(AttitudeReadings {
+        attitudes,
+        sigma_per_row,
+    })
 }
 
 #[cfg(test)]
@@ -211,6 +315,94 @@ mod tests {
         expect_err(&format!("{h}-1,1,2,3\n"), Some(2));
         expect_err(&format!("{h}0,1,2,3\n0,1,2,3\n"), Some(3));
         expect_err(&format!("{h}0 1 2 3\n"), Some(2));
+    }
+
+    #[test]
+    fn sigma_columns_present_absent_and_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("attitude.csv");
+        // Old files (no σ columns) read as before, every reading with the given default.
+        std::fs::write(&path, "index,roll_deg,pitch_deg,yaw_deg\n0,1,2,3\n").unwrap();
+        let wide = Attitude::default().with_sigma_deg(2.0, 30.0).sigma;
+        let read = read_attitude_readings(&path, wide).unwrap();
+        assert!(!read.sigma_per_row);
+        assert_eq!(read.attitudes[0].sigma, wide);
+        assert_eq!(
+            read_attitude_csv(&path).unwrap()[0].sigma,
+            AttitudeSigma::default()
+        );
+        // With σ columns, each row's own σ, whatever the default.
+        std::fs::write(
+            &path,
+            format!("{ATTITUDE_HEADER_WITH_SIGMA}\n0,1,2,3,0.25,4\n1,1,2,3, 1 ,180\n"),
+        )
+        .unwrap();
+        let read = read_attitude_readings(&path, wide).unwrap();
+        assert!(read.sigma_per_row);
+        let sigma_deg = |a: &Attitude| [a.sigma.roll_pitch.to_degrees(), a.sigma.yaw.to_degrees()];
+        let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() + (a[1] - b[1]).abs() < 1e-12;
+        assert!(close(sigma_deg(&read.attitudes[0]), [0.25, 4.0]));
+        assert!(close(sigma_deg(&read.attitudes[1]), [1.0, 180.0]));
+        // The writer keeps the old form for default σ and writes the columns otherwise.
+        let plain = [Attitude::from_degrees(0.5, -1.0, 90.0)];
+        write_attitude_csv(&path, &plain).unwrap();
+        assert!(std::fs::read_to_string(&path)
+            .unwrap()
+            .starts_with(&format!("{ATTITUDE_HEADER}\n")));
+        let mixed = [
+            Attitude::from_degrees(0.5, -1.0, 90.0),
+            Attitude::from_degrees(0.5, -1.0, 92.0).with_sigma_deg(0.2, 20.0),
+        ];
+        write_attitude_csv(&path, &mixed).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(
+            text,
+            format!("{ATTITUDE_HEADER_WITH_SIGMA}\n0,0.5,-1,90,0.5,3.5\n1,0.5,-1,92,0.2,20\n")
+        );
+        let back = read_attitude_csv(&path).unwrap();
+        for (a, b) in mixed.iter().zip(&back) {
+            assert!(close(sigma_deg(a), sigma_deg(b)), "{a:?} {b:?}");
+        }
+        // An invalid σ is not written.
+        let bad = [Attitude::from_degrees(0.0, 0.0, 0.0).with_sigma_deg(0.5, -1.0)];
+        assert!(matches!(
+            write_attitude_csv(&path, &bad),
+            Err(Error::Invalid(_))
+        ));
+    }
+
+    #[test]
+    fn malformed_sigma_columns() {
+        let h = format!("{ATTITUDE_HEADER_WITH_SIGMA}\n");
+        let cases = [
+            (format!("{h}0,1,2,3,0.5\n"), 2, "5 fields"),
+            (format!("{h}0,1,2,3\n"), 2, "4 fields"),
+            (
+                format!("{ATTITUDE_HEADER}\n0,1,2,3,0.5,3.5\n"),
+                2,
+                "6 fields",
+            ),
+            (format!("{h}0,1,2,3,-0.5,3.5\n"), 2, "positive"),
+            (format!("{h}0,1,2,3,0.5,0\n"), 2, "zero"),
+            (
+                format!("{h}0,1,2,3,0.5,3.5\n1,1,2,3,nan,3.5\n"),
+                3,
+                "finite",
+            ),
+            (format!("{h}0,1,2,3,0.5,inf\n"), 2, "finite"),
+            (format!("{h}0,1,2,3,0.5,three\n"), 2, "yaw_sigma_deg"),
+            (format!("{h}0,1,2,3,95,3.5\n"), 2, "more than 90"),
+            (format!("{h}0,1,2,3,0.5,400\n"), 2, "more than 180"),
+            (
+                "index,roll_deg,pitch_deg,yaw_deg,sigma\n0,1,2,3,1\n".to_string(),
+                1,
+                "header",
+            ),
+        ];
+        for (text, line, why) in cases {
+            let msg = expect_err(&text, Some(line));
+            assert!(msg.contains(why), "{text:?}: {msg}");
+        }
     }
 
     #[test]

@@ -3,12 +3,12 @@
 //! `sensor.toml`.
 
 use super::{
-    read_attitude_csv, read_kitti_poses, read_points, read_sensor_toml, read_sweep,
+    read_attitude_readings, read_kitti_poses, read_points, read_sensor_file, read_sweep,
     write_attitude_csv, write_points_ply, write_poses, write_sensor_toml, write_sweep, PointFormat,
     POINT_EXTENSIONS,
 };
 use crate::error::{Error, Result};
-use sdem::geometry::{Attitude, Pose, Vec3};
+use sdem::geometry::{Attitude, AttitudeSigma, Pose, Vec3};
 use sdem::sensor::{SensorConfig, Sweep};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -38,13 +38,21 @@ pub struct Dataset {
     pub root: PathBuf,
     /// One point-cloud file per stop, in `scans/`, sorted by file name.
     pub scan_paths: Vec<PathBuf>,
-    /// The gyro/compass attitude of each scan, from `attitude.csv`, when present (one per scan).
+    /// The gyro/compass attitude of each scan, from `attitude.csv`, when present (one per scan),
+    /// each with its standard deviations ([`Attitude::sigma`]): the row's own when the file
+    /// has σ columns, else [`Dataset::attitude_sigma`].
     ///
-    /// Without it there is no attitude measurement: a single localization takes the level
-    /// attitude (roll = pitch = yaw = 0, see [`Dataset::attitude_or_level`]), and the SLAM loop
-    /// takes the previous scan's estimated attitude as the prior of the next one and searches
-    /// heading wider, since no compass bounds it.
+    /// Without it there is no attitude measurement: the attitude is unknown, and
+    /// `sdem::localize` searches it (a [`sdem::Scan`] built with `None`); the SLAM loop takes
+    /// the previous scan's estimated attitude as the prior of the next one and searches heading
+    /// wider, since no compass bounds it.
     pub attitudes: Option<Vec<Attitude>>,
+    /// The standard deviations of the attitude readings that `sensor.toml` states, or
+    /// [`AttitudeSigma::default`] (0.5° roll/pitch, 3.5° heading) when it states none. Rows of
+    /// `attitude.csv` with σ columns carry their own.
+    pub attitude_sigma: AttitudeSigma,
+    /// Where the readings' standard deviations come from.
+    pub attitude_sigma_from: SigmaSource,
     /// The robot's dead-reckoned `world_from_sensor` of each scan, from `odometry.txt`, when
     /// present (one per scan). Odometry drifts: only the relative motion between consecutive
     /// scans, `odometry[i - 1].inverse() * odometry[i]`, is meant to be used, as a prior.
@@ -53,6 +61,28 @@ pub struct Dataset {
     pub truth: Option<Vec<Pose>>,
     /// The sensor model from `sensor.toml`, when present.
     pub sensor: Option<SensorConfig>,
+}
+
+/// Where the standard deviations of a dataset's attitude readings come from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SigmaSource {
+    /// Neither file states them: [`AttitudeSigma::default`].
+    Default,
+    /// `sensor.toml`'s `attitude_sigma_roll_pitch_deg` / `attitude_sigma_yaw_deg`.
+    SensorToml,
+    /// `attitude.csv`'s per-row σ columns.
+    AttitudeCsv,
+}
+
+impl SigmaSource {
+    /// The source in words, for messages: `the default`, `sensor.toml`, `attitude.csv`.
+    pub fn describe(self) -> &'static str {
+        match self {
+            SigmaSource::Default => "the default",
+            SigmaSource::SensorToml => SENSOR_FILE,
+            SigmaSource::AttitudeCsv => ATTITUDE_FILE,
+        }
+    }
 }
 
 fn is_hidden(path: &Path) -> bool {
@@ -134,31 +164,43 @@ impl Dataset {
             }
         }
 
+        // sensor.toml first: its σ is the default of attitude.csv's readings.
+        let sensor_path = root.join(SENSOR_FILE);
+        let sensor_file = if sensor_path.exists() {
+            Some(read_sensor_file(&sensor_path)?)
+        } else {
+            None
+        };
+        let toml_sigma = sensor_file.as_ref().and_then(|f| f.attitude_sigma);
+        let attitude_sigma = toml_sigma.unwrap_or_default();
+        let mut attitude_sigma_from = if toml_sigma.is_some() {
+            SigmaSource::SensorToml
+        } else {
+            SigmaSource::Default
+        };
+        let sensor = sensor_file.map(|f| f.sensor);
+
         let attitude_path = root.join(ATTITUDE_FILE);
         let attitudes = if attitude_path.exists() {
-            let attitudes = read_attitude_csv(&attitude_path)?;
-            if attitudes.len() != scan_paths.len() {
+            let readings = read_attitude_readings(&attitude_path, attitude_sigma)?;
+            if readings.attitudes.len() != scan_paths.len() {
                 return Err(Error::Invalid(format!(
                     "{} has {} rows but {} holds {} scans; they must match one to one",
                     attitude_path.display(),
-                    attitudes.len(),
+                    readings.attitudes.len(),
                     scans_dir.display(),
                     scan_paths.len()
                 )));
             }
-            Some(attitudes)
+            if readings.sigma_per_row {
+                attitude_sigma_from = SigmaSource::AttitudeCsv;
+            }
+            Some(readings.attitudes)
         } else {
             None
         };
         let odometry = read_poses_if_present(&root.join(ODOMETRY_FILE), &scans_dir, &scan_paths)?;
         let truth = read_poses_if_present(&root.join(TRUTH_FILE), &scans_dir, &scan_paths)?;
-
-        let sensor_path = root.join(SENSOR_FILE);
-        let sensor = if sensor_path.exists() {
-            Some(read_sensor_toml(&sensor_path)?)
-        } else {
-            None
-        };
 
         Ok(Dataset {
             root: root.to_path_buf(),
@@ -167,21 +209,28 @@ impl Dataset {
             odometry,
             truth,
             sensor,
+            attitude_sigma,
+            attitude_sigma_from,
         })
     }
 
-    /// The gyro/compass attitude of scan `index`, or the level attitude (roll = pitch = yaw = 0)
-    /// when the dataset has no `attitude.csv`. `None` when `index` is out of range.
+    /// The gyro/compass attitude of scan `index` with its σ, or `None` when the dataset has no
+    /// `attitude.csv` (the attitude is unknown) or `index` is out of range.
+    pub fn attitude(&self, index: usize) -> Option<Attitude> {
+        self.attitudes.as_ref().and_then(|a| a.get(index).copied())
+    }
+
+    /// The gyro/compass attitude of scan `index`, or the level attitude (roll = pitch = yaw = 0,
+    /// with [`Dataset::attitude_sigma`]) when the dataset has no `attitude.csv`. `None` when
+    /// `index` is out of range.
     pub fn attitude_or_level(&self, index: usize) -> Option<Attitude> {
         if index >= self.len() {
             return None;
         }
-        Some(
-            self.attitudes
-                .as_ref()
-                .and_then(|a| a.get(index).copied())
-                .unwrap_or_default(),
-        )
+        Some(self.attitude(index).unwrap_or(Attitude {
+            sigma: self.attitude_sigma,
+            ..Attitude::default()
+        }))
     }
 
     /// The number of scans.
@@ -576,6 +625,69 @@ mod tests {
         );
         assert!(dataset.truth.is_none() && dataset.sensor.is_none());
         assert!(dataset.load_sweep(0).unwrap().is_none());
+    }
+
+    /// The readings' σ: per row from attitude.csv's columns, else sensor.toml's, else the
+    /// defaults; without attitude.csv the attitude is unknown.
+    #[test]
+    fn attitude_sigma_from_each_source() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        std::fs::create_dir(root.join("scans")).unwrap();
+        for name in ["a.xyz", "b.xyz"] {
+            std::fs::write(root.join("scans").join(name), "1 2 3\n").unwrap();
+        }
+        let yaw_sigma_deg = |d: &Dataset, i: usize| d.attitude(i).unwrap().sigma.yaw.to_degrees();
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-12;
+
+        // No attitude.csv, no sensor.toml: unknown attitude, default σ.
+        let d = Dataset::open(root).unwrap();
+        assert_eq!(d.attitude(0), None);
+        assert_eq!(d.attitude_sigma, AttitudeSigma::default());
+        assert_eq!(d.attitude_sigma_from, SigmaSource::Default);
+        assert_eq!(d.attitude_or_level(1), Some(Attitude::default()));
+
+        // sensor.toml's σ: the dataset's, and the level attitude's when there are no readings.
+        std::fs::write(root.join("sensor.toml"), "attitude_sigma_yaw_deg = 20\n").unwrap();
+        let d = Dataset::open(root).unwrap();
+        assert_eq!(d.attitude_sigma_from, SigmaSource::SensorToml);
+        assert!(close(d.attitude_sigma.yaw.to_degrees(), 20.0));
+        assert!(close(
+            d.attitude_or_level(0).unwrap().sigma.yaw.to_degrees(),
+            20.0
+        ));
+        assert_eq!(d.attitude(0), None);
+
+        // Readings without σ columns take sensor.toml's.
+        let csv = root.join("attitude.csv");
+        std::fs::write(
+            &csv,
+            "index,roll_deg,pitch_deg,yaw_deg\n0,0,0,0\n1,0,0,90\n",
+        )
+        .unwrap();
+        let d = Dataset::open(root).unwrap();
+        assert!(close(yaw_sigma_deg(&d, 1), 20.0));
+        assert_eq!(d.attitude_sigma_from, SigmaSource::SensorToml);
+
+        // Per-row σ wins over sensor.toml's.
+        std::fs::write(
+            &csv,
+            "index,roll_deg,pitch_deg,yaw_deg,roll_pitch_sigma_deg,yaw_sigma_deg\n\
+             0,0,0,0,0.5,2\n1,0,0,90,0.5,45\n",
+        )
+        .unwrap();
+        let d = Dataset::open(root).unwrap();
+        assert!(close(yaw_sigma_deg(&d, 0), 2.0) && close(yaw_sigma_deg(&d, 1), 45.0));
+        assert_eq!(d.attitude_sigma_from, SigmaSource::AttitudeCsv);
+        assert_eq!(d.attitude_sigma_from.describe(), "attitude.csv");
+
+        // An invalid σ in sensor.toml is an error naming it, even with σ columns in the csv.
+        std::fs::write(root.join("sensor.toml"), "attitude_sigma_yaw_deg = -1\n").unwrap();
+        let err = Dataset::open(root).unwrap_err().to_string();
+        assert!(
+            err.contains("sensor.toml:1:") && err.contains("attitude_sigma_yaw_deg"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -55,6 +55,18 @@
 //! pitch beyond ±[`MAX_TILT_READING_DEG`] (360°) is not a reading in degrees and is an error;
 //! yaw is not bounded (a gyro heading may be unwrapped).
 //!
+//! Each reading may carry its own standard deviations (a compass that is good in the open and
+//! poor near steel), in two more columns, degrees, with the header
+//! [`ATTITUDE_HEADER_WITH_SIGMA`]:
+//! ```text
+//! index,roll_deg,pitch_deg,yaw_deg,roll_pitch_sigma_deg,yaw_sigma_deg
+//! 0,0.5,-1.25,90,0.5,3.5
+//! 1,0.25,-1,92.5,0.5,20
+//! ```
+//! Then every row has all six fields, each σ positive, roll/pitch σ at most 90°, yaw σ at most
+//! 180°. Without them (the four-column header) every reading takes the σ of `sensor.toml`, or
+//! the defaults (0.5° roll/pitch, 3.5° yaw) ([`read_attitude_readings`]).
+//!
 //! # Pose files ([`read_kitti_poses`], [`read_tum_poses`], [`write_poses`])
 //!
 //! KITTI: one pose per line, 12 numbers, the row-major 3×4 matrix `[R | t]` of
@@ -63,11 +75,18 @@
 //! the scan index as the timestamp. [`write_poses`] writes a KITTI file and, beside it, the same
 //! poses as TUM with the extension `.tum`, so `evo_ape` / `evo_rpe` read either.
 //!
-//! # `sensor.toml` ([`read_sensor_toml`], [`write_sensor_toml`])
+//! # `sensor.toml` ([`read_sensor_file`], [`write_sensor_file`]; [`read_sensor_toml`], [`write_sensor_toml`])
 //!
 //! The fields of [`SensorConfig`] (unknown keys are errors, missing keys take the defaults), then
 //! [`SensorConfig::validate`]. An empty file is an error (a truncated one: remove the file to use
-//! the defaults).
+//! the defaults). At the top (before any `[table]`), two optional keys state how far the
+//! gyro/compass readings of `attitude.csv` can be off, as standard deviations in degrees
+//! ([`sdem::geometry::AttitudeSigma`]): `attitude_sigma_roll_pitch_deg` (default 0.5) and
+//! `attitude_sigma_yaw_deg` (default 3.5; 180 says the compass tells nothing). Each must be
+//! positive, roll/pitch at most 90, yaw at most 180. `sdem::localize` searches the heading over
+//! 3σ of the two readings' difference, and flags a match that tilts the scans beyond 3σ of roll
+//! and pitch. They are not the simulator's `tilt_sensor_noise_deg` and `compass_noise_deg`
+//! (the noise it adds), which a real compass near steel exceeds.
 //!
 //! # Raw sweeps: the `.sweep` format, version 1 ([`read_sweep`], [`write_sweep`])
 //!
@@ -145,16 +164,20 @@
 //!   odometry.txt         optional: dead-reckoned world_from_sensor poses, KITTI (+ odometry.tum)
 //!   poses_truth.txt      optional: true world_from_sensor poses, KITTI (+ poses_truth.tum)
 //!   poses_slam6d.txt     optional: slam6D's registration of an imported 3DTK folder, KITTI
-//!   sensor.toml          optional: the sensor model
+//!   sensor.toml          optional: the sensor model and the attitude readings' σ
 //! ```
 //!
 //! Every optional per-scan file, when present, has exactly one row (pose) per scan, in the order
 //! of the scan files' names; a different count is an error naming the file and both counts.
 //!
 //! - **`attitude.csv` absent**: the robot had no gyro/compass (KITTI), so there is no attitude
-//!   measurement. `sdem localize` then takes the level attitude (roll = pitch = yaw = 0) for both
-//!   scans; the SLAM loop takes the previous scan's estimated attitude as the prior of the next
-//!   one and searches heading wider, since no compass bounds it.
+//!   measurement ([`Dataset::attitude`] is `None`). `sdem localize` then searches the rotation
+//!   (`sdem::localize` with scans of unknown attitude; `--assume-level` takes both as level
+//!   instead); the SLAM loop takes the previous scan's estimated attitude as the prior of the
+//!   next one and searches heading wider, since no compass bounds it.
+//! - **The readings' uncertainty**: each reading has standard deviations
+//!   ([`sdem::geometry::Attitude::sigma`]), from `attitude.csv`'s σ columns, else from
+//!   `sensor.toml`, else the defaults ([`Dataset::attitude_sigma`], [`Dataset::attitude_sigma_from`]).
 //! - **`odometry.txt`**: the robot's dead-reckoned `world_from_sensor` of each scan, in the KITTI
 //!   pose format above ([`read_kitti_poses`]). Dead reckoning drifts without bound, so only the
 //!   relative motion between consecutive scans, `odometry[i-1]⁻¹ · odometry[i]`, is used (as the
@@ -200,13 +223,17 @@ mod pcd;
 mod ply;
 mod points;
 mod poses;
+mod sensor_file;
 mod sweep;
 mod voxels;
 
-pub use attitude::{read_attitude_csv, write_attitude_csv, ATTITUDE_HEADER, MAX_TILT_READING_DEG};
+pub use attitude::{
+    read_attitude_csv, read_attitude_readings, write_attitude_csv, AttitudeReadings,
+    ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG,
+};
 pub use dataset::{
-    clear_dataset, write_dataset, Dataset, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE,
-    SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
+    clear_dataset, write_dataset, Dataset, SigmaSource, ATTITUDE_FILE, DATASET_ENTRIES,
+    ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
 };
 pub use import::{
     import_3dtk, import_dataset, import_kitti, kitti_velodyne_poses, parse_kitti_calib_tr,
@@ -219,6 +246,11 @@ pub use ply::write_points_ply;
 pub use points::{read_points, PointFormat, MAX_MEDIAN_RANGE_M, POINT_EXTENSIONS};
 pub use poses::{
     read_kitti_poses, read_tum_poses, write_kitti_poses, write_poses, write_tum_poses,
+};
+pub use sensor_file::{
+    attitude_sigma_from_degrees, read_sensor_file, write_sensor_file, SensorFile,
+    ATTITUDE_SIGMA_ROLL_PITCH_KEY, ATTITUDE_SIGMA_YAW_KEY, MAX_ATTITUDE_SIGMA_ROLL_PITCH_DEG,
+    MAX_ATTITUDE_SIGMA_YAW_DEG,
 };
 pub use sweep::{read_sweep, write_sweep, SWEEP_MAGIC, SWEEP_VERSION};
 pub use voxels::{read_voxel_map, write_voxel_map, VOXEL_EXTENSION, VOXEL_MAGIC, VOXEL_VERSION};
@@ -431,8 +463,8 @@ fn sweep_points(path: &Path) -> Result<Vec<Vec3>> {
     Ok(points)
 }
 
-/// Writes `sensor.toml`: the configuration is validated first, so sdem never writes a file it
-/// would refuse to read.
+/// Writes `sensor.toml` with the sensor model alone (no attitude σ; see [`write_sensor_file`]):
+/// the configuration is validated first, so sdem never writes a file it would refuse to read.
 ///
 /// # Example
 /// ```
@@ -445,42 +477,23 @@ fn sweep_points(path: &Path) -> Result<Vec<Vec3>> {
 /// # std::fs::remove_dir_all(&dir).unwrap();
 /// ```
 pub fn write_sensor_toml(path: &Path, config: &SensorConfig) -> Result<()> {
-    config.validate()?;
-    let body = toml::to_string_pretty(config).map_err(|e| {
-        Error::Invalid(format!(
-            "cannot write {}: the sensor model does not serialize as TOML: {e}",
-            path.display()
-        ))
-    })?;
-    write_atomic(path, |w| {
-        w.write_all(
-            b"# sdem sensor model: angles in degrees, lengths in metres. Missing keys take the defaults.\n",
-        )?;
-        w.write_all(body.as_bytes())
-    })
+    write_sensor_file(
+        path,
+        &SensorFile {
+            sensor: config.clone(),
+            attitude_sigma: None,
+        },
+    )
 }
 
-/// Reads `sensor.toml` into a validated [`SensorConfig`]. Unknown keys, wrong types and invalid
-/// values are parse errors naming the file and the line (for an invalid value, the line of the
-/// key the message names, where the file sets it). An empty file is an error too: it is a
-/// truncated one (sdem writes every key); remove the file to use the defaults.
+/// Reads `sensor.toml` into a validated [`SensorConfig`] (the sensor model alone; the attitude
+/// readings' standard deviations, which the file may state too, are checked and left out: see
+/// [`read_sensor_file`] for both). Unknown keys, wrong types and invalid values are parse errors
+/// naming the file and the line (for an invalid value, the line of the key the message names,
+/// where the file sets it). An empty file is an error too: it is a truncated one (sdem writes
+/// every key); remove the file to use the defaults.
 pub fn read_sensor_toml(path: &Path) -> Result<SensorConfig> {
-    let text = read_text(path)?;
-    if text.trim().is_empty() {
-        return Err(Error::parse(
-            path,
-            None,
-            "the file is empty (truncated?); write the sensor model's keys, or remove the file to \
-             use the default sensor model",
-        ));
-    }
-    let config: SensorConfig = parse_toml(
-        path,
-        &text,
-        "the keys are those of sdem's SensorConfig; angles in degrees, lengths in metres",
-    )?;
-    at_named_key(path, &text, config.validate())?;
-    Ok(config)
+    read_sensor_file(path).map(|file| file.sensor)
 }
 
 /// Reads the configuration file of `sdem slam --config FILE`: the fields of
@@ -511,15 +524,19 @@ fn at_named_key(path: &Path, text: &str, validated: sdem::Result<()>) -> Result<
 /// Parses TOML `text` read from `path`; an error names the file and line on one line (TOML's own
 /// message shows the line over several), with `keys` saying what the keys are.
 fn parse_toml<T: serde::de::DeserializeOwned>(path: &Path, text: &str, keys: &str) -> Result<T> {
-    toml::from_str(text).map_err(|e| {
-        let line = e.span().map(|span| {
-            1 + text
-                .get(..span.start)
-                .map_or(0, |t| count_newlines(t.as_bytes()))
-        });
-        let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
-        Error::parse(path, line, format!("{message} ({keys})"))
-    })
+    toml::from_str(text).map_err(|e| toml_error(path, text, e, keys))
+}
+
+/// A TOML error in `text` read from `path` as a parse error naming the file and line on one
+/// line, with `keys` saying what the keys are.
+fn toml_error(path: &Path, text: &str, e: toml::de::Error, keys: &str) -> Error {
+    let line = e.span().map(|span| {
+        1 + text
+            .get(..span.start)
+            .map_or(0, |t| count_newlines(t.as_bytes()))
+    });
+    let message = e.message().split_whitespace().collect::<Vec<_>>().join(" ");
+    Error::parse(path, line, format!("{message} ({keys})"))
 }
 
 /// The 1-based line of the first `KEY = value` line of a TOML text whose `KEY` the message

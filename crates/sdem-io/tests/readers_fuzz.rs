@@ -148,10 +148,12 @@ fn check_points(points: &[Vec3]) -> Result<(), String> {
 }
 
 fn check_attitude(a: &Attitude) -> Result<(), String> {
-    if a.is_finite() {
-        Ok(())
-    } else {
+    if !a.is_finite() {
         Err(format!("non-finite attitude {a:?}"))
+    } else if !a.sigma_is_valid() {
+        Err(format!("invalid standard deviations {:?}", a.sigma))
+    } else {
+        Ok(())
     }
 }
 
@@ -216,10 +218,18 @@ fn read_and_check(target: Target, path: &Path) -> Result<Result<(), String>, Str
             Ok(pose) => proper(&pose),
             Err(err) => return e(err),
         },
-        Target::SensorToml => match sdem_io::read_sensor_toml(path) {
-            Ok(sensor) => sensor
+        Target::SensorToml => match sdem_io::read_sensor_file(path) {
+            Ok(file) => file
+                .sensor
                 .validate()
-                .map_err(|e| format!("Ok but invalid: {e}")),
+                .map_err(|e| format!("Ok but invalid: {e}"))
+                .and_then(|()| match file.attitude_sigma {
+                    Some(sigma) => check_attitude(&Attitude {
+                        sigma,
+                        ..Attitude::default()
+                    }),
+                    None => Ok(()),
+                }),
             Err(err) => return e(err),
         },
         Target::SlamOptions => match sdem_io::read_slam_config(path) {
@@ -756,7 +766,12 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
              0 0.01 -0.02 0.1 1.2411 1.2398 nan 0.5 0\n\
              40 0.01 -0.02 0.1 2 2 2 2 7.25\n",
         ),
-        Target::Attitude => text("index,roll_deg,pitch_deg,yaw_deg\n0,0.5,-1.25,90\n1,0.25,-1,92.5\n"),
+        Target::Attitude => vec![
+            b"index,roll_deg,pitch_deg,yaw_deg\n0,0.5,-1.25,90\n1,0.25,-1,92.5\n".to_vec(),
+            b"index,roll_deg,pitch_deg,yaw_deg,roll_pitch_sigma_deg,yaw_sigma_deg\n\
+              0,0.5,-1.25,90,0.5,3.5\n1,0.25,-1,92.5,0.25,20\n"
+                .to_vec(),
+        ],
         Target::KittiPoses => text(
             "1 0 0 0 0 1 0 0 0 0 1 0\n\
              9.999978e-01 5.272628e-04 -2.066935e-03 -4.690294e-02 -5.296506e-04 9.999992e-01 \
@@ -774,10 +789,14 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
              -7.210626507497e-03 8.081198471645e-03 -9.999413164504e-01 -5.403984729748e-02 \
              9.999738645903e-01 4.859485810390e-04 -7.206933692422e-03 -2.921968648686e-01\n",
         ),
-        Target::SensorToml => text(
-            "# sdem sensor model\ntilt_min_deg = -45.0\ntilt_max_deg = 40.0\npan_step_deg = 1.0\n\
-             max_range_m = 8.0\ntrusted_range_m = 3.0\n\n[lift]\nlink_length_m = 0.4\n",
-        ),
+        Target::SensorToml => vec![
+            b"# sdem sensor model\ntilt_min_deg = -45.0\ntilt_max_deg = 40.0\npan_step_deg = 1.0\n\
+              max_range_m = 8.0\ntrusted_range_m = 3.0\n\n[lift]\nlink_length_m = 0.4\n"
+                .to_vec(),
+            b"attitude_sigma_roll_pitch_deg = 0.5\nattitude_sigma_yaw_deg = 20\nmax_range_m = 8.0\n\
+              \n[lift]\nlink_length_m = 0.4\n"
+                .to_vec(),
+        ],
         Target::SlamOptions => vec![toml::to_string_pretty(&SlamOptions::default())
             .unwrap()
             .into_bytes()],
