@@ -313,9 +313,8 @@ impl SuiteConfig {
             yaw_sigma_deg,
         } = self.readings
         {
-            if !(roll_pitch_sigma_deg > 0.0 && yaw_sigma_deg > 0.0)
-                || !(roll_pitch_sigma_deg.is_finite() && yaw_sigma_deg.is_finite())
-            {
+            let valid = |sigma: f64| sigma.is_finite() && sigma > 0.0;
+            if !(valid(roll_pitch_sigma_deg) && valid(yaw_sigma_deg)) {
                 return bad("the readings' σ must be finite and positive".into());
             }
         }
@@ -475,42 +474,75 @@ fn building_origins(
     Ok(origins)
 }
 
-/// Draws `count` seeded pairs (see the module documentation and [`SuiteConfig`]).
+/// Draws `count` seeded pairs (see the module documentation and [`SuiteConfig`]):
+/// [`SuiteGenerator::new`]`(seed, config)` then [`SuiteGenerator::pairs`]`(0..count)`.
 ///
 /// # Arguments
 /// * `seed` — seeds the scenes and every pair.
 /// * `count` — the number of pairs; pair `i` is drawn in `config.scenes[i % len]`.
 /// * `config` — the recipe.
 ///
-/// # Returns
-/// For pair `i`, from its own `ChaCha8Rng` stream `i`: a reference sensor origin (one of the
-/// scene's stops, or uniform in its region with `min_clearance_m`), roll and pitch each uniform
-/// within `±reference_tilt_max_deg`, heading uniform over a full turn; a query origin uniform in
-/// the ball of `step_max_m` around it (height within `±step_z_max_m`) with `min_clearance_m`,
-/// roll and pitch each uniform within `±query_tilt_max_deg`, heading uniform over a full turn,
-/// redrawn until it shares `min_overlap` with the reference; both scans simulated; the readings
-/// from a stream of their own. The result depends on the seed only, not on the thread count, and
-/// a prefix of a longer run is the same pairs.
-///
 /// # Errors
 /// [`Error::Invalid`] for an invalid `config`, or when no pair fits after many draws.
 pub fn suite_pairs(seed: u64, count: usize, config: &SuiteConfig) -> Result<Vec<SuitePair>> {
-    config.validate()?;
-    if count == 0 {
-        return Ok(Vec::new());
-    }
-    let places = places(seed, config)?;
-    (0..count)
-        .into_par_iter()
-        .map(|index| {
-            let place = &places[index % places.len()];
-            let mut rng = ChaCha8Rng::seed_from_u64(seed ^ PAIR_SALT);
-            rng.set_stream(index as u64);
-            let mut reading_rng = ChaCha8Rng::seed_from_u64(seed ^ READING_SALT);
-            reading_rng.set_stream(index as u64);
-            draw_pair(place, config, index, &mut rng, &mut reading_rng)
+    SuiteGenerator::new(seed, config.clone())?.pairs(0..count)
+}
+
+/// The scenes of a recipe, built once, from which pairs are drawn by index: a long suite
+/// simulates its pairs a few at a time instead of holding them all.
+pub struct SuiteGenerator {
+    seed: u64,
+    config: SuiteConfig,
+    places: Vec<Place>,
+}
+
+impl SuiteGenerator {
+    /// Checks `config` and builds its scenes for `seed`.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for an invalid `config`.
+    pub fn new(seed: u64, config: SuiteConfig) -> Result<Self> {
+        config.validate()?;
+        let places = places(seed, &config)?;
+        Ok(Self {
+            seed,
+            config,
+            places,
         })
-        .collect()
+    }
+
+    /// The recipe.
+    pub fn config(&self) -> &SuiteConfig {
+        &self.config
+    }
+
+    /// The pairs with the indices of `range`, drawn in parallel.
+    ///
+    /// # Returns
+    /// For pair `i`, from its own `ChaCha8Rng` stream `i`: a reference sensor origin (one of the
+    /// scene's stops, or uniform in its region with `min_clearance_m`), roll and pitch each
+    /// uniform within `±reference_tilt_max_deg`, heading uniform over a full turn; a query
+    /// origin uniform in the ball of `step_max_m` around it (height within `±step_z_max_m`) with
+    /// `min_clearance_m`, roll and pitch each uniform within `±query_tilt_max_deg`, heading
+    /// uniform over a full turn, redrawn until it shares `min_overlap` with the reference; both
+    /// scans simulated; the readings from a stream of their own. Pair `i` depends on the seed
+    /// and `i` only, not on the range or the thread count.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] when no pair fits after many draws.
+    pub fn pairs(&self, range: std::ops::Range<usize>) -> Result<Vec<SuitePair>> {
+        range
+            .into_par_iter()
+            .map(|index| {
+                let place = &self.places[index % self.places.len()];
+                let mut rng = ChaCha8Rng::seed_from_u64(self.seed ^ PAIR_SALT);
+                rng.set_stream(index as u64);
+                let mut reading_rng = ChaCha8Rng::seed_from_u64(self.seed ^ READING_SALT);
+                reading_rng.set_stream(index as u64);
+                draw_pair(place, &self.config, index, &mut rng, &mut reading_rng)
+            })
+            .collect()
+    }
 }
 
 /// One pair from its own random streams (see [`suite_pairs`]).

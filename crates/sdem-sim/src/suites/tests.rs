@@ -67,6 +67,9 @@ fn pairs_are_deterministic_for_a_seed_and_any_thread_count() {
     let d = suite_pairs(6, 4, &config).unwrap();
     assert_ne!(a[0].truth, d[0].truth);
     assert!(suite_pairs(5, 0, &config).unwrap().is_empty());
+    // Pairs drawn by index from a generator are the same pairs.
+    let generator = SuiteGenerator::new(5, config).unwrap();
+    assert_eq!(generator.pairs(2..4).unwrap(), &a[2..4]);
 }
 
 #[test]
