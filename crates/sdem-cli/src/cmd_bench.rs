@@ -50,6 +50,9 @@ pub struct Args {
     /// With --faults: only these cases (none, all, or a fault's name; repeat the flag).
     #[arg(long = "case", value_name = "CASE", requires = "faults")]
     cases: Vec<String>,
+    /// `--suite` and its flags.
+    #[command(flatten)]
+    suites: crate::cmd_bench_suites::SuiteArgs,
 }
 
 impl Args {
@@ -291,6 +294,16 @@ pub fn run(args: Args) -> Result<()> {
     };
     if args.faults {
         return crate::cmd_bench_faults::run(&args.fault_args(), &say);
+    }
+    if args.suites.suite.is_some() {
+        let common = crate::cmd_bench_suites::Common {
+            quick: args.quick,
+            pairs: args.pairs,
+            seed: args.seed,
+            step: args.step,
+            json: args.json,
+        };
+        return crate::cmd_bench_suites::run(&args.suites, &common, &say);
     }
     let report = measure(&args, &say)?;
     if args.json {

@@ -5,9 +5,12 @@
 //! [`EXIT_STATUS`]).
 
 mod attitude_args;
+mod bench_kitti;
+mod bench_peers;
 mod bench_tally;
 mod cmd_bench;
 mod cmd_bench_faults;
+mod cmd_bench_suites;
 mod cmd_demo;
 mod cmd_import;
 mod cmd_localize;
@@ -57,7 +60,8 @@ enum Command {
     /// Map a dataset: the stop-and-go loop with merging, loop closure and a fused map.
     #[command(after_help = EXIT_STATUS)]
     Slam(cmd_slam::Args),
-    /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs.
+    /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs;
+    /// --faults and --suite measure other cases.
     Bench(cmd_bench::Args),
     /// Turn a 3DTK folder or a KITTI odometry sequence into a dataset folder.
     Import(cmd_import::Args),

@@ -1,11 +1,12 @@
 //! # sdem-sim — a seeded simulator for sdem
 //!
-//! Everything sdem is measured against: collapsed-building scenes cast exactly, the tilting laser
-//! range finder of Nagatani et al. (2003) with its noise, drivable stop-and-go routes with true
-//! poses, simulated odometry, field faults (dust, dropped returns, people walking by, moved
-//! rubble), the seeded benchmark pairs, the paper's preparatory experiment and synthetic pose
-//! graphs. Every random draw comes from a seeded `ChaCha8Rng`, so a seed gives the same scene and
-//! sweeps on every machine and for any number of threads.
+//! Everything sdem is measured against: collapsed-building, hall and street scenes cast exactly,
+//! the tilting laser range finder of Nagatani et al. (2003) and a spinning LiDAR with their
+//! noise, drivable stop-and-go routes with true poses, simulated odometry, field faults (dust,
+//! dropped returns, people walking by, moved rubble), the seeded benchmark pairs and the bench
+//! suites' pairs (unlevelled, compass noise, spinning LiDAR), the paper's preparatory experiment
+//! and synthetic pose graphs. Every random draw comes from a seeded `ChaCha8Rng`, so a seed gives
+//! the same scene and sweeps on every machine and for any number of threads.
 //!
 //! # Example
 //! ```
@@ -27,3 +28,4 @@ pub mod faults;
 pub mod odometry;
 pub mod pose_graphs;
 pub mod sim;
+pub mod suites;

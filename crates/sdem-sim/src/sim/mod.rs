@@ -5,13 +5,17 @@
 //! cast against it exactly ([`Scene::raycast`]).
 //!
 //! Scenes: [`paper_room`] (the preparatory experiment of Sec. V), [`corridor`] (long and
-//! featureless, for ambiguity tests) and [`collapsed_building`] (a room, a narrow ditch and a wider
-//! void, with a drivable stop-and-go route: [`collapsed_building_stops`]). [`scan`] simulates one
-//! raw sweep and [`simulate_run`] a whole run.
+//! featureless, for ambiguity tests), [`collapsed_building`] (a room, a narrow ditch and a wider
+//! void, with a drivable stop-and-go route: [`collapsed_building_stops`]), and the open scenes
+//! [`open_hall`] and [`street`]. [`scan`] simulates one raw sweep of the tilting LRF and
+//! [`simulate_run`] a whole run; [`spin_scan`] one turn of a spinning multi-beam LiDAR.
 //!
-//! World frame (DESIGN.md): every scene is built so that the world origin is the first scan's
-//! sensor origin. The first sensor pose of [`collapsed_building_stops`] is exactly the identity,
-//! with the floor flat at `z = -COLLAPSED_BUILDING_START_HEIGHT_M` beneath it.
+//! World frame (DESIGN.md): the paper's room, the corridor and the collapsed building are built
+//! so that the world origin is the first scan's sensor origin. The first sensor pose of
+//! [`collapsed_building_stops`] is exactly the identity, with the floor flat at
+//! `z = -COLLAPSED_BUILDING_START_HEIGHT_M` beneath it. The open scenes have their floor at
+//! `z = 0` and say where a sensor may stand ([`open_hall_sensor_region`],
+//! [`street_sensor_region`]).
 //!
 //! Everything random comes from `ChaCha8Rng` (a fixed algorithm), so a seed gives the same scene,
 //! path and sweeps on every machine and for any number of threads.
@@ -31,6 +35,8 @@
 
 mod building;
 mod fixed_scenes;
+mod lidar;
+mod open_scenes;
 mod route;
 mod scanner;
 mod scene;
@@ -43,6 +49,8 @@ pub use building::collapsed_building;
 pub use fixed_scenes::{
     corridor, paper_room, CORRIDOR_SENSOR_HEIGHT_M, PAPER_ROOM_SENSOR_HEIGHT_M,
 };
+pub use lidar::{lidar_beam, spin_scan, LidarConfig};
+pub use open_scenes::{open_hall, open_hall_sensor_region, street, street_sensor_region};
 pub use route::{COLLAPSED_BUILDING_START_HEIGHT_M, MAX_STOPS};
 pub use scanner::{scan, simulate_changing_run, simulate_run, SimStop};
 pub use scene::{Scene, MIN_STANDING_GAP_M};
