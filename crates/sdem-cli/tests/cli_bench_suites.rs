@@ -30,7 +30,7 @@ fn run_suite(dir: &Path, python: &Path, args: &[&str]) -> Value {
 fn fake_python(dir: &Path) -> std::path::PathBuf {
     let path = dir.join("python");
     let script = r#"#!/bin/sh
-echo '{"method": "o3d_fpfh_ransac_icp", "time_ms": 100.0, "trans_err_m": 0.001, "rot_err_deg": 0.01}'
+echo '{"method": "o3d_fpfh_ransac_icp", "time_ms": 100.0, "T": [[1, 0, 0, 0.25], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]], "trans_err_m": 0.001, "rot_err_deg": 0.01}'
 echo '{"method": "kiss_matcher_icp", "error": "ModuleNotFoundError: No module named kiss_matcher"}'
 echo '{"method": "small_gicp_gicp", "time_ms": 20.0, "trans_err_m": 0.5, "rot_err_deg": 10.0}'
 "#;
@@ -159,6 +159,15 @@ fn unlevelled_suite_reports_counts_that_add_up_with_the_peers_beside_it() {
         .unwrap()
         .contains("kiss_matcher"));
     assert_eq!(method("small_gicp_gicp")["succeeded"], 0);
+    // The peers' poses are read, and compared with sdem's.
+    let first = &p["per_pair"][0][0];
+    assert_eq!(first["estimate"]["x"], 0.25, "{first}");
+    for m in methods {
+        assert!(m["agrees_with_sdem"].as_u64().unwrap() <= 3);
+    }
+    assert!(records
+        .iter()
+        .all(|r| r["estimate"].is_object() == r["error"].is_null()));
     assert_eq!(method("small_gicp_gicp")["global"], false);
     // The fastest global peer that ran on every pair: FPFH (KISS-Matcher did not run).
     assert_eq!(p["fastest_global"], "Open3D FPFH + RANSAC + ICP");
