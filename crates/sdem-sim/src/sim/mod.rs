@@ -7,7 +7,8 @@
 //! Scenes: [`paper_room`] (the preparatory experiment of Sec. V), [`corridor`] (long and
 //! featureless, for ambiguity tests) and [`collapsed_building`] (a room, a narrow ditch and a wider
 //! void, with a drivable stop-and-go route: [`collapsed_building_stops`]). [`scan`] simulates one
-//! raw sweep and [`simulate_run`] a whole run.
+//! raw sweep and [`simulate_run`] a whole run. [`street`] and [`spinning_scan`] are the other
+//! kind of scanner: a spinning multi-beam LiDAR ([`SpinningLidar`]) on a street.
 //!
 //! World frame (DESIGN.md): every scene is built so that the world origin is the first scan's
 //! sensor origin. The first sensor pose of [`collapsed_building_stops`] is exactly the identity,
@@ -31,6 +32,7 @@
 
 mod building;
 mod fixed_scenes;
+mod lidar;
 mod route;
 mod scanner;
 mod scene;
@@ -43,6 +45,7 @@ pub use building::collapsed_building;
 pub use fixed_scenes::{
     corridor, paper_room, CORRIDOR_SENSOR_HEIGHT_M, PAPER_ROOM_SENSOR_HEIGHT_M,
 };
+pub use lidar::{spinning_scan, street, SpinningLidar, STREET_SENSOR_HEIGHT_M};
 pub use route::{COLLAPSED_BUILDING_START_HEIGHT_M, MAX_STOPS};
 pub use scanner::{scan, simulate_changing_run, simulate_run, SimStop};
 pub use scene::{Scene, MIN_STANDING_GAP_M};
