@@ -44,7 +44,7 @@ pub struct RefineConfig {
     /// and let the worst pair's error grow to 4.32 mm.
     pub converged_step: f64,
     /// At most this many query points are refined (0, the default: every boundary point), one
-    /// per cube of a side grown from 2 cm until they fit ([`crate::cost::even_points`], as the
+    /// per cube of a side grown from 5 cm until they fit ([`crate::cost::even_points`], as the
     /// search's points are chosen): spread evenly, as a LiDAR's are not (its S-DEM holds a
     /// point every few centimetres on the road near the car and every few decimetres on the
     /// houses). The refinement's time grows with the points, its precision with their square
@@ -503,7 +503,7 @@ pub fn refine(
     let sampled;
     let query_points: &[[f32; 3]] =
         if config.max_points > 0 && query.points().len() > config.max_points {
-            sampled = crate::cost::even_points(query, 0.02, config.max_points);
+            sampled = crate::cost::even_points(query, 0.05, config.max_points);
             &sampled
         } else {
             query.points()
