@@ -126,12 +126,13 @@ impl LocalizeOptions {
     /// * the **refinement** on at most [`REFINE_POINTS`] evenly spread query points, converged at
     ///   0.1 mm or after 15 iterations.
     ///
-    /// Measured on KITTI 00 (frames 0→1, 5→6, 10→11, 14→15, ±1 m, ±5°, no guess): the same poses
-    /// to 1 mm as with every point refined, in 40–46 ms a pair (S-DEMs included) on 2 cores,
-    /// against 0.5–1.3 s with the defaults on the same grid; half the step and τ = 3 steps gave
-    /// the same poses in 2.3 times the time. On the simulated SICK pairs of `sdem bench` they
-    /// are safe but coarser than the defaults (20 pairs: median 0.95 mm against 0.77 mm, largest
-    /// 3.8 mm against 3.6 mm): the defaults stay the tilting SICK's.
+    /// Measured on KITTI 00 (frames 0→1, 5→6, 10→11, 14→15, ±1 m, ±5°, ±30 cm of height, no
+    /// guess; `cargo run --release -p sdem-cli --example lidar_pairs`): the same poses to a few
+    /// millimetres as with every point refined, in 31–39 ms a pair (both S-DEMs included) on 2
+    /// cores, against 1.0–2.1 s with the defaults (1 cm steps, τ = 5 cm, 1° cells); a step of
+    /// `c` and τ = 3`c` gave the same poses in 1.6 times the time. On the simulated SICK pairs
+    /// of `sdem bench` they are safe but coarser than the defaults (20 pairs: median 0.95 mm
+    /// against 0.77 mm, largest 3.8 mm against 3.6 mm): the defaults stay the tilting SICK's.
     ///
     /// # Example
     /// ```
