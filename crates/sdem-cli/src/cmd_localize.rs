@@ -15,7 +15,7 @@ use sdem::localize::{
     Diagnostics, HeadingWindow, Localization, LocalizeOptions, OffsetPrior, RefineOutcome,
     RefinementSummary, SearchMode, SearchWindow,
 };
-use sdem::sdem::SdemConfig;
+use sdem::sdem::{Sdem, SdemConfig};
 use sdem::slam::Near;
 use sdem::Scan;
 use sdem_io::Dataset;
@@ -114,6 +114,12 @@ pub struct Args {
     /// S-DEM cell size, degrees.
     #[arg(long, default_value_t = 1.0)]
     resolution: f64,
+    /// Derive the S-DEM grid from the reference scan and the search's step, truncation and
+    /// refinement from its S-DEM (for a spinning LiDAR: `SdemConfig::for_scan`,
+    /// `LocalizeOptions::for_scan`) instead of the tilting SICK's defaults; --window,
+    /// --heading-window and the other search flags still apply.
+    #[arg(long, conflicts_with_all = ["step", "resolution", "map"])]
+    match_scan: bool,
     /// Take a result with doubts as the best guess: exit status 0 instead of 3. The output
     /// still labels it doubtful (`"trusted": false` with its doubts).
     #[arg(long)]
@@ -338,11 +344,25 @@ pub fn run(args: Args) -> Result<Outcome> {
             );
         }
     }
-    let sdem_config = SdemConfig {
-        resolution_deg: args.resolution,
-        ..Default::default()
+    let (sdem_config, config) = if args.match_scan {
+        let points = dataset.load_scan(reference_index)?;
+        let attitude = dataset
+            .attitude_or_level(reference_index)
+            .unwrap_or_default();
+        let grid = SdemConfig::for_points(&points);
+        let matched = LocalizeOptions::for_scan(&Sdem::from_points(&points, &attitude, &grid)?);
+        let step = matched.step_m;
+        (grid, localize_config(&args, matched, step)?)
+    } else {
+        let grid = SdemConfig {
+            resolution_deg: args.resolution,
+            ..Default::default()
+        };
+        (
+            grid,
+            localize_config(&args, LocalizeOptions::default(), args.step)?,
+        )
     };
-    let config = localize_config(&args)?;
     let pair = (reference_index, query_index);
     let attitudes = attitudes_of(&dataset, &dataset_path, pair, &attitude_flags(&args)?)?;
     let (found, time_ms) = localize_scans(&dataset, pair, &attitudes, &sdem_config, &config)?;
@@ -365,8 +385,9 @@ pub fn run(args: Args) -> Result<Outcome> {
     Ok(outcome)
 }
 
-/// The search's settings from the arguments, checked.
-fn localize_config(args: &Args) -> Result<LocalizeOptions> {
+/// The search's settings from the arguments, checked, over `base` (the defaults, or the ones
+/// matched to the scan) with grid step `step`.
+fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<LocalizeOptions> {
     if let Some(window) = args.heading_window {
         if !(window.is_finite() && (0.0..=180.0).contains(&window)) {
             bail!("--heading-window {window} must lie in 0..=180 degrees (0 trusts the compass)");
@@ -398,7 +419,7 @@ fn localize_config(args: &Args) -> Result<LocalizeOptions> {
     };
     Ok(LocalizeOptions {
         window: args.window.unwrap_or_else(SearchWindow::paper),
-        step_m: args.step,
+        step_m: step,
         // Without --heading-window, sdem::localize sets the range from the readings' σ (or
         // searches the whole rotation); the step is ours.
         heading: HeadingWindow {
@@ -411,10 +432,10 @@ fn localize_config(args: &Args) -> Result<LocalizeOptions> {
         cost: CostConfig {
             model,
             prior,
-            ..Default::default()
+            ..base.cost.clone()
         },
         runner_up: !args.no_runner_up,
-        ..Default::default()
+        ..base
     })
 }
 

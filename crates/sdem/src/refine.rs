@@ -43,6 +43,13 @@ pub struct RefineConfig {
     /// to the micrometre (median 0.77 mm, max 3.64 mm) and 16 ms less a pair; 30 µm took 4–7
     /// and let the worst pair's error grow to 4.32 mm.
     pub converged_step: f64,
+    /// At most this many query points are refined (0, the default: every boundary point), one
+    /// per cube of a side grown from 5 cm until they fit ([`crate::cost::even_points`], as the
+    /// search's points are chosen): spread evenly, as a LiDAR's are not (its S-DEM holds a
+    /// point every few centimetres on the road near the car and every few decimetres on the
+    /// houses). The refinement's time grows with the points, its precision with their square
+    /// root (see [`crate::localize::REFINE_POINTS`]).
+    pub max_points: usize,
 }
 
 /// How the refinement pairs a query point with a reference point. Nearest is the default: on the
@@ -78,6 +85,7 @@ impl Default for RefineConfig {
             min_inliers: 200,
             association: Association::Nearest,
             converged_step: 1e-5,
+            max_points: 0,
         }
     }
 }
@@ -491,7 +499,16 @@ pub fn refine(
     let mut iterations = 0;
     // Each query point's reference point (`u32::MAX`: none), kept between iterations while
     // the estimate moves little (see [`REASSOCIATE_STEP`]).
-    let mut pairs = vec![u32::MAX; query.points().len()];
+    // The points refined: every boundary point, or an even sample of them.
+    let sampled;
+    let query_points: &[[f32; 3]] =
+        if config.max_points > 0 && query.points().len() > config.max_points {
+            sampled = crate::cost::even_points(query, 0.05, config.max_points);
+            &sampled
+        } else {
+            query.points()
+        };
+    let mut pairs = vec![u32::MAX; query_points.len()];
     let mut associate = true;
     let mut settled = false;
     for iteration in 0..config.max_iterations.max(1) {
@@ -501,8 +518,7 @@ pub fn refine(
         let r32 = rotation.matrix().cast::<f32>();
         let t32 = translation.cast::<f32>();
         let pose = (r32, t32);
-        let normal_equations = query
-            .points()
+        let normal_equations = query_points
             .par_chunks(CHUNK)
             .zip(pairs.par_chunks_mut(CHUNK))
             .map(|(points, pairs)| pairing.accumulate(&pose, points, pairs, fresh, scale))

@@ -36,6 +36,7 @@
 mod building;
 mod fixed_scenes;
 mod lidar;
+pub mod lidar_street;
 mod open_scenes;
 mod route;
 mod scanner;
@@ -50,6 +51,7 @@ pub use fixed_scenes::{
     corridor, paper_room, CORRIDOR_SENSOR_HEIGHT_M, PAPER_ROOM_SENSOR_HEIGHT_M,
 };
 pub use lidar::{lidar_beam, spin_scan, LidarConfig};
+pub use lidar_street::{spinning_scan, SpinningLidar, STREET_SENSOR_HEIGHT_M};
 pub use open_scenes::{open_hall, open_hall_sensor_region, street, street_sensor_region};
 pub use route::{COLLAPSED_BUILDING_START_HEIGHT_M, MAX_STOPS};
 pub use scanner::{scan, simulate_changing_run, simulate_run, SimStop};

@@ -43,7 +43,7 @@ impl<'a> BranchAndBound<'a> {
         Self {
             reference: prepared.correlator.reference(),
             grid,
-            tables: &prepared.tables,
+            tables: prepared.tables,
             groups: &prepared.groups,
             truncation_sq: prepared.correlator.truncation_sq(),
             cap,
@@ -323,7 +323,7 @@ impl<'a> BranchAndBound<'a> {
 /// shared by its searches (the best and the runner-up).
 #[doc(hidden)]
 pub struct Prepared<'a> {
-    tables: RangeTables,
+    tables: &'a RangeTables,
     groups: QueryGroups,
     /// The compared points' median horizontal distance from the query's origin, metres.
     median_horizontal_m: f64,
@@ -346,7 +346,7 @@ impl<'a> Prepared<'a> {
             *horizontal.select_nth_unstable_by(k, f64::total_cmp).1
         };
         let (tables, groups) = rayon::join(
-            || RangeTables::new(correlator.reference()),
+            || correlator.reference().range_tables(),
             || QueryGroups::new(&points, 6),
         );
         Self {

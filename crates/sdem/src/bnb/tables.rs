@@ -8,6 +8,7 @@ use rayon::prelude::*;
 /// The reference S-DEM's cells as the search reads them: each cell's plane (for the cone loop),
 /// and the range gates' extent over coarse blocks of cells (for cones too large to visit).
 #[doc(hidden)]
+#[derive(Debug, Clone)]
 pub struct RangeTables {
     pub(super) n_az: usize,
     pub(super) n_el: usize,
@@ -128,6 +129,7 @@ pub(super) const LANES: usize = 8;
 /// stored `stride` apart: the table's columns (twice the azimuth cells on a full circle, so a
 /// window that wraps is one run), then [`LANES`] unknown cells, so a row can be read past its end.
 /// An unknown cell has a zero normal and an empty gate (`lo` = ∞, `hi` = −∞): it costs `τ²`.
+#[derive(Debug, Clone)]
 pub(super) struct PlaneRows {
     pub(super) stride: usize,
     pub(super) nx: Vec<f32>,
