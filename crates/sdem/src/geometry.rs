@@ -201,6 +201,11 @@ pub fn pose_error(truth: &Pose, estimate: &Pose) -> (f64, f64) {
     (delta.translation.vector.norm(), delta.rotation.angle())
 }
 
+/// The angle `a` (radians) wrapped into [−π, π).
+pub fn wrap_pi(a: f64) -> f64 {
+    (a + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI
+}
+
 /// The unit direction of an azimuth (counter-clockwise from +x) and an elevation (up from the
 /// horizontal plane), both radians.
 pub fn direction(azimuth: f64, elevation: f64) -> Vec3 {

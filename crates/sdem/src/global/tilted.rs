@@ -1,23 +1,25 @@
-//! The rotation between two scans when the attitude of one or both is unknown or uncertain.
+//! The rotation between two scans when one of them cannot be levelled from its own surfaces
+//! (no floor or ceiling in view) and has no reliable attitude reading.
 //!
-//! The orientations of the surfaces a scan sees do not depend on where it was taken: a floor faces
-//! up, a wall faces its way, from any origin. Each scan's surface normals, weighted by the area
-//! they stand for, form an *extended Gaussian image* (Horn 1984); the rotation that best lays the
-//! query's image on the reference's is the rotation between the scans, up to the symmetries of
-//! the scene (a rectangular room looks the same turned by 180°). Makadia, Patterson & Daniilidis
-//! (CVPR 2006) correlate such images over all of SO(3) with spherical harmonics; here the
-//! rotations a robot can have (a tilt within a bound, any heading) are searched directly, the
-//! heading by shifting longitude columns, coarse first and then fine around the best peaks.
+//! The orientations of the surfaces a scan sees do not depend on where it was taken: a wall faces
+//! its way from any origin. Each scan's surface normals, weighted by the area they stand for,
+//! form an *extended Gaussian image* (Horn 1984); the rotation that best lays the query's image
+//! on the reference's is the rotation between the scans, up to the symmetries of the scene.
+//! Makadia, Patterson & Daniilidis (CVPR 2006) correlate such images over all of SO(3) with
+//! spherical harmonics; here the rotations a robot can have (a tilt within a bound, any heading)
+//! are searched directly, the heading by shifting longitude columns, coarse first and then fine
+//! around the best peaks.
 //!
 //! The result is a handful of [`RotationHypothesis`]es, best first. None of them is trusted on
-//! its own: [`crate::scan::localize`] runs the exact translation and heading search
-//! ([`crate::localize::localize`], eq. 1's cost) once per hypothesis and keeps the one whose
-//! comparison of the two S-DEMs is best, and a different rotation that compares almost as well
-//! is a doubt ([`crate::Doubt::AnotherRotation`]).
+//! its own: each is searched exactly over the translation window and a few degrees of heading
+//! ([`crate::localize::localize`], eq. 1's cost), the best comparison wins, and a different
+//! rotation that compares almost as well is a doubt ([`crate::Doubt::AnotherRotation`]).
 
+use super::{RotationPrior, MIN_ORIENTED_CELLS};
 use crate::doubt::Doubt;
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Vec3};
+use crate::level::oriented_cells;
 use crate::localize::{
     localize, localize_below, HeadingWindow, Localization, LocalizeOptions, SearchWindow,
 };
@@ -27,17 +29,6 @@ use nalgebra::Rotation3;
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::f64::consts::PI;
-
-/// Which rotations `reference_level_from_query_level` may be: a tilt (the angle between the
-/// two levelled frames' z axes) up to `max_tilt`, and a heading within `heading_half_range`
-/// of zero (π: any heading). Radians.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RotationPrior {
-    /// The largest tilt between the two levelled frames, radians.
-    pub max_tilt: f64,
-    /// The heading's half range around zero, radians (π: a full turn).
-    pub heading_half_range: f64,
-}
 
 /// One candidate rotation between the two levelled frames, with how well the surface
 /// orientations agree under it (a correlation score, larger is better; only comparable between
@@ -49,10 +40,6 @@ pub struct RotationHypothesis {
     /// The correlation of the two extended Gaussian images under `rotation`.
     pub score: f64,
 }
-
-/// The fewest cells with a measured surface orientation a scan needs for its rotation to be
-/// found from them.
-pub const MIN_ORIENTED_CELLS: usize = 50;
 
 /// Coarse stage: lattice step and kernel width of the reference image, radians.
 const COARSE_STEP: f64 = 4.0 * PI / 180.0;
@@ -82,8 +69,12 @@ pub fn rotation_hypotheses(
     count: usize,
     min_relative_score: f64,
 ) -> Result<Vec<RotationHypothesis>> {
-    let (reference_normals, query_normals) =
-        rayon::join(|| surface_normals(reference), || surface_normals(query));
+    let normals = |sdem: &Sdem| -> Vec<(Vec3, f64)> {
+        (oriented_cells(sdem).into_iter())
+            .map(|c| (-c.normal, c.area))
+            .collect()
+    };
+    let (reference_normals, query_normals) = rayon::join(|| normals(reference), || normals(query));
     for (which, normals) in [("reference", &reference_normals), ("query", &query_normals)] {
         if normals.len() < MIN_ORIENTED_CELLS {
             return Err(Error::NoSurfaces { which });
@@ -116,98 +107,6 @@ pub fn rotation_hypotheses(
         }
     }
     Ok(kept)
-}
-
-/// The sensor's tilt estimated from its own scan when it has no attitude reading: the "up"
-/// within [`MAX_UNKNOWN_TILT`] of the sensor's z axis that floors (facing up) and ceilings
-/// (facing down) agree on best, as an attitude with zero heading. `None` when the scan shows
-/// too few measurable surfaces.
-pub fn estimated_tilt(sdem: &Sdem) -> Option<Attitude> {
-    let normals = surface_normals(sdem);
-    if normals.len() < MIN_ORIENTED_CELLS {
-        return None;
-    }
-    let table = SphereTable::new(&normals, COARSE_STEP / 2.0, COARSE_KERNEL);
-    let step = FINE_STEP;
-    let m = (MAX_UNKNOWN_TILT / step).ceil() as i64;
-    let mut best: Option<(f64, Attitude)> = None;
-    for i in -m..=m {
-        for j in -m..=m {
-            let tilt = Attitude::new(i as f64 * step, j as f64 * step, 0.0);
-            // `up` in the sensor frame is the levelled z axis taken back.
-            let up = tilt.rotation().inverse() * Vec3::z();
-            if up.z.clamp(-1.0, 1.0).acos() > MAX_UNKNOWN_TILT {
-                continue;
-            }
-            // Normals point away from the sensor: a floor's down, a ceiling's up.
-            let score = table.at(&-up) + table.at(&up);
-            if best.as_ref().is_none_or(|b| score > b.0) {
-                best = Some((score, tilt));
-            }
-        }
-    }
-    best.filter(|b| b.0 > 0.0).map(|b| b.1)
-}
-
-/// The surface normal at each known cell of an S-DEM whose neighbours two cells away on both
-/// axes lie on the same surface, pointing away from the sensor, with the area of surface the
-/// cell stands for (its footprint at its range over the cosine of incidence, capped) as weight.
-fn surface_normals(sdem: &Sdem) -> Vec<(Vec3, f64)> {
-    const SPAN: i64 = 2;
-    let spec = sdem.grid();
-    let (n_az, n_el) = (spec.azimuth_cells() as i64, spec.elevation_cells() as i64);
-    let res = spec.resolution();
-    let full_circle = (n_az as f64 * res - 2.0 * PI).abs() < 1e-6;
-    let mut index = vec![u32::MAX; spec.len()];
-    for (i, &c) in sdem.cells().iter().enumerate() {
-        index[c as usize] = i as u32;
-    }
-    let points = sdem.points();
-    let point_at = |e: i64, a: i64| -> Option<Vec3> {
-        if e < 0 || e >= n_el {
-            return None;
-        }
-        let a = if full_circle {
-            a.rem_euclid(n_az)
-        } else if a < 0 || a >= n_az {
-            return None;
-        } else {
-            a
-        };
-        let i = index[(e * n_az + a) as usize];
-        (i != u32::MAX).then(|| {
-            let p = points[i as usize];
-            Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64)
-        })
-    };
-    (sdem.cells().par_iter().zip(points.par_iter()))
-        .filter_map(|(&cell, p)| {
-            let (e, a) = (cell as i64 / n_az, cell as i64 % n_az);
-            let p = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            let range = p.norm();
-            // Neighbours on the same surface: their range within a spread that a surface seen
-            // at up to ~80° of incidence keeps over two cells.
-            let near = |q: Option<Vec3>| {
-                q.filter(|q| (q.norm() - range).abs() < 0.02 + 0.25 * range * SPAN as f64 * res)
-            };
-            let along = near(point_at(e, a + SPAN))? - near(point_at(e, a - SPAN))?;
-            let across = near(point_at(e + SPAN, a))? - near(point_at(e - SPAN, a))?;
-            let n = along.cross(&across);
-            let len = n.norm();
-            if len < 1e-12 {
-                return None;
-            }
-            let ray = p / range;
-            let mut n = n / len;
-            if n.dot(&ray) < 0.0 {
-                n = -n;
-            }
-            let (_, el) = spec.cell_center(cell as usize);
-            let incidence = n.dot(&ray).max(0.3);
-            let area = range * range * res * res * el.cos() / incidence;
-            Some((n, area))
-        })
-        .collect()
 }
 
 /// The query's normals gathered on a latitude–longitude lattice of step `step`: per lattice
@@ -343,12 +242,6 @@ impl SphereTable {
                 *s += w * line[(col as i64 + k).rem_euclid(cols) as usize] as f64;
             }
         }
-    }
-
-    /// The table's value in direction `n`.
-    fn at(&self, n: &Vec3) -> f64 {
-        let (row, col) = self.lattice.cell_of(n);
-        self.values[row * self.lattice.cols + col] as f64
     }
 
     /// The score of the query's directions under `rotation`.
@@ -506,10 +399,6 @@ fn refine_peak(
     }
 }
 
-/// The largest tilt from level a scan without an attitude reading may have, radians (30°: a
-/// robot lying on rubble; a hand-held or vehicle scanner is within it).
-pub const MAX_UNKNOWN_TILT: f64 = 30.0 * PI / 180.0;
-
 /// At most this many rotation hypotheses are verified by the exact search.
 const MAX_HYPOTHESES: usize = 10;
 /// … none scoring below this share of the best hypothesis's correlation.
@@ -527,128 +416,74 @@ const FINAL_HEADING_DEG: f64 = 1.0;
 /// [`Doubt::AnotherRotation`].
 const OTHER_ROTATION: f64 = 5.0 * PI / 180.0;
 
-/// The rotations a pair of scans may differ by, from their attitude readings: a scan without
-/// one may be tilted up to [`MAX_UNKNOWN_TILT`] and have any heading; readings allow three
-/// standard deviations of their difference. `None` when both readings are good enough for the
-/// levelled search alone (roll and pitch within `level_tolerance` at three σ).
-pub fn rotation_prior(
-    reference: Option<&Attitude>,
-    query: Option<&Attitude>,
-    level_tolerance: f64,
-) -> Option<RotationPrior> {
-    let tilt = |a: Option<&Attitude>| a.map_or(MAX_UNKNOWN_TILT, |a| 3.0 * a.sigma.roll_pitch);
-    match (reference, query) {
-        (Some(r), Some(q)) => {
-            let tilt = 3.0 * r.sigma.roll_pitch.hypot(q.sigma.roll_pitch);
-            (tilt > level_tolerance).then(|| RotationPrior {
-                max_tilt: tilt,
-                heading_half_range: (3.0 * r.sigma.yaw.hypot(q.sigma.yaw)).min(PI),
-            })
-        }
-        _ => Some(RotationPrior {
-            max_tilt: tilt(reference) + tilt(query),
-            heading_half_range: PI,
-        }),
-    }
-}
-
-/// Localizes `query` against `reference` when their rotation is not known well enough for the
-/// levelled search: the rotation hypotheses of [`rotation_hypotheses`], each searched exactly
-/// over the translation window and a few degrees of heading around it; the best comparison
-/// (eq. 1) wins and is searched again, levelled by its refined rotation, with the caller's
-/// options. A different rotation comparing within the ambiguity ratio is the doubt
+/// Localizes `query` against `reference` when a scan could be levelled neither by its reading
+/// nor by its surfaces: the rotation hypotheses of [`rotation_hypotheses`], each searched
+/// exactly over the translation window and a few degrees of heading around it; the best
+/// comparison (eq. 1) wins and is searched again, levelled by its refined rotation, with the
+/// caller's options. A different rotation comparing within the ambiguity ratio is the doubt
 /// [`Doubt::AnotherRotation`].
 ///
-/// When the reference's attitude is unknown its levelled frame is its sensor frame, whose z
-/// axis need not be vertical, so the window's height is widened to its largest half-size.
+/// `reference_level` and `query_level` are the attitudes that level each scan where one is
+/// known (a reading, or the vertical of its surfaces), `None` where not. A reference without
+/// one keeps its sensor frame, whose z axis need not be vertical, so the window's height is
+/// widened to its largest half-size.
 ///
 /// # Errors
 /// As [`crate::localize::localize`], and [`Error::NoSurfaces`].
-pub fn localize_unlevelled(
+pub(super) fn localize_tilted(
     reference: &Scan,
+    reference_level: Option<&Attitude>,
     query: &Scan,
+    query_level: Option<&Attitude>,
     options: &LocalizeOptions,
     prior: &RotationPrior,
 ) -> Result<Localization> {
     let start = std::time::Instant::now();
-    // Without a reading the reference is levelled by its own estimated tilt, so the window's
-    // height means height, give or take what the estimate may miss.
-    let (reference_sdem, reference_level, window) = match reference.attitude() {
+    let (reference_sdem, reference_rotation, window) = match reference_level {
         Some(a) => (
-            Cow::Borrowed(reference.sdem()),
+            Cow::Owned(Sdem::from_points(
+                reference.points_in_sensor(),
+                a,
+                reference.sdem().config(),
+            )?),
             a.rotation(),
             options.window,
         ),
-        None => match estimated_tilt(reference.sdem()) {
-            Some(tilt) => (
-                Cow::Owned(Sdem::from_points(
-                    reference.points_in_sensor(),
-                    &tilt,
-                    reference.sdem().config(),
-                )?),
-                tilt.rotation(),
-                tilt_margin(&options.window),
-            ),
-            None => (
-                Cow::Borrowed(reference.sdem()),
-                Rotation3::identity(),
-                upright_free(&options.window),
-            ),
+        None => (
+            Cow::Borrowed(reference.sdem()),
+            Rotation3::identity(),
+            upright_free(&options.window),
+        ),
+    };
+    let (query_sdem, query_rotation) = match query_level {
+        Some(a) => (
+            Cow::Owned(Sdem::from_points(
+                query.points_in_sensor(),
+                a,
+                query.sdem().config(),
+            )?),
+            a.rotation(),
+        ),
+        None => (Cow::Borrowed(query.sdem()), Rotation3::identity()),
+    };
+    let hypotheses = rotation_hypotheses(
+        &reference_sdem,
+        &query_sdem,
+        prior,
+        MAX_HYPOTHESES,
+        MIN_RELATIVE_SCORE,
+    )?;
+    let found = verify(
+        Verifying {
+            reference_sdem: &reference_sdem,
+            reference_level: reference_rotation,
+            window: &window,
+            query,
+            query_level: query_rotation,
+            options,
         },
-    };
-    let reference_sdem: &Sdem = &reference_sdem;
-    let searched = |query_sdem: &Sdem, query_level: Rotation3<f64>, prior: &RotationPrior| {
-        let hypotheses = rotation_hypotheses(
-            reference_sdem,
-            query_sdem,
-            prior,
-            MAX_HYPOTHESES,
-            MIN_RELATIVE_SCORE,
-        )?;
-        verify(
-            Verifying {
-                reference_sdem,
-                reference_level,
-                window: &window,
-                query,
-                query_level,
-                options,
-            },
-            &hypotheses,
-        )
-    };
-    // A query without a reading is levelled by its own estimated tilt first: then only what
-    // the two estimates may miss is left of the tilt, and the surfaces decide the heading. If
-    // that does not give a trusted match, the whole prior is searched.
-    let estimate = query
-        .attitude()
-        .is_none()
-        .then(|| estimated_tilt(query.sdem()))
-        .flatten();
-    let mut first = None;
-    if let Some(tilt) = estimate {
-        let query_sdem = Sdem::from_points(query.points_in_sensor(), &tilt, query.sdem().config())?;
-        let reference_tilt = match reference.attitude() {
-            Some(a) => 3.0 * a.sigma.roll_pitch,
-            None => TILT_ESTIMATE_ERROR,
-        };
-        let near_level = RotationPrior {
-            max_tilt: (reference_tilt + TILT_ESTIMATE_ERROR).min(prior.max_tilt),
-            heading_half_range: prior.heading_half_range,
-        };
-        match searched(&query_sdem, tilt.rotation(), &near_level) {
-            Ok(found) if found.trusted => return Ok(finish(found, start)),
-            outcome => first = Some(outcome),
-        }
-    }
-    let query_level = query
-        .attitude()
-        .map_or_else(Rotation3::identity, Attitude::rotation);
-    let found = match (searched(query.sdem(), query_level, prior), first) {
-        (Ok(found), Some(Ok(earlier))) if !found.trusted && earlier.cost < found.cost => earlier,
-        (Err(_), Some(Ok(earlier))) => earlier,
-        (outcome, _) => outcome?,
-    };
+        &hypotheses,
+    )?;
     Ok(finish(found, start))
 }
 
@@ -769,22 +604,6 @@ fn verify(v: Verifying, hypotheses: &[RotationHypothesis]) -> Result<Localizatio
     }
     found.trusted = found.doubts.is_empty();
     Ok(found)
-}
-
-/// How far off a tilt estimated from the scan may be, for the window's margin (radians, 5°).
-const TILT_ESTIMATE_ERROR: f64 = 5.0 * PI / 180.0;
-
-/// The window with its height widened by what a tilt error of [`TILT_ESTIMATE_ERROR`] turns
-/// its horizontal extent into.
-fn tilt_margin(window: &SearchWindow) -> SearchWindow {
-    let horizontal = (0..2)
-        .flat_map(|i| [window.min[i].abs(), window.max[i].abs()])
-        .fold(0.0, f64::max);
-    let margin = horizontal * TILT_ESTIMATE_ERROR.sin();
-    SearchWindow {
-        min: [window.min[0], window.min[1], window.min[2] - margin],
-        max: [window.max[0], window.max[1], window.max[2] + margin],
-    }
 }
 
 /// The window with its height widened to its largest half-size, around the same centre.

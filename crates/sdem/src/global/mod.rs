@@ -1,0 +1,316 @@
+//! Localization when the attitude of one scan or both is unknown or uncertain: no gyro, a
+//! robot lying on rubble beyond what its gyro was trusted for, a compass near steel, other
+//! people's recordings.
+//!
+//! The paper levels every scan by its gyro and compass and searches only the position (and
+//! here a few degrees of heading). Without a reading, three more angles are unknown. They are
+//! found in two steps, each of which keeps the exact search as the judge:
+//!
+//! 1. **Level each scan by its own surfaces** ([`crate::level`]): floors and ceilings face
+//!    along the vertical wherever the scan was taken, and walls stand across it, so the
+//!    vertical is measured to a fraction of a degree in rooms, corridors, halls, ditches and
+//!    streets. A reading with a σ is the prior for this measurement: the surfaces' vertical
+//!    is looked for within three σ of it. After this only the heading and the position are
+//!    left, as in the paper.
+//! 2. **Heading hypotheses from surface orientations** ([`crate::level::heading_hypotheses`]):
+//!    the orientations of walls do not depend on where the scans were taken, so correlating
+//!    the two levelled extended Gaussian images over heading gives the few headings the scene
+//!    allows (four in a rectangular room; often one where the clutter breaks the symmetry).
+//!    Each is searched **exactly** over the caller's translation window and ±[`HYPOTHESIS_HEADING_DEG`]
+//!    of heading (branch and bound, the same minimum as the exhaustive search over that
+//!    window), later hypotheses only below the cost the best one found (they end as soon as
+//!    nothing in their window can compete). The best comparison (eq. 1) wins; another heading
+//!    comparing within the ambiguity ratio is the doubt [`crate::Doubt::AnotherRotation`].
+//!
+//! What is exact is the search within each hypothesis's window. The hypotheses themselves
+//! come from the surfaces and can miss: a result then has a poor cost and comes out with
+//! doubts (`few_inliers`, `runner_up`, …), never as a trusted wrong pose. A scan that shows no
+//! floor or ceiling cannot be levelled this way and goes to [`tilted`]'s search over tilt and
+//! heading together.
+
+mod tilted;
+
+pub use tilted::{rotation_hypotheses, RotationHypothesis};
+
+use crate::doubt::Doubt;
+use crate::error::{Error, Result};
+use crate::geometry::{wrap_pi, Attitude, Vec3};
+use crate::level::{heading_hypotheses, level_from_cells, oriented_cells, rotated, OrientedCell};
+use crate::localize::{localize, localize_below, HeadingWindow, Localization, LocalizeOptions};
+use crate::scan::Scan;
+use crate::sdem::Sdem;
+use nalgebra::Rotation3;
+use std::f64::consts::PI;
+
+/// The fewest cells with a measured surface orientation a scan needs for its rotation to be
+/// found from them.
+pub const MIN_ORIENTED_CELLS: usize = 50;
+
+/// The largest tilt from level a scan without an attitude reading may have, radians: roll and
+/// pitch each within ±30° (a robot lying on rubble; hand-held and vehicle scanners are well
+/// within it) tilt the sensor's z axis by up to 41.4°.
+pub const MAX_UNKNOWN_TILT: f64 = 41.5 * PI / 180.0;
+
+/// Which rotations `reference_level_from_query_level` may be: a tilt (the angle between the
+/// two levelled frames' z axes) up to `max_tilt`, and a heading within `heading_half_range`
+/// of zero (π: any heading). Radians.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RotationPrior {
+    /// The largest tilt between the two levelled frames, radians.
+    pub max_tilt: f64,
+    /// The heading's half range around zero, radians (π: a full turn).
+    pub heading_half_range: f64,
+}
+
+/// The rotations a pair of scans may differ by, from their attitude readings: a scan without
+/// one may be tilted up to [`MAX_UNKNOWN_TILT`] and have any heading; readings allow three
+/// standard deviations of their difference. `None` when both readings are good enough for the
+/// levelled search alone (roll and pitch within `level_tolerance` at three σ).
+pub fn rotation_prior(
+    reference: Option<&Attitude>,
+    query: Option<&Attitude>,
+    level_tolerance: f64,
+) -> Option<RotationPrior> {
+    let tilt = |a: Option<&Attitude>| a.map_or(MAX_UNKNOWN_TILT, |a| 3.0 * a.sigma.roll_pitch);
+    match (reference, query) {
+        (Some(r), Some(q)) => {
+            let tilt = 3.0 * r.sigma.roll_pitch.hypot(q.sigma.roll_pitch);
+            (tilt > level_tolerance).then(|| RotationPrior {
+                max_tilt: tilt,
+                heading_half_range: (3.0 * r.sigma.yaw.hypot(q.sigma.yaw)).min(PI),
+            })
+        }
+        _ => Some(RotationPrior {
+            max_tilt: tilt(reference) + tilt(query),
+            heading_half_range: PI,
+        }),
+    }
+}
+
+/// At most this many heading hypotheses are searched.
+const MAX_HEADINGS: usize = 6;
+/// Each heading hypothesis is searched over ± this, degrees: the correlation's peaks lie
+/// within ±0.5° of the truth on the scenes measured; the rest is the margin for a blunt peak.
+pub const HYPOTHESIS_HEADING_DEG: f64 = 2.0;
+/// Two headings farther apart than this are different answers, for the doubt
+/// [`Doubt::AnotherRotation`].
+const OTHER_ROTATION: f64 = 5.0 * PI / 180.0;
+
+/// A scan as the global search sees it: its oriented cells (sensor frame) and the attitude
+/// that levels it, when one is known.
+struct Levelled {
+    cells: Vec<OrientedCell>,
+    /// The reading, or the vertical of the surfaces (with the reading's heading).
+    attitude: Option<Attitude>,
+}
+
+/// The attitude that levels `scan`: its reading when that is certain enough to level the
+/// search alone; else the vertical of its surfaces, looked for within three σ of the reading
+/// (within [`MAX_UNKNOWN_TILT`] of the sensor's z axis without one), keeping the reading's
+/// heading; else the reading, or nothing.
+fn levelled(scan: &Scan) -> Levelled {
+    let reading = scan.attitude().copied();
+    // The S-DEM is levelled by the reading (as level without one): its cells back in the
+    // sensor frame.
+    let sensor_from_sdem = reading.map_or_else(Rotation3::identity, |a| a.rotation().inverse());
+    let cells = rotated(&oriented_cells(scan.sdem()), &sensor_from_sdem);
+    if let Some(a) = reading {
+        if 3.0 * a.sigma.roll_pitch <= crate::scan::LEVEL_TOLERANCE / 2.0 {
+            return Levelled {
+                cells,
+                attitude: Some(a),
+            };
+        }
+    }
+    let (expected_up, max_tilt) = match reading {
+        Some(a) => (
+            a.rotation().inverse() * Vec3::z(),
+            (3.0 * a.sigma.roll_pitch).min(MAX_UNKNOWN_TILT),
+        ),
+        None => (Vec3::z(), MAX_UNKNOWN_TILT),
+    };
+    let from_surfaces = level_from_cells(&cells, &expected_up, max_tilt).map(|l| {
+        let yaw = reading.map_or(0.0, |a| a.yaw);
+        let yaw_sigma = reading.map_or(PI, |a| a.sigma.yaw);
+        Attitude::new(l.attitude.roll, l.attitude.pitch, yaw)
+            .with_sigma_deg(l.sigma.to_degrees(), yaw_sigma.to_degrees())
+    });
+    Levelled {
+        cells,
+        attitude: from_surfaces.or(reading),
+    }
+}
+
+/// Localizes `query` against `reference` when their rotation is not known well enough for the
+/// levelled search (see the module's text).
+///
+/// # Errors
+/// As [`crate::localize::localize`], and [`Error::NoSurfaces`] when neither the surfaces nor
+/// the readings give a rotation to search.
+pub fn localize_unlevelled(
+    reference: &Scan,
+    query: &Scan,
+    options: &LocalizeOptions,
+    prior: &RotationPrior,
+) -> Result<Localization> {
+    let start = std::time::Instant::now();
+    let (r, q) = rayon::join(|| levelled(reference), || levelled(query));
+    let levelled_by_surfaces = |l: &Levelled| {
+        l.attitude
+            .is_some_and(|a| a.sigma.roll_pitch <= crate::scan::LEVEL_TOLERANCE / 3.0)
+    };
+    let mut found = if levelled_by_surfaces(&r) && levelled_by_surfaces(&q) {
+        let (ra, qa) = (r.attitude.expect("levelled"), q.attitude.expect("levelled"));
+        search_headings(
+            reference, &r.cells, &ra, query, &q.cells, &qa, options, prior,
+        )?
+    } else {
+        let residual = RotationPrior {
+            max_tilt: match (r.attitude, q.attitude) {
+                (Some(ra), Some(qa)) => 3.0 * ra.sigma.roll_pitch.hypot(qa.sigma.roll_pitch),
+                _ => prior.max_tilt,
+            }
+            .min(prior.max_tilt),
+            heading_half_range: prior.heading_half_range,
+        };
+        tilted::localize_tilted(
+            reference,
+            r.attitude.as_ref(),
+            query,
+            q.attitude.as_ref(),
+            options,
+            &residual,
+        )?
+    };
+    found.time = start.elapsed();
+    Ok(found)
+}
+
+/// Both scans levelled: the heading hypotheses of their surfaces, each searched exactly over
+/// the window and ±[`HYPOTHESIS_HEADING_DEG`], the best kept; a different heading within the
+/// ambiguity ratio of its cost is a doubt.
+#[allow(clippy::too_many_arguments)]
+fn search_headings(
+    reference: &Scan,
+    reference_cells: &[OrientedCell],
+    reference_level: &Attitude,
+    query: &Scan,
+    query_cells: &[OrientedCell],
+    query_level: &Attitude,
+    options: &LocalizeOptions,
+    prior: &RotationPrior,
+) -> Result<Localization> {
+    let config = reference.sdem().config();
+    let (reference_sdem, hypotheses) = rayon::join(
+        || Sdem::from_points(reference.points_in_sensor(), reference_level, config),
+        || {
+            let r = rotated(reference_cells, &reference_level.rotation());
+            let q = rotated(query_cells, &query_level.rotation());
+            with_turned(
+                heading_hypotheses(&r, &q, prior.heading_half_range, MAX_HEADINGS),
+                prior.heading_half_range,
+            )
+        },
+    );
+    let reference_sdem = reference_sdem?;
+    if hypotheses.is_empty() {
+        return Err(Error::NoSurfaces { which: "query" });
+    }
+    let heading = HeadingWindow {
+        half_range_deg: HYPOTHESIS_HEADING_DEG,
+        step_deg: options.heading.step_deg,
+    };
+    let turned = |h: f64| {
+        let a = Attitude::new(query_level.roll, query_level.pitch, query_level.yaw + h)
+            .with_sigma_deg(
+                query_level.sigma.roll_pitch.to_degrees(),
+                HYPOTHESIS_HEADING_DEG / 3.0,
+            );
+        Sdem::from_points(query.points_in_sensor(), &a, config)
+    };
+    let full = LocalizeOptions {
+        heading,
+        ..options.clone()
+    };
+    // The hypotheses in the order of their correlation; the first searched in full, each later
+    // one only for a cost below what could still win or rival the best.
+    let screening = LocalizeOptions {
+        refine: false,
+        runner_up: false,
+        ..full.clone()
+    };
+    let mut best: Option<(f64, Localization)> = None;
+    let mut others: Vec<(f64, f64)> = Vec::new();
+    let mut first_error = None;
+    for &(h, _) in &hypotheses {
+        let query_sdem = match turned(h) {
+            Ok(s) => s,
+            Err(e) => {
+                first_error.get_or_insert(e);
+                continue;
+            }
+        };
+        let outcome = match &best {
+            None => localize(&reference_sdem, &query_sdem, &full).map(Some),
+            Some((_, b)) => localize_below(
+                &reference_sdem,
+                &query_sdem,
+                &screening,
+                options.ambiguous_cost_ratio * b.cost,
+            ),
+        };
+        match outcome {
+            Ok(None) => {}
+            Ok(Some(found)) => match &best {
+                Some((_, b)) if found.cost >= b.cost => others.push((h, found.cost)),
+                Some((bh, b)) => {
+                    // Better than the best so far: searched in full, the old best a rival.
+                    others.push((*bh, b.cost));
+                    let found = localize(&reference_sdem, &query_sdem, &full)?;
+                    best = Some((h, found));
+                }
+                None => best = Some((h, found)),
+            },
+            Err(e) => {
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    let Some((best_heading, mut found)) = best else {
+        return Err(first_error.unwrap_or(Error::NoSurfaces { which: "query" }));
+    };
+    let found_heading = wrap_pi(best_heading + found.heading_correction);
+    let rival = others
+        .iter()
+        .filter(|(h, _)| wrap_pi(h - found_heading).abs() > OTHER_ROTATION)
+        .filter(|(_, cost)| *cost < options.ambiguous_cost_ratio * found.cost)
+        .min_by(|a, b| a.1.total_cmp(&b.1));
+    if let Some(&(h, cost)) = rival {
+        found.doubts.push(Doubt::AnotherRotation {
+            angle_deg: wrap_pi(h - found_heading).abs().to_degrees(),
+            cost,
+            best_cost: found.cost,
+        });
+        found.diagnostics.ambiguous = true;
+        found.trusted = false;
+    }
+    Ok(found)
+}
+
+/// The hypotheses, and after them each one's half turn where the headings allow it and it is
+/// not there already: a scanner that sees the front half of the sphere, turned round, sees the
+/// other half of a room whose walls correlate best a half turn off.
+fn with_turned(hypotheses: Vec<(f64, f64)>, half_range: f64) -> Vec<(f64, f64)> {
+    let mut all = hypotheses.clone();
+    for &(h, score) in hypotheses.iter().take(2) {
+        let turned = wrap_pi(h + PI);
+        if turned.abs() <= half_range
+            && all
+                .iter()
+                .all(|(g, _)| wrap_pi(g - turned).abs() > 2.0 * HYPOTHESIS_HEADING_DEG.to_radians())
+        {
+            all.push((turned, score));
+        }
+    }
+    all
+}
