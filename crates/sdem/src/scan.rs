@@ -216,6 +216,43 @@ pub fn localize(reference: &Scan, query: &Scan, options: &LocalizeOptions) -> Re
     crate::localize::localize(&reference.sdem, &query.sdem, &options)
 }
 
+/// Eq. (1) between two scans at a given pose: how well `query`, placed at `reference_from_query`,
+/// compares with `reference` (the cost every search minimizes, with the search's compared
+/// points and overlap rule). The attitudes are not used: the pose says it all.
+///
+/// Useful to score a pose from elsewhere (odometry, another method, the truth of a simulation)
+/// on the same scale as [`Localization::cost`].
+///
+/// # Returns
+/// `None` when the scans share fewer cells at that pose than a candidate must
+/// ([`crate::cost::CostConfig::min_overlap`]).
+///
+/// # Errors
+/// [`Error::Invalid`] for an invalid cost configuration or scans on different grids.
+pub fn cost_at(
+    reference: &Scan,
+    query: &Scan,
+    reference_from_query: &crate::geometry::Pose,
+    cost: &crate::cost::CostConfig,
+) -> Result<Option<crate::cost::Correlation>> {
+    cost.validate()?;
+    let grid = reference.sdem.config();
+    if grid != query.sdem.config() {
+        return Err(Error::Invalid(
+            "the reference and the query are on different S-DEM grids".into(),
+        ));
+    }
+    // The reference's frame is the levelled frame of both: the query turned into it.
+    let turned = Attitude::from_rotation(&reference_from_query.rotation.to_rotation_matrix());
+    let (reference_sdem, query_sdem) = rayon::join(
+        || Sdem::from_points(&reference.points_in_sensor, &Attitude::default(), grid),
+        || Sdem::from_points(&query.points_in_sensor, &turned, grid),
+    );
+    let (reference_sdem, query_sdem) = (reference_sdem?, query_sdem?);
+    let mut correlator = crate::cost::Correlator::new(&reference_sdem, &query_sdem, cost)?;
+    Ok(correlator.evaluate(&reference_from_query.translation.vector, 0.0))
+}
+
 /// Roll and pitch readings whose difference is within this at three standard deviations are
 /// taken as they are: the levelled search and the 6-DoF refinement absorb such a tilt. Beyond
 /// it, the rotation is searched ([`crate::global`]). Radians (3°: the default readings, 0.5°

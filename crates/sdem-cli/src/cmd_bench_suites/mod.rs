@@ -151,6 +151,25 @@ struct PairRecord {
     trusted: bool,
     doubts: Vec<&'static str>,
     error: Option<String>,
+    /// Eq. (1) at the estimate and at the truth (`sdem::cost_at`, the search's cost), m²;
+    /// `None` where the scans share too few cells at that pose to compare.
+    cost_at_estimate: Option<f64>,
+    cost_at_truth: Option<f64>,
+}
+
+impl PairRecord {
+    /// A wrong pose that the scans themselves favour: eq. (1) is lower at the estimate than at
+    /// the truth, or the truth shares too few cells to be compared at all. No search over
+    /// this cost can find such a pair's truth; only a doubt can save it.
+    fn scans_favour_wrong(&self) -> bool {
+        !self.correct
+            && self.estimate.is_some()
+            && match (self.cost_at_estimate, self.cost_at_truth) {
+                (Some(estimate), Some(truth)) => estimate <= truth,
+                (_, None) => true,
+                (None, Some(_)) => false,
+            }
+    }
 }
 
 /// What a set of pairs came to.
@@ -173,6 +192,9 @@ struct TallyReport {
     wrong_flagged: usize,
     /// Right poses flagged all the same: false alarms.
     correct_flagged: usize,
+    /// Wrong poses the scans themselves favour over the truth (eq. 1 lower at the estimate,
+    /// or the truth not comparable): failures of the data and the cost, not of the search.
+    wrong_favoured_by_scans: usize,
     /// Errors count as infinitely wrong.
     translation_error_mm: Stats,
     rotation_error_deg: Stats,
@@ -596,12 +618,14 @@ fn run_part(
 /// sdem on one pair through the root API: both scans built (side by side), then localized.
 fn localize_case(case: &Case, options: &LocalizeOptions, success: (f64, f64)) -> PairRecord {
     let start = Instant::now();
-    let result = (|| -> sdem::Result<sdem::Localization> {
+    let result = (|| -> sdem::Result<(Scan, Scan, sdem::Localization)> {
         let (reference, query) = rayon::join(
             || Scan::from_points(&case.reference, case.reference_attitude),
             || Scan::from_points(&case.query, case.query_attitude),
         );
-        sdem::localize(&reference?, &query?, options)
+        let (reference, query) = (reference?, query?);
+        let found = sdem::localize(&reference, &query, options)?;
+        Ok((reference, query, found))
     })();
     let time_ms = elapsed_ms(start);
     let mut record = PairRecord {
@@ -620,9 +644,19 @@ fn localize_case(case: &Case, options: &LocalizeOptions, success: (f64, f64)) ->
         trusted: false,
         doubts: Vec::new(),
         error: None,
+        cost_at_estimate: None,
+        cost_at_truth: None,
     };
     match result {
-        Ok(found) => {
+        Ok((reference, query, found)) => {
+            let cost = |pose: &sdem::Pose| {
+                sdem::cost_at(&reference, &query, pose, &options.cost)
+                    .ok()
+                    .flatten()
+                    .map(|c| c.cost)
+            };
+            record.cost_at_estimate = cost(&found.reference_from_query);
+            record.cost_at_truth = cost(&case.truth);
             let (t, r) = pose_error(&case.truth, &found.reference_from_query);
             let r = r.to_degrees();
             record.translation_error_m = Some(t);
@@ -663,6 +697,7 @@ fn tally<'a>(group: &str, records: impl Iterator<Item = &'a PairRecord>) -> Tall
         wrong_trusted: count(&|r| r.trusted && !r.correct),
         wrong_flagged: count(&|r| !r.trusted && !r.correct),
         correct_flagged: count(&|r| !r.trusted && r.correct),
+        wrong_favoured_by_scans: count(&|r| r.scans_favour_wrong()),
         translation_error_mm: summarize(
             &records
                 .iter()

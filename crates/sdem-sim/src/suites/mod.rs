@@ -321,15 +321,12 @@ impl SuiteConfig {
         self.sensor.validate()
     }
 
-    /// A translation window that holds every query of these pairs, on the reference's axes
-    /// taken as level: `step_max_m` (+5 cm) across, and in height `step_z_max_m` plus what the
-    /// reference's tilt turns of the horizontal step into height (+5 cm).
+    /// A translation window that holds every query of these pairs, on the reference's levelled
+    /// axes (levelled by its reading, or by its own floor and ceiling without one):
+    /// `step_max_m` (+5 cm) across and `step_z_max_m` (+5 cm) in height.
     pub fn search_window(&self) -> SearchWindow {
         let across = self.step_max_m + 0.05;
-        let tilt = (2f64.sqrt() * self.reference_tilt_max_deg.to_radians())
-            .min(0.5 * std::f64::consts::PI);
-        let height = self.step_z_max_m + self.step_max_m * tilt.sin() + 0.05;
-        SearchWindow::around(&Vec3::zeros(), [across, across, height])
+        SearchWindow::around(&Vec3::zeros(), [across, across, self.step_z_max_m + 0.05])
     }
 }
 

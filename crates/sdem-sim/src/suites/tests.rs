@@ -113,11 +113,10 @@ fn unlevelled_poses_are_free_tilted_within_bounds_and_overlap() {
         assert!(pair.overlap >= config.min_overlap && pair.overlap <= 1.0);
         assert!(pair.reference_attitude.is_none() && pair.query_attitude.is_none());
         assert!(pair.reference_points.len() > 1000 && pair.query_points.len() > 1000);
-        // The window holds the offset on the reference's axes taken as level.
-        let offset = pair
-            .world_from_reference
-            .rotation
-            .inverse_transform_vector(&step);
+        // The window holds the offset on the reference's levelled axes (world axes turned by
+        // its heading).
+        let heading = attitude_of(&pair.world_from_reference).yaw;
+        let offset = nalgebra::Rotation3::from_axis_angle(&Vec3::z_axis(), -heading) * step;
         for axis in 0..3 {
             assert!(offset[axis] >= window.min[axis] && offset[axis] <= window.max[axis]);
         }
