@@ -198,6 +198,15 @@ impl CostConfig {
         self.min_overlap_cells.max(fraction).max(1)
     }
 
+    /// The highest cost a candidate may have to be a match, m²: `(1 − min_inlier_fraction) τ²`.
+    /// Every compared point beyond the truncation, or in a cell the reference does not see,
+    /// costs `τ²`, so a candidate costing no more keeps at least `min_inlier_fraction` of its
+    /// points within the truncation; the searches leave out every box bounded above it, so a
+    /// pair that matches nowhere in the window ends without scoring the whole window.
+    pub fn max_match_cost(&self) -> f64 {
+        (1.0 - self.min_inlier_fraction) * self.truncation_m * self.truncation_m
+    }
+
     /// `τ²` in single precision, as every term is computed.
     #[doc(hidden)]
     pub fn truncation_sq(&self) -> f32 {

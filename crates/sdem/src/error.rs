@@ -28,17 +28,20 @@ pub enum Error {
         /// The fewest a localization needs.
         needed: usize,
     },
-    /// No candidate in the search window shares enough cells with the query.
+    /// No candidate in the search window shares enough cells with the query at a cost low
+    /// enough to be a match ([`crate::cost::CostConfig::max_match_cost`]).
     #[error(
-        "no candidate in the window shares {needed} cells with the query \
-         S-DEM ({compared} compared); check the window and the attitudes, or lower the minimum \
-         overlap"
+        "no candidate in the window matches: none shares {needed} cells with the query \
+         S-DEM ({compared} compared) at a cost of at most {max_cost_m2:.5} m²; check the window \
+         and the attitudes, or lower the minimum overlap"
     )]
     NoOverlap {
         /// Cells a candidate must share.
         needed: usize,
         /// Query points compared.
         compared: usize,
+        /// The highest cost a match may have, m².
+        max_cost_m2: f64,
     },
     /// The best candidate in the window matches too few of the query's points.
     #[error(

@@ -432,7 +432,7 @@ pub(crate) fn localize_below(
         reference,
         config,
         full_turn,
-        cap,
+        cap.min(config.cost.max_match_cost()),
     );
     if best.is_none() && cap.is_finite() {
         return Ok(None);
@@ -525,10 +525,10 @@ pub(crate) fn localize_below(
 
 /// Whether a grid optimum on the window's edge (`idx`) is one in truth: without a refinement,
 /// always; with one (`refined`: its offset and heading correction), when the refined pose lies
-/// within half a step of the edge it was found on, or beyond. A grid coarser than the pose's
-/// precision (a LiDAR's 15 cm) whose step does not divide the window puts an optimum well
-/// inside it on the last candidate (with ±30 cm of height at 16 cm steps, the candidates are
-/// −30, −14, +2 and +18 cm, and +18 cm is an edge): the refinement says where the pose is.
+/// within half a step (at most [`EDGE_MARGIN_M`]) of the edge it was found on, or beyond. A
+/// grid coarser than the pose's precision (a LiDAR's 15–25 cm) puts an optimum well inside the
+/// window on its last candidate (with ±15 cm of height at 25 cm steps every candidate is an
+/// edge): the refinement, which the window does not bound, says where the pose is.
 fn stays_on_edge(
     grid: &CandidateGrid,
     idx: Index,
@@ -545,7 +545,12 @@ fn stays_on_edge(
             return false;
         }
         let (value, lo, hi, half) = if a < 3 {
-            (offset[a], window.min[a], window.max[a], 0.5 * grid.step)
+            (
+                offset[a],
+                window.min[a],
+                window.max[a],
+                (0.5 * grid.step).min(EDGE_MARGIN_M),
+            )
         } else {
             let (first, last) = (grid.yaws[0], grid.yaws[grid.yaws.len() - 1]);
             (heading, first, last, 0.5 * (grid.yaws[1] - first).abs())
@@ -553,6 +558,11 @@ fn stays_on_edge(
         (low_edge && value <= lo + half) || (high_edge && value >= hi - half)
     })
 }
+
+/// A refined position this close to the window's edge (or half a step, if less) is on it,
+/// metres: the refinement is millimetre-precise, and a basin whose bottom lies a few
+/// centimetres inside the window is not cut by it.
+const EDGE_MARGIN_M: f64 = 0.02;
 
 /// Rejects a configuration [`localize`] cannot run: an invalid cost, refinement or heading
 /// window, branch-and-bound with a cost other than the projective one, or a step that is not a
@@ -630,6 +640,7 @@ fn best_candidate(
         return Err(Error::NoOverlap {
             needed: correlator.min_overlap(),
             compared: correlator.compared_points(),
+            max_cost_m2: config.cost.max_match_cost(),
         });
     };
     let grid_index = grid.index(flat);
@@ -640,6 +651,7 @@ fn best_candidate(
         (correlator.evaluate(&grid_offset, grid_heading)).ok_or_else(|| Error::NoOverlap {
             needed: correlator.min_overlap(),
             compared: correlator.compared_points(),
+            max_cost_m2: config.cost.max_match_cost(),
         })?;
     let compared = correlator.compared_points();
     let needed_inliers = (config.cost.min_inlier_fraction * compared as f64).ceil();
