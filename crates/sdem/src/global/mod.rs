@@ -39,6 +39,7 @@ use crate::level::{heading_hypotheses, level_from_cells, oriented_cells, rotated
 use crate::localize::{localize, localize_below, HeadingWindow, Localization, LocalizeOptions};
 use crate::scan::Scan;
 use crate::sdem::Sdem;
+use crate::search::matched_heading_step;
 use nalgebra::Rotation3;
 use std::f64::consts::PI;
 
@@ -276,9 +277,26 @@ fn search_headings(
             }
         }
     }
-    let Some((best_heading, mut found)) = best else {
+    let Some((mut best_heading, mut found)) = best else {
         return Err(first_error.unwrap_or(Error::NoSurfaces { which: "query" }));
     };
+    // A hypothesis's heading window is ours, not the caller's: an optimum on its edge means
+    // the correlation's peak was blunt, so the search is centred on it and run again.
+    let widest = turned(best_heading).map_or(f64::INFINITY, |q| {
+        (heading
+            .samples(matched_heading_step(&q, full.step_m))
+            .into_iter())
+        .fold(0.0f64, |m, h| m.max(h.abs()))
+    });
+    if found.grid_heading.abs() >= widest - 1e-9 {
+        let centred = wrap_pi(best_heading + found.grid_heading);
+        if let Ok(again) = turned(centred).and_then(|q| localize(&reference_sdem, &q, &full)) {
+            if again.cost <= found.cost {
+                others.push((best_heading, found.cost));
+                (best_heading, found) = (centred, again);
+            }
+        }
+    }
     let found_heading = wrap_pi(best_heading + found.heading_correction);
     let rival = others
         .iter()
