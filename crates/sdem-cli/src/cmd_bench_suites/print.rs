@@ -19,7 +19,7 @@ pub(super) fn print_report(report: &Report) {
     }
     println!();
     println!(
-        "WRONG POSES REPORTED AS TRUSTED, all parts: {} (target 0)",
+        "WRONG POSES REPORTED AS TRUSTED, all parts with a reliable truth: {} (target 0)",
         report.wrong_trusted
     );
 }
@@ -83,10 +83,23 @@ fn print_part(part: &PartReport) {
         );
     }
     if let Some(all) = &part.all {
+        if !part.truth_reliable {
+            println!(
+                "  this part's truth is doubted by its own README (up to ~0.18 m a frame off at \
+                 the start): its errors and WRONG+TRUSTED measure the truth as much as sdem; the \
+                 peers' agreement with sdem is the check, and the total leaves it out"
+            );
+        }
         println!(
             "  wrong poses reported as trusted: {} of {} (target 0); wrong and flagged: {}; right \
-             but flagged: {}; errors (no pose): {}",
-            all.wrong_trusted, all.pairs, all.wrong_flagged, all.correct_flagged, all.errors
+             but flagged: {}; errors (no pose): {}; wrong poses the scans favour over the truth \
+             (eq. 1 lower there, or the truth not comparable): {}",
+            all.wrong_trusted,
+            all.pairs,
+            all.wrong_flagged,
+            all.correct_flagged,
+            all.errors,
+            all.wrong_favoured_by_scans
         );
         if !all.doubt_kinds.is_empty() {
             let kinds: Vec<String> = all
