@@ -219,10 +219,12 @@ mod dataset;
 mod error;
 mod import;
 mod mapfile;
+mod mcap_out;
 mod pcd;
 mod ply;
 mod points;
 mod poses;
+pub mod rosbag;
 mod sensor_file;
 mod sweep;
 mod voxels;
@@ -242,6 +244,9 @@ pub use import::{
     UOS_MIN_RANGE_M,
 };
 pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
+pub use mcap_out::{
+    point_cloud2_message, write_map_mcap, MapScene, McapSummary, MAP_FRAME, ROBOT_FRAME,
+};
 pub use ply::write_points_ply;
 pub use points::{read_points, PointFormat, MAX_MEDIAN_RANGE_M, POINT_EXTENSIONS};
 pub use poses::{
