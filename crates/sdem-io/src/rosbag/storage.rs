@@ -86,6 +86,9 @@ impl Damage {
     /// The damage in words: the file, where, the last whole message and the cause.
     pub fn describe(&self) -> String {
         let at = match self.byte_offset {
+            Some(offset) if offset >= self.file_size => {
+                format!("where it ends, at byte {}", self.file_size)
+            }
             Some(offset) => format!("at byte {offset} of {}", self.file_size),
             None => format!("({} bytes)", self.file_size),
         };
