@@ -205,6 +205,15 @@
 //!   `attitude.csv` is written (no gyro/compass).
 //!
 //! Scans are renumbered from `000000` in the order of their source numbers.
+//!
+//! # ROS 2 bags ([`rosbag`]) and MCAP output ([`write_map_mcap`])
+//!
+//! [`rosbag::import_rosbag`] makes a dataset folder of a ROS 2 bag (rosbag2 MCAP or SQLite3
+//! storage, or one `.mcap` file): scans from `PointCloud2` or a tilting laser's `LaserScan`
+//! lines, `attitude.csv` from an `Imu`, `odometry.txt` from an `Odometry` topic, all at each
+//! scan's stamp and in the sensor frame through `/tf_static`; [`rosbag::bag_info`] says what a
+//! bag holds. [`write_map_mcap`] writes a mapped run as MCAP with ROS 2 schemas for Foxglove and
+//! RViz. The module documentations give the details.
 
 pub use crate::error::{Error, Result};
 use sdem::geometry::Vec3;

@@ -54,7 +54,7 @@ pub struct McapSummary {
     /// The messages written.
     pub messages: u64,
     /// Each topic with its type and message count.
-    pub topics: Vec<(String, String, u64)>,
+    pub topics: TopicCounts,
 }
 
 fn stamp_ns(stop: usize) -> u64 {
@@ -210,7 +210,10 @@ impl Out {
     }
 }
 
-fn encode(scene: &MapScene) -> mcap::McapResult<(Vec<u8>, Vec<(String, String, u64)>)> {
+/// Each topic with its type and message count.
+type TopicCounts = Vec<(String, String, u64)>;
+
+fn encode(scene: &MapScene) -> mcap::McapResult<(Vec<u8>, TopicCounts)> {
     let options = mcap::WriteOptions::new()
         .profile("ros2")
         .library(concat!("sdem-io/", env!("CARGO_PKG_VERSION")));
