@@ -174,7 +174,7 @@ pub fn import_rosbag(
             total,
         })
     })?;
-    check_damage(&bag, &collected, options)?;
+    check_damage(&collected, options)?;
     let tree = TfTree::new(
         &collected.tf_static,
         std::mem::take(&mut collected.tf_moving),
@@ -281,8 +281,8 @@ fn check_options(options: &BagImportOptions) -> Result<()> {
     Ok(())
 }
 
-/// Refuses a damaged bag unless `salvage`; then compares what was read with metadata.yaml.
-fn check_damage(bag: &Bag, collected: &Collected, options: &BagImportOptions) -> Result<()> {
+/// Refuses a damaged bag unless `salvage`.
+fn check_damage(collected: &Collected, options: &BagImportOptions) -> Result<()> {
     let Some(damage) = &collected.damage else {
         return Ok(());
     };
@@ -293,7 +293,6 @@ fn check_damage(bag: &Bag, collected: &Collected, options: &BagImportOptions) ->
             damage.describe()
         )));
     }
-    let _ = bag;
     Ok(())
 }
 
