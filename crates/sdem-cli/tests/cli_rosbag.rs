@@ -381,10 +381,16 @@ fn sdem_info_lists_topics_types_counts_and_rates() {
 
 #[test]
 fn a_bag_cut_short_is_refused_naming_the_damage_and_salvaged_on_request() {
+    for (storage, name) in [("mcap", "bag.mcap"), ("sqlite3", "bag.db3")] {
+        cut_short(storage, name);
+    }
+}
+
+fn cut_short(storage: &str, name: &str) {
     let dir = tempfile::tempdir().unwrap();
     let bag = dir.path().join("bag");
-    make_bag(simulated(), &bag, "mcap", &[]);
-    let file = bag.join("bag.mcap");
+    make_bag(simulated(), &bag, storage, &[]);
+    let file = bag.join(name);
     let bytes = std::fs::read(&file).unwrap();
     std::fs::write(&file, &bytes[..bytes.len() * 7 / 10]).unwrap();
     let ds = dir.path().join("ds");
@@ -397,7 +403,7 @@ fn a_bag_cut_short_is_refused_naming_the_damage_and_salvaged_on_request() {
             ds.to_str().unwrap(),
         ],
     );
-    assert!(e.contains("bag.mcap") && e.contains("cut short"), "{e}");
+    assert!(e.contains(name) && e.contains("damaged"), "{e}");
     assert!(
         e.contains("the last whole message is") && e.contains("--salvage"),
         "{e}"

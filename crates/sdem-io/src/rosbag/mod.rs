@@ -46,6 +46,7 @@ mod metadata;
 mod pointcloud;
 mod select;
 mod series;
+mod sqlite_pages;
 mod stops;
 mod storage;
 mod sweeps;

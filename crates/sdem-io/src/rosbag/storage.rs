@@ -80,6 +80,9 @@ pub struct Damage {
     pub messages_read: u64,
     /// The topic and index of the last message read whole.
     pub last_message: Option<(String, u64)>,
+    /// Messages recovered past the damage from the pages of an SQLite file that SQLite could
+    /// not read on (they are among `messages_read`).
+    pub recovered_from_pages: u64,
 }
 
 impl Damage {
@@ -96,8 +99,12 @@ impl Damage {
             Some((topic, index)) => format!("the last whole message is {topic} #{index}"),
             None => "no message before it could be read".to_string(),
         };
+        let recovered = match self.recovered_from_pages {
+            0 => String::new(),
+            n => format!(" ({n} of them recovered from the file's pages past the damage)"),
+        };
         format!(
-            "{} is damaged {at}: {}; {} messages read, {last}",
+            "{} is damaged {at}: {}; {} messages read{recovered}, {last}",
             self.file.display(),
             self.cause,
             self.messages_read
@@ -311,19 +318,71 @@ impl Bag {
             None
         };
         let db_path = unpacked.as_ref().map_or(file, |t| t.path.as_path());
-        let damage = |state: &ReadState, e: rusqlite::Error| {
-            Ok(Some(state.damage(file, None, size, format!("SQLite: {e}"))))
-        };
         let flags =
             rusqlite::OpenFlags::SQLITE_OPEN_READ_ONLY | rusqlite::OpenFlags::SQLITE_OPEN_NO_MUTEX;
         let db = match rusqlite::Connection::open_with_flags(db_path, flags) {
             Ok(db) => db,
-            Err(e) => return damage(state, e),
+            Err(e) => return Ok(Some(state.damage(file, None, size, format!("SQLite: {e}")))),
         };
+        // A file cut short holds fewer pages than its header says, which SQLite calls corrupt
+        // unless the schema is writable; read-only, that only makes it read what is there.
+        let _ = db.execute_batch("PRAGMA writable_schema = ON");
         let topics = match sqlite_topics(&db) {
             Ok(t) => t,
-            Err(e) => return damage(state, e),
+            Err(e) => return Ok(Some(state.damage(file, None, size, format!("SQLite: {e}")))),
         };
+        let mut last_id = 0i64;
+        let stopped = self.sqlite_rows(
+            &db,
+            file,
+            size,
+            &topics,
+            &mut last_id,
+            state,
+            visit,
+            progress,
+        )?;
+        let Some(e) = stopped else {
+            progress(state.bytes_before + size);
+            return Ok(None);
+        };
+        // SQLite stops where the file's index is lost; the rows may still lie in its pages.
+        let mut damage = state.damage(file, None, size, format!("SQLite: {e}"));
+        for row in super::sqlite_pages::rows_after(db_path, last_id) {
+            let Some(topic) = topics.get(&row.topic_id) else {
+                continue;
+            };
+            self.deliver(
+                state,
+                file,
+                &topic.0,
+                &topic.1,
+                &topic.2,
+                row.timestamp,
+                &row.data,
+                visit,
+            )?;
+            damage.recovered_from_pages += 1;
+        }
+        damage.messages_read = state.messages_read;
+        damage.last_message.clone_from(&state.last);
+        Ok(Some(damage))
+    }
+
+    /// Reads the `messages` table in id order until its end (`None`) or an error of SQLite's
+    /// (returned); `last_id` is the id of the last row delivered.
+    #[allow(clippy::too_many_arguments)]
+    fn sqlite_rows(
+        &self,
+        db: &rusqlite::Connection,
+        file: &Path,
+        size: u64,
+        topics: &HashMap<i64, (String, String, String)>,
+        last_id: &mut i64,
+        state: &mut ReadState,
+        visit: &mut dyn FnMut(&BagMessage) -> Result<()>,
+        progress: &mut dyn FnMut(u64),
+    ) -> Result<Option<rusqlite::Error>> {
         let rows_total: u64 = db
             .query_row("SELECT MAX(id) FROM messages", [], |r| {
                 r.get::<_, Option<i64>>(0)
@@ -332,31 +391,32 @@ impl Bag {
             .flatten()
             .map_or(0, |v| v.max(0) as u64);
         let mut statement =
-            match db.prepare("SELECT topic_id, timestamp, data FROM messages ORDER BY id") {
+            match db.prepare("SELECT id, topic_id, timestamp, data FROM messages ORDER BY id") {
                 Ok(s) => s,
-                Err(e) => return damage(state, e),
+                Err(e) => return Ok(Some(e)),
             };
         let mut rows = match statement.query([]) {
             Ok(r) => r,
-            Err(e) => return damage(state, e),
+            Err(e) => return Ok(Some(e)),
         };
         let mut n = 0u64;
         loop {
             let row = match rows.next() {
                 Ok(Some(row)) => row,
-                Ok(None) => break,
-                Err(e) => return damage(state, e),
+                Ok(None) => return Ok(None),
+                Err(e) => return Ok(Some(e)),
             };
             let fields = (|| -> rusqlite::Result<_> {
                 Ok((
                     row.get::<_, i64>(0)?,
                     row.get::<_, i64>(1)?,
-                    row.get_ref(2)?.as_blob()?,
+                    row.get::<_, i64>(2)?,
+                    row.get_ref(3)?.as_blob()?,
                 ))
             })();
-            let (topic_id, timestamp, data) = match fields {
+            let (id, topic_id, timestamp, data) = match fields {
                 Ok(f) => f,
-                Err(e) => return damage(state, e),
+                Err(e) => return Ok(Some(e)),
             };
             let Some(topic) = topics.get(&topic_id) else {
                 return Err(Error::parse(
@@ -371,13 +431,12 @@ impl Bag {
             self.deliver(
                 state, file, &topic.0, &topic.1, &topic.2, timestamp, data, visit,
             )?;
+            *last_id = id;
             n += 1;
             if n % 256 == 0 && rows_total > 0 {
                 progress(state.bytes_before + size * n.min(rows_total) / rows_total);
             }
         }
-        progress(state.bytes_before + size);
-        Ok(None)
     }
 }
 
@@ -442,6 +501,7 @@ impl ReadState {
             cause,
             messages_read: self.messages_read,
             last_message: self.last.clone(),
+            recovered_from_pages: 0,
         }
     }
 }
