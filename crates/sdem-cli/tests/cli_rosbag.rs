@@ -345,6 +345,80 @@ fn a_tilting_laser_bag_becomes_one_scan_per_sweep_in_the_sensor_model() {
 }
 
 #[test]
+fn a_laser_tilted_on_tf_gives_the_same_sweeps_in_its_parent_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("bag");
+    make_bag(simulated(), &bag, "sqlite3", &["--laser", "--laser-tf"]);
+    let ds = dir.path().join("ds");
+    let summary = run_json(
+        dir.path(),
+        &[
+            "import",
+            bag.to_str().unwrap(),
+            "--out",
+            ds.to_str().unwrap(),
+            "--json",
+        ],
+    );
+    assert_eq!(summary["stops"], 12, "{summary}");
+    assert_eq!(summary["sensor_frame"], "tilt_base", "{summary}");
+    assert_rows_close(
+        &ds.join("attitude.csv"),
+        &simulated().join("attitude.csv"),
+        1e-6,
+    );
+    let name = "scans/000005.ply";
+    let floats = |p: &Path| -> Vec<f32> {
+        sdem_points(p)
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect()
+    };
+    let (a, b) = (floats(&ds.join(name)), floats(&simulated().join(name)));
+    assert_eq!(a.len(), b.len());
+    assert!(a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-4));
+}
+
+#[test]
+fn a_lidar_scanning_at_10_hz_gives_a_stop_per_distance_travelled() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("bag");
+    make_bag(simulated(), &bag, "mcap", &["--cloud-rate", "10"]);
+    let ds = dir.path().join("ds");
+    let summary = run_json(
+        dir.path(),
+        &[
+            "import",
+            bag.to_str().unwrap(),
+            "--out",
+            ds.to_str().unwrap(),
+            "--stop-distance",
+            "0.2",
+            "--stop-angle",
+            "5",
+            "--json",
+        ],
+    );
+    // 40 clouds at each of the 12 places; one stop where the robot arrives at each.
+    assert_eq!(summary["scans_in_bag"], 480, "{summary}");
+    assert_eq!(summary["stops"], 12, "{summary}");
+    assert!(
+        summary["stop_rule"].as_str().unwrap().contains("travelled"),
+        "{summary}"
+    );
+    assert_rows_close(
+        &ds.join("attitude.csv"),
+        &simulated().join("attitude.csv"),
+        1e-6,
+    );
+    assert_rows_close(
+        &ds.join("odometry.txt"),
+        &simulated().join("odometry.txt"),
+        1e-9,
+    );
+}
+
+#[test]
 fn sdem_info_lists_topics_types_counts_and_rates() {
     let dir = tempfile::tempdir().unwrap();
     let bag = dir.path().join("bag");
