@@ -269,8 +269,10 @@ impl Bag {
             Box::new(std::io::BufReader::with_capacity(1 << 20, counting))
         };
         let options = mcap::sans_io::LinearReaderOptions::default()
-            .with_validate_chunk_crcs(true)
-            .with_record_length_limit(record_limit(size, self.file_compressed));
+            // A chunk's CRC checked before any of its messages is used: a changed byte must
+            // not reach the import as a message.
+            .with_prevalidate_chunk_crcs(true)
+            .with_record_length_limit(usize::try_from(MCAP_RECORD_LIMIT).unwrap_or(usize::MAX));
         let reader = mcap::io::MessageReader::new_with_options(source, options);
         for (n, message) in reader.enumerate() {
             let message = match message {
@@ -440,16 +442,9 @@ impl Bag {
     }
 }
 
-/// The largest record the MCAP reader may allocate for: the file's size (a length beyond it is
-/// damage), or 4 GiB in a compressed file.
-fn record_limit(size: u64, compressed: bool) -> usize {
-    let limit = if compressed {
-        4 << 30
-    } else {
-        size.max(1 << 16)
-    };
-    usize::try_from(limit).unwrap_or(usize::MAX)
-}
+/// The largest record or chunk the MCAP reader accepts, bytes: a length beyond it is damage.
+/// Not the file's size: a chunk of zeros may unpack to a thousand times its stored size.
+const MCAP_RECORD_LIMIT: u64 = 4 << 30;
 
 /// An MCAP reading error in words, naming the likely cause of the usual ones.
 fn mcap_cause(e: &mcap::McapError) -> String {
