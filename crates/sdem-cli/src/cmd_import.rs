@@ -14,7 +14,8 @@ pub struct Args {
     /// poses.txt, calib.txt), or a ROS 2 bag (a rosbag2 folder, or one .mcap or .db3 file).
     source: PathBuf,
     /// The dataset folder to write (scans/ and, for 3DTK, odometry.txt, attitude.csv and
-    /// poses_slam6d.txt; for KITTI, poses_truth.txt).
+    /// poses_slam6d.txt; for KITTI, poses_truth.txt; for a ROS 2 bag, attitude.csv, odometry.txt
+    /// and, for a tilting laser, sensor.toml).
     #[arg(long)]
     out: PathBuf,
     /// The source's format [default: guessed: a bag means ros2, velodyne/ means kitti,
