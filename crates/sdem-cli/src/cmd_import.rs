@@ -1,4 +1,5 @@
-//! `sdem import`: a 3DTK folder or a KITTI odometry sequence turned into a dataset folder.
+//! `sdem import`: a 3DTK folder, a KITTI odometry sequence or a ROS 2 bag turned into a
+//! dataset folder.
 
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
@@ -8,15 +9,17 @@ use std::path::PathBuf;
 /// Arguments of `sdem import`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The folder to import: a 3DTK folder (scanNNN.3d + scanNNN.pose, optionally
-    /// slam6d_frames_2009/ or scanNNN.frames) or a KITTI odometry sequence (velodyne/NNNNNN.bin,
-    /// poses.txt, calib.txt).
+    /// What to import: a 3DTK folder (scanNNN.3d + scanNNN.pose, optionally
+    /// slam6d_frames_2009/ or scanNNN.frames), a KITTI odometry sequence (velodyne/NNNNNN.bin,
+    /// poses.txt, calib.txt), or a ROS 2 bag (a rosbag2 folder, or one .mcap or .db3 file).
     source: PathBuf,
     /// The dataset folder to write (scans/ and, for 3DTK, odometry.txt, attitude.csv and
-    /// poses_slam6d.txt; for KITTI, poses_truth.txt).
+    /// poses_slam6d.txt; for KITTI, poses_truth.txt; for a ROS 2 bag, attitude.csv, odometry.txt
+    /// and, for a tilting laser, sensor.toml).
     #[arg(long)]
     out: PathBuf,
-    /// The source's format [default: guessed: velodyne/ means kitti, scanNNN.3d means 3dtk].
+    /// The source's format [default: guessed: a bag means ros2, velodyne/ means kitti,
+    /// scanNNN.3d means 3dtk].
     #[arg(long, value_enum)]
     format: Option<Format>,
     /// The first scan number to import (the NNN in the file names).
@@ -37,6 +40,8 @@ pub struct Args {
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    bag: crate::cmd_import_bag::BagArgs,
 }
 
 /// The `--format` values.
@@ -47,14 +52,35 @@ enum Format {
     Uos3dtk,
     /// KITTI odometry: velodyne/NNNNNN.bin, poses.txt, calib.txt.
     Kitti,
+    /// A ROS 2 bag: a rosbag2 folder (metadata.yaml + .mcap or .db3), or one .mcap file.
+    Ros2,
 }
 
 /// Runs `sdem import`.
 pub fn run(args: Args) -> Result<()> {
     check_args(&args)?;
+    let is_bag = match args.format {
+        Some(Format::Ros2) => true,
+        Some(_) => false,
+        None => sdem_io::rosbag::is_rosbag(&args.source),
+    };
+    if is_bag {
+        if args.first != 0 || args.count.is_some() || args.frames.is_some() {
+            bail!("--first, --count and --frames are for 3DTK and KITTI folders; a bag's stops are chosen with --stops");
+        }
+        clear_for_force(&args)?;
+        return crate::cmd_import_bag::run(&args.source, &args.out, &args.bag, args.json);
+    }
+    if let Some(flag) = args.bag.given().first() {
+        bail!(
+            "{flag} is for ROS 2 bags; {} is not one (a rosbag2 folder with metadata.yaml, or \
+             an .mcap or .db3 file)",
+            args.source.display()
+        );
+    }
     let format = args.format.map(|f| match f {
         Format::Uos3dtk => ImportFormat::Uos3dtk,
-        Format::Kitti => ImportFormat::Kitti,
+        Format::Kitti | Format::Ros2 => ImportFormat::Kitti,
     });
     let options = ImportOptions {
         first: args.first,
@@ -65,14 +91,7 @@ pub fn run(args: Args) -> Result<()> {
         Some(f) => f,
         None => ImportFormat::detect(&args.source)?,
     };
-    if args.force {
-        sdem_io::clear_dataset(&args.out).with_context(|| {
-            format!(
-                "cannot remove the old dataset in {} for --force",
-                args.out.display()
-            )
-        })?;
-    }
+    clear_for_force(&args)?;
     let summary = import_dataset(&args.source, &args.out, Some(format), &options)?;
     if args.json {
         return print_json(&summary);
@@ -81,11 +100,24 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
+/// With `--force`, removes the old dataset in `--out`.
+fn clear_for_force(args: &Args) -> Result<()> {
+    if args.force {
+        sdem_io::clear_dataset(&args.out).with_context(|| {
+            format!(
+                "cannot remove the old dataset in {} for --force",
+                args.out.display()
+            )
+        })?;
+    }
+    Ok(())
+}
+
 /// Checks the source, `--count`, and that `--out` is a folder that is empty or may be replaced.
 fn check_args(args: &Args) -> Result<()> {
     if !args.source.exists() {
         bail!(
-            "{} does not exist; import reads a 3DTK folder or a KITTI sequence folder",
+            "{} does not exist; import reads a 3DTK folder, a KITTI sequence folder or a ROS 2 bag",
             args.source.display()
         );
     }

@@ -64,6 +64,10 @@ pub struct Args {
     /// counted and labelled DOUBTFUL (`"trusted": false` with their doubts in report.json).
     #[arg(long)]
     accept_doubtful: bool,
+    /// Also write the map as MCAP for Foxglove and RViz (see `sdem export --mcap`); an
+    /// existing file is replaced only with --force.
+    #[arg(long, value_name = "OUT.mcap")]
+    mcap: Option<PathBuf>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -85,6 +89,9 @@ struct Report {
     free_voxels: usize,
     map_points: usize,
     pictures: Vec<PathBuf>,
+    /// The MCAP file written with --mcap.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    mcap: Option<sdem_io::McapSummary>,
     /// Where the attitudes came from: `readings` (attitude.csv) or `unknown`, the readings' σ
     /// and where it came from, in figures and words.
     attitude: SlamAttitude,
@@ -190,6 +197,7 @@ struct Outputs {
     poses: Vec<Pose>,
     cloud: Vec<Vec3>,
     pictures: Vec<PathBuf>,
+    mcap: Option<sdem_io::McapSummary>,
 }
 
 /// Runs `sdem slam`: done, or done with doubts (exit status 3) when a step of the map has
@@ -199,6 +207,9 @@ pub fn run(args: Args) -> Result<Outcome> {
     let dataset = Dataset::open(&args.dataset)?;
     let sigma = parse_sigma(&args, &dataset)?;
     let map_dir = args.out.join(MAP_DIR);
+    if let Some(mcap) = &args.mcap {
+        crate::export_mcap::check_target(mcap, args.force)?;
+    }
     prepare_out(&args, &map_dir)?;
     let mut run = if args.resume {
         resume(&args, &map_dir)?
@@ -449,10 +460,15 @@ fn write_outputs(args: &Args, slam: &Slam) -> Result<Outputs> {
             &cloud,
         )?
     };
+    let mcap = match &args.mcap {
+        Some(path) => Some(crate::export_mcap::write(path, slam)?),
+        None => None,
+    };
     Ok(Outputs {
         poses,
         cloud,
         pictures,
+        mcap,
     })
 }
 
@@ -497,6 +513,7 @@ fn make_report(
         poses,
         cloud,
         pictures,
+        mcap,
     } = outputs;
     let truth = match &dataset.truth {
         Some(t) => Some(trajectory_errors(&t[..poses.len()], &poses)?),
@@ -541,6 +558,7 @@ fn make_report(
         free_voxels,
         map_points: cloud.len(),
         pictures,
+        mcap,
         attitude,
         trusted: doubtful_scans.is_empty(),
         doubtful_steps: doubtful_scans.len(),
@@ -597,6 +615,14 @@ fn print_text(args: &Args, report: &Report) {
             ", plan.png, section.png, panorama.png, slice.png, cost.png, viewer.html"
         }
     );
+    if let (Some(path), Some(m)) = (&args.mcap, &report.mcap) {
+        println!(
+            "wrote {} ({:.1} MiB, {} messages) for Foxglove and RViz",
+            path.display(),
+            m.bytes as f64 / (1024.0 * 1024.0),
+            m.messages
+        );
+    }
 }
 
 /// Prints how many steps are doubtful, then each doubtful step's doubts, one `DOUBT:` line each.

@@ -12,11 +12,15 @@ mod cmd_bench;
 mod cmd_bench_faults;
 mod cmd_bench_suites;
 mod cmd_demo;
+mod cmd_export;
 mod cmd_import;
+mod cmd_import_bag;
+mod cmd_info;
 mod cmd_localize;
 mod cmd_simulate;
 mod cmd_slam;
 mod cmd_view;
+mod export_mcap;
 mod output;
 mod progress;
 
@@ -63,8 +67,12 @@ enum Command {
     /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs;
     /// --faults and --suite measure other cases.
     Bench(cmd_bench::Args),
-    /// Turn a 3DTK folder or a KITTI odometry sequence into a dataset folder.
+    /// Turn a 3DTK folder, a KITTI odometry sequence or a ROS 2 bag into a dataset folder.
     Import(cmd_import::Args),
+    /// Say what a ROS 2 bag holds: files, storage, time span, topics with types, counts, rates.
+    Info(cmd_info::Args),
+    /// Write a saved map for other tools: --mcap for Foxglove and RViz.
+    Export(cmd_export::Args),
     /// Pictures for people: S-DEM panorama and slice, map plan and section, cost surface, and
     /// the 3D viewer page.
     View(cmd_view::Args),
@@ -79,6 +87,8 @@ fn main() -> ExitCode {
         Command::Localize(args) => cmd_localize::run(args),
         Command::Bench(args) => done(cmd_bench::run(args)),
         Command::Import(args) => done(cmd_import::run(args)),
+        Command::Info(args) => done(cmd_info::run(args)),
+        Command::Export(args) => done(cmd_export::run(args)),
         Command::Slam(args) => cmd_slam::run(args),
         Command::View(args) => done(cmd_view::run(args)),
     };

@@ -205,6 +205,15 @@
 //!   `attitude.csv` is written (no gyro/compass).
 //!
 //! Scans are renumbered from `000000` in the order of their source numbers.
+//!
+//! # ROS 2 bags ([`rosbag`]) and MCAP output ([`write_map_mcap`])
+//!
+//! [`rosbag::import_rosbag`] makes a dataset folder of a ROS 2 bag (rosbag2 MCAP or SQLite3
+//! storage, or one `.mcap` file): scans from `PointCloud2` or a tilting laser's `LaserScan`
+//! lines, `attitude.csv` from an `Imu`, `odometry.txt` from an `Odometry` topic, all at each
+//! scan's stamp and in the sensor frame through `/tf_static`; [`rosbag::bag_info`] says what a
+//! bag holds. [`write_map_mcap`] writes a mapped run as MCAP with ROS 2 schemas for Foxglove and
+//! RViz. The module documentations give the details.
 
 pub use crate::error::{Error, Result};
 use sdem::geometry::Vec3;
@@ -219,10 +228,12 @@ mod dataset;
 mod error;
 mod import;
 mod mapfile;
+mod mcap_out;
 mod pcd;
 mod ply;
 mod points;
 mod poses;
+pub mod rosbag;
 mod sensor_file;
 mod sweep;
 mod voxels;
@@ -242,6 +253,9 @@ pub use import::{
     UOS_MIN_RANGE_M,
 };
 pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
+pub use mcap_out::{
+    point_cloud2_message, write_map_mcap, MapScene, McapSummary, MAP_FRAME, ROBOT_FRAME,
+};
 pub use ply::write_points_ply;
 pub use points::{read_points, PointFormat, MAX_MEDIAN_RANGE_M, POINT_EXTENSIONS};
 pub use poses::{

@@ -227,7 +227,7 @@ fn select(
 }
 
 /// Refuses to import into a folder that holds a dataset entry.
-fn check_out(out: &Path) -> Result<()> {
+pub(crate) fn check_out(out: &Path) -> Result<()> {
     if out.exists() && !out.is_dir() {
         return Err(Error::Invalid(format!(
             "{} is not a folder; import writes a dataset folder",
@@ -248,7 +248,7 @@ fn check_out(out: &Path) -> Result<()> {
 
 /// Runs the writing part of an import; on error removes what it wrote (the folder held no
 /// dataset entry before, see [`check_out`]).
-fn write_or_roll_back(out: &Path, write: impl FnOnce() -> Result<()>) -> Result<()> {
+pub(crate) fn write_or_roll_back(out: &Path, write: impl FnOnce() -> Result<()>) -> Result<()> {
     let created = !out.exists();
     let result = std::fs::create_dir_all(out.join(SCANS_DIR))
         .map_err(|e| Error::io(out.join(SCANS_DIR), e))

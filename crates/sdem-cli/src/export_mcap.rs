@@ -1,0 +1,45 @@
+//! A map as MCAP for Foxglove and RViz (`sdem slam --mcap`, `sdem export --mcap`): the
+//! values `sdem_io::write_map_mcap` writes, taken from the mapper.
+
+use anyhow::{bail, Result};
+use sdem::Slam;
+use sdem_io::{write_map_mcap, MapScene, McapSummary};
+use std::path::Path;
+
+/// Refuses to replace an existing file without `force`, before any work is done.
+pub fn check_target(path: &Path, force: bool) -> Result<()> {
+    if path.is_dir() {
+        bail!(
+            "--mcap {} is a folder; name a file (OUT.mcap)",
+            path.display()
+        );
+    }
+    if path.exists() && !force {
+        bail!(
+            "--mcap {} already exists; choose another file or pass --force to replace it",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// Writes the map of `slam`: its fused cloud, every node's points in the world, the poses, the
+/// accepted loop closures.
+pub fn write(path: &Path, slam: &Slam) -> Result<McapSummary> {
+    let poses = slam.poses();
+    let scans: Vec<_> = slam.map.nodes.iter().map(|n| n.points_in_world()).collect();
+    let cloud = slam.merged_cloud();
+    let closures: Vec<(usize, usize)> = slam
+        .loop_closures
+        .iter()
+        .filter(|c| c.accepted)
+        .map(|c| (c.from, c.to))
+        .collect();
+    let scene = MapScene {
+        world_from_sensor: &poses,
+        scans_in_world: &scans,
+        map_cloud: &cloud,
+        loop_closures: &closures,
+    };
+    Ok(write_map_mcap(path, &scene)?)
+}
