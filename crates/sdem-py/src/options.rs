@@ -22,7 +22,7 @@ pub fn with_overrides<T: Serialize + DeserializeOwned>(
     what: &str,
 ) -> PyResult<T> {
     let Some(overrides) = overrides else {
-        return Ok(clone_through_json(base, what)?);
+        return clone_through_json(base, what);
     };
     let mut value = to_json(base, what)?;
     merge(&mut value, dict_json(overrides, what)?, what, "")?;
