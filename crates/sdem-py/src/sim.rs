@@ -36,7 +36,10 @@ use sdem_sim::sim;
 /// Raises:
 ///     sdem.InvalidError: a negative or non-finite spread.
 #[pyfunction]
-#[pyo3(signature = (seed, count, *, displacement_half_m=(0.5, 0.5, 0.1), yaw_spread_deg=15.0, tilt_max_deg=3.0, compass_error_max_deg=10.0))]
+#[pyo3(
+    signature = (seed, count, *, displacement_half_m=(0.5, 0.5, 0.1), yaw_spread_deg=15.0, tilt_max_deg=3.0, compass_error_max_deg=10.0),
+    text_signature = "(seed, count, *, displacement_half_m=(0.5, 0.5, 0.1), yaw_spread_deg=15.0, tilt_max_deg=3.0, compass_error_max_deg=10.0)"
+)]
 fn pairs<'py>(
     py: Python<'py>,
     seed: u64,

@@ -4,6 +4,7 @@ everything here. The full documentation is in the docstrings (``help(sdem.locali
 from __future__ import annotations
 
 import os
+import pathlib
 from types import ModuleType
 from typing import Any, Callable, Literal, Mapping, Sequence, Union
 
@@ -225,7 +226,7 @@ class Map:
     @property
     def options(self) -> dict[str, Any]: ...
     @property
-    def path(self) -> str: ...
+    def path(self) -> pathlib.Path: ...
     def __len__(self) -> int: ...
 
 sim: ModuleType
