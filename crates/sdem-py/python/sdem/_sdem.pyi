@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 import pathlib
 from types import ModuleType
-from typing import Any, Callable, Literal, Mapping, Sequence, Union
+from typing import Any, Callable, Literal, Mapping, Sequence, Union, final
 
 import numpy as np
 import numpy.typing as npt
@@ -35,19 +35,20 @@ DoubtKind = Literal[
     "taken_from_prediction",
 ]
 
+@final
 class Scan:
     """A scan as the sensor gave it: points in the sensor frame, metres, and the gyro/compass
     attitude read when it was taken (``None``: unknown, searched by a localization)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         points: Points,
         attitude_deg: AttitudeDeg | None = None,
         *,
         roll_pitch_sigma_deg: float | None = None,
         yaw_sigma_deg: float | None = None,
         grid: Mapping[str, Any] | None = None,
-    ) -> None: ...
+    ) -> Scan: ...
     @property
     def attitude_deg(self) -> tuple[float, float, float] | None:
         """The attitude reading, degrees, or ``None`` when unknown."""
@@ -65,6 +66,7 @@ class Scan:
         """The S-DEM grid, a dict of ``SdemConfig`` fields."""
     def __len__(self) -> int: ...
 
+@final
 class Doubt:
     """One reason not to trust a pose: ``kind``, figures and ``message``, as the command
     line's JSON writes it. A figure reads as an attribute (``doubt.fraction``)."""
@@ -79,6 +81,7 @@ class Doubt:
         """``{"kind": ..., <figures>, "message": ...}``, as ``sdem localize --json``."""
     def __getattr__(self, name: str) -> Any: ...
 
+@final
 class Localization:
     """The result of ``localize``: the pose with how far to trust it. A result with doubts is
     the best candidate found, not a pose to trust (``trusted`` is False)."""
@@ -128,6 +131,7 @@ def read_points(path: PathLike) -> npt.NDArray[np.float64]:
     """Reads ``.ply``, ``.pcd``, ``.xyz``/``.txt``, KITTI ``.bin``, 3DTK ``.3d`` or ``.sweep``
     as ``(N, 3)`` float64; raises ``FileError`` or ``ParseError``."""
 
+@final
 class Step:
     """One stop added by ``Slam.add``."""
 
@@ -147,13 +151,14 @@ class Step:
     def report(self) -> dict[str, Any]:
         """The step as ``report.json`` holds it."""
 
+@final
 class Slam:
     """The incremental stop-and-go loop with loop closure; ``options`` are ``SlamOptions``
     fields (``slam_options()`` lists them with their defaults)."""
 
-    def __init__(
-        self, *, progress: Callable[[Step], object] | None = None, **options: Any
-    ) -> None: ...
+    def __new__(
+        cls, *, progress: Callable[[Step], object] | None = None, **options: Any
+    ) -> Slam: ...
     @staticmethod
     def load(
         path: PathLike, *, progress: Callable[[Step], object] | None = None
@@ -184,6 +189,7 @@ class Slam:
         """Saves the map (atomically) for ``Map.load``, ``Slam.load`` and the command line."""
     def __len__(self) -> int: ...
 
+@final
 class Relocalization:
     """A scan relocalized in a saved map."""
 
@@ -204,6 +210,7 @@ class Relocalization:
     @property
     def time_ms(self) -> float: ...
 
+@final
 class Map:
     """A saved map to relocalize scans in, as ``sdem localize --map`` does."""
 
@@ -230,3 +237,22 @@ class Map:
     def __len__(self) -> int: ...
 
 sim: ModuleType
+
+__all__ = [
+    "Scan",
+    "Localization",
+    "Doubt",
+    "Slam",
+    "Step",
+    "Map",
+    "Relocalization",
+    "localize",
+    "localize_options",
+    "localize_options_for_scan",
+    "grid_for_scan",
+    "slam_options",
+    "read_points",
+    "DEFAULT_ATTITUDE_SIGMA_DEG",
+    "__version__",
+    "sim",
+]

@@ -43,4 +43,4 @@ def run(seed: int, stops: int) -> Run:
     """A seeded stop-and-go run through the simulated collapsed building, with the truth and
     simulated odometry."""
 
-__all__: list[str]
+__all__ = ["pairs", "run"]
