@@ -1,0 +1,588 @@
+//! `sdem.Slam` (the incremental loop) with its `sdem.Step`s, and `sdem.Map` (a saved map to
+//! relocalize in) with its `sdem.Relocalization`.
+
+use crate::arrays::{matrices4, matrix4, numbers, points_array, points_from, pose_from};
+use crate::errors::{invalid, invalid_input, io_error, sdem_error};
+use crate::localize::{attitude_from, doubt_list};
+use crate::options::{to_json, to_python, with_overrides};
+use numpy::PyArray2;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+use sdem::geometry::Vec3;
+use sdem::slam::{relocalize, Near};
+use sdem::{Doubt as RustDoubt, Pose, SlamOptions};
+use sdem_io::{NodeFiles, SavedMap, MAP_MANIFEST};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// The incremental stop-and-go loop (Nagatani et al. 2003, Sec. III, with loop closure): add
+/// one stop's scan at a time; each is localized against the map, becomes a node, closes loops
+/// and updates the fused map.
+///
+/// Args:
+///     progress: an optional callable, called with each ``sdem.Step`` as ``add`` finishes it
+///         (for a progress display or a log; sdem itself prints nothing). An exception it raises
+///         comes out of ``add``, after the scan was added.
+///     **options: ``SlamOptions`` fields, name for name, each defaulting to the library's
+///         value (``sdem.slam_options()`` lists them all; a dict for a nested struct changes
+///         only the fields it names): ``sdem`` (the S-DEM grid), ``localize`` (the search; the
+///         window and heading are set per scan from the fields below; 2 cm steps, no runner-up
+///         search), ``window_half_m`` ([0.15, 0.15, 0.08]: around an odometry prediction),
+///         ``window_half_no_odometry_m`` ([0.5, 0.5, 0.15]), ``prior_sigma_m`` (0.05),
+///         ``prior_sigma_no_odometry_m`` (0.2), ``heading_half_deg`` (3.0),
+///         ``heading_half_compass_deg`` (8.0), ``heading_half_no_prior_deg`` (15.0),
+///         ``reference_radius_m`` (4.0), ``max_reference_nodes`` (3),
+///         ``min_reference_overlap_cells`` (300), ``edge_sigma_floor_m`` (0.005),
+///         ``edge_sigma_floor_deg`` (0.1), ``loop_closure``, ``optimize`` (the pose graph) and
+///         ``voxel`` (the fused occupancy map).
+///
+/// Raises:
+///     sdem.InvalidError: an unknown option, a value of the wrong type or out of range.
+#[pyclass(module = "sdem")]
+pub struct Slam {
+    inner: sdem::Slam,
+    last_step: Option<Py<Step>>,
+    progress: Option<Py<PyAny>>,
+    /// The folder this map was saved to or loaded from, with the node files it holds.
+    saved: Option<(PathBuf, NodeFiles)>,
+}
+
+#[pymethods]
+impl Slam {
+    #[new]
+    #[pyo3(signature = (*, progress=None, **options))]
+    fn new(progress: Option<Py<PyAny>>, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let options = with_overrides(&SlamOptions::default(), options, "slam options")?;
+        Ok(Self {
+            inner: sdem::Slam::new(options).map_err(sdem_error)?,
+            last_step: None,
+            progress,
+            saved: None,
+        })
+    }
+
+    /// Resumes the map saved in ``path`` (by ``Slam.save`` or ``sdem slam``; the folder
+    /// holding ``map.json``, or its parent), with the configuration it was made with.
+    /// Odometry given to the next ``add`` is taken as a first reading: its motion counts from
+    /// there.
+    ///
+    /// Raises:
+    ///     sdem.FileError, sdem.ParseError: a missing or damaged map.
+    #[staticmethod]
+    #[pyo3(signature = (path, *, progress=None))]
+    fn load(py: Python<'_>, path: PathBuf, progress: Option<Py<PyAny>>) -> PyResult<Self> {
+        let folder = map_folder(&path);
+        let saved = py.detach(|| sdem_io::load_map(&folder)).map_err(io_error)?;
+        let node_files = saved.node_files.clone();
+        let inner = py
+            .detach(|| {
+                sdem::Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)
+            })
+            .map_err(sdem_error)?;
+        Ok(Self {
+            inner,
+            last_step: None,
+            progress,
+            saved: Some((folder, node_files)),
+        })
+    }
+
+    /// Adds the next stop's scan: predicts its pose, localizes it against the map, adds it as
+    /// a node, closes loops and updates the fused map. Runs without the GIL.
+    ///
+    /// Args:
+    ///     points: ``(N, 3)`` float32 or float64, sensor frame, metres (NaN rows skipped).
+    ///     attitude_deg: the gyro/compass reading ``(roll, pitch, yaw)`` in degrees, or
+    ///         ``None`` without one.
+    ///     odometry: ``odom_from_sensor``, the odometry frame's pose of the sensor at this
+    ///         stop as a 4x4 homogeneous matrix (as ROS's ``/odom`` gives it), or ``None``
+    ///         without odometry. Only its motion since the last ``add`` that gave one is used.
+    ///     roll_pitch_sigma_deg, yaw_sigma_deg: the reading's standard deviations, degrees
+    ///         (defaults 0.5 and 3.5), as for ``sdem.Scan``.
+    ///
+    /// Returns:
+    ///     numpy.ndarray: ``world_from_sensor``, the sensor's pose in the world as the step
+    ///     left it, ``(4, 4)`` float64 (later loop closures can move it: see ``poses()``).
+    ///     ``last_step`` holds the step's status, doubts and report.
+    ///
+    /// Raises:
+    ///     sdem.InvalidInputError, sdem.TooFewPointsError: bad input.
+    ///     sdem.AtScanError: the scan matches nothing in the map (its ``source`` says why);
+    ///         the map is then unchanged.
+    #[pyo3(signature = (points, attitude_deg=None, odometry=None, *, roll_pitch_sigma_deg=None, yaw_sigma_deg=None))]
+    fn add<'py>(
+        mut slf: PyRefMut<'py, Self>,
+        py: Python<'py>,
+        points: &Bound<'py, PyAny>,
+        attitude_deg: Option<&Bound<'py, PyAny>>,
+        odometry: Option<&Bound<'py, PyAny>>,
+        roll_pitch_sigma_deg: Option<f64>,
+        yaw_sigma_deg: Option<f64>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let points = points_from(points, "points")?;
+        let attitude = attitude_from(attitude_deg, roll_pitch_sigma_deg, yaw_sigma_deg)?;
+        let odom_from_sensor = match odometry.filter(|o| !o.is_none()) {
+            Some(o) => Some(pose_from(o, "odometry")?),
+            None => None,
+        };
+        let inner = &mut slf.inner;
+        let step = py
+            .detach(|| inner.add(&points, attitude, odom_from_sensor))
+            .map_err(sdem_error)?;
+        let world_from_sensor = matrix4(py, &step.world_from_sensor);
+        let step = Py::new(py, Step::new(&step)?)?;
+        slf.last_step = Some(step.clone_ref(py));
+        let progress = slf.progress.as_ref().map(|p| p.clone_ref(py));
+        drop(slf); // the callback may read this Slam
+        if let Some(progress) = progress {
+            progress.call1(py, (step,))?;
+        }
+        Ok(world_from_sensor)
+    }
+
+    /// The last step ``add`` made (``None`` before the first).
+    #[getter]
+    fn last_step(&self, py: Python<'_>) -> Option<Py<Step>> {
+        self.last_step.as_ref().map(|s| s.clone_ref(py))
+    }
+
+    /// ``world_from_sensor`` of every node, in the order the scans were added, as the last
+    /// loop closure left them: ``(n, 4, 4)`` float64.
+    fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        matrices4(py, &self.inner.poses())
+    }
+
+    /// The merged point cloud: every node's points in the world, kept where the fused map is
+    /// occupied now (moved rubble, seen through later, drops out), one per voxel; ``(M, 3)``
+    /// float64.
+    fn merged_cloud<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let cloud = py.detach(|| self.inner.merged_cloud());
+        points_array(py, &cloud, |p| [p.x, p.y, p.z])
+    }
+
+    /// Accepted loop closures as ``(from_node, to_node)`` pairs.
+    #[getter]
+    fn loop_closures(&self) -> Vec<(usize, usize)> {
+        (self.inner.loop_closures.iter())
+            .map(|c| (c.from, c.to))
+            .collect()
+    }
+
+    /// The effective options, a dict of ``SlamOptions`` fields.
+    #[getter]
+    fn options<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, self.inner.config())
+    }
+
+    /// Saves the map into the folder ``path`` (created when missing) through sdem-io: node
+    /// files, then the manifest ``map.json``, each written atomically, so a crash leaves the
+    /// previous save whole. Saving again into the same folder writes only the new nodes.
+    /// ``sdem.Map.load``, ``Slam.load`` and ``sdem localize --map`` read it.
+    ///
+    /// Args:
+    ///     path: the folder.
+    ///     overwrite: replace a map this ``Slam`` did not save there or load from there
+    ///         (default False: that is an error).
+    ///
+    /// Raises:
+    ///     sdem.InvalidError: ``path`` holds another map and ``overwrite`` is False.
+    ///     sdem.FileError: the file system's errors.
+    #[pyo3(signature = (path, *, overwrite=false))]
+    fn save(&mut self, py: Python<'_>, path: PathBuf, overwrite: bool) -> PyResult<()> {
+        let mut node_files = match self.saved.take() {
+            Some((folder, files)) if folder == path => files,
+            _ if path.join(MAP_MANIFEST).exists() && !overwrite => {
+                return Err(invalid(format!(
+                    "{} already holds a map; pass overwrite=True to replace it",
+                    path.display()
+                )));
+            }
+            _ => NodeFiles::default(),
+        };
+        let slam = &self.inner;
+        let result = py.detach(|| {
+            sdem_io::save_map(
+                &path,
+                &mut node_files,
+                slam.config(),
+                &slam.map,
+                &slam.edges,
+                &slam.loop_closures,
+                None,
+            )
+        });
+        // After a failed save the folder's node files are unknown: the next save writes all.
+        if result.is_ok() {
+            self.saved = Some((path, node_files));
+        }
+        result.map_err(io_error)
+    }
+
+    /// The number of nodes (scans added).
+    fn __len__(&self) -> usize {
+        self.inner.map.nodes.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "sdem.Slam({} nodes, {} loop closures)",
+            self.__len__(),
+            self.inner.loop_closures.len()
+        )
+    }
+}
+
+/// One stop added by ``Slam.add``: where the sensor stood, how the match went, and the report
+/// ``sdem slam`` writes for it in ``report.json``.
+#[pyclass(module = "sdem", frozen)]
+pub struct Step {
+    world_from_sensor: Pose,
+    status: String,
+    doubts: Vec<RustDoubt>,
+    trusted: bool,
+    node_id: usize,
+    time_ms: f64,
+    report: Value,
+}
+
+impl Step {
+    fn new(step: &sdem::Step) -> PyResult<Self> {
+        let status = to_json(&step.status, "step status")?;
+        let mut report = to_json(&step.report, "step report")?;
+        if let Some(object) = report.as_object_mut() {
+            let doubts = step.report.doubts.iter().map(crate::localize::doubt_json);
+            object.insert("doubts".into(), Value::Array(doubts.collect()));
+        }
+        Ok(Self {
+            world_from_sensor: step.world_from_sensor,
+            status: status.as_str().unwrap_or_default().to_string(),
+            doubts: step.report.doubts.clone(),
+            trusted: step.report.trusted,
+            node_id: step.report.node_id,
+            time_ms: step.report.time_ms,
+            report,
+        })
+    }
+}
+
+#[pymethods]
+impl Step {
+    /// The sensor's pose in the world when the step ended, ``(4, 4)`` float64.
+    #[getter]
+    fn world_from_sensor<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        matrix4(py, &self.world_from_sensor).into_any()
+    }
+
+    /// ``"first"`` (the scan defines the world frame), ``"tracked"`` (matched with no
+    /// doubt) or ``"doubtful"`` (matched with doubts: the pose is the best guess).
+    #[getter]
+    fn status(&self) -> &str {
+        &self.status
+    }
+
+    /// No doubt about the match: the step's pose rests on the scans.
+    #[getter]
+    fn trusted(&self) -> bool {
+        self.trusted
+    }
+
+    /// Every reason not to trust the match, a list of ``sdem.Doubt``.
+    #[getter]
+    fn doubts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        doubt_list(py, &self.doubts)
+    }
+
+    /// The node the scan became.
+    #[getter]
+    fn node_id(&self) -> usize {
+        self.node_id
+    }
+
+    /// Wall time of the whole step (localization, loop closure, optimization, map update), ms.
+    #[getter]
+    fn time_ms(&self) -> f64 {
+        self.time_ms
+    }
+
+    /// The step as ``report.json`` holds it: ``scan_index``, ``node_id``, ``time_ms``,
+    /// ``localize_ms``, ``world_from_sensor`` and ``predicted_world_from_sensor`` (metres and
+    /// degrees), ``heading_prior``, ``reference_nodes``, ``cost``, ``overlap_fraction``,
+    /// ``inlier_fraction``, ``covariance``, ``doubts`` (with messages), ``trusted``,
+    /// ``refinement``, ``loop_closures`` and ``optimization``. A new dict at each access.
+    #[getter]
+    fn report<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &self.report)
+    }
+
+    fn __repr__(&self) -> String {
+        let t = self.world_from_sensor.translation.vector;
+        format!(
+            "sdem.Step(node_id={}, status='{}', x={:.4}, y={:.4}, z={:.4}, doubts={:?}, \
+             time_ms={:.1})",
+            self.node_id,
+            self.status,
+            t.x,
+            t.y,
+            t.z,
+            self.doubts.iter().map(|d| d.kind()).collect::<Vec<_>>(),
+            self.time_ms
+        )
+    }
+}
+
+/// The folder holding `map.json`: `path` itself, or `path/map` as `sdem slam` writes it.
+fn map_folder(path: &Path) -> PathBuf {
+    if path.join(MAP_MANIFEST).exists() || !path.join("map").join(MAP_MANIFEST).exists() {
+        path.to_path_buf()
+    } else {
+        path.join("map")
+    }
+}
+
+/// A saved map (``Slam.save`` or ``sdem slam`` wrote it), loaded to relocalize scans in, as
+/// ``sdem localize --map`` does. Load it with ``sdem.Map.load(path)``.
+#[pyclass(module = "sdem", frozen)]
+pub struct Map {
+    saved: SavedMap,
+    folder: PathBuf,
+}
+
+#[pymethods]
+impl Map {
+    /// Loads the map saved in ``path`` (the folder holding ``map.json``, or its parent, as
+    /// ``sdem slam`` writes ``OUT/map``), checking every file.
+    ///
+    /// Raises:
+    ///     sdem.FileError, sdem.ParseError, sdem.InvalidError: a missing or damaged map, each
+    ///         naming the file.
+    #[staticmethod]
+    fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
+        let folder = map_folder(&path);
+        let saved = py.detach(|| sdem_io::load_map(&folder)).map_err(io_error)?;
+        Ok(Self { saved, folder })
+    }
+
+    /// Finds where a scan was taken in the map, with the map's own search settings: near
+    /// ``near`` when given, else at the nodes whose place descriptors look most like the
+    /// scan's, trying up to ``max_nodes`` nodes with the exact search until one matches.
+    /// Runs without the GIL.
+    ///
+    /// Args:
+    ///     points: ``(N, 3)`` float32 or float64, sensor frame, metres.
+    ///     attitude_deg: the gyro/compass reading ``(roll, pitch, yaw)`` in degrees, or
+    ///         ``None`` (taken as level, heading searched ±15°).
+    ///     near: where the scan was taken, roughly: ``(x, y, z)`` in the map's frame, metres.
+    ///     near_sigma_m: how well ``near`` is known (one sigma, metres) when it is a
+    ///         prediction (odometry since the last known pose): it then also weighs in the
+    ///         cost, and along a direction the scan leaves free the position is the
+    ///         prediction's.
+    ///     max_nodes: at most this many nodes are tried (3).
+    ///     roll_pitch_sigma_deg, yaw_sigma_deg: the reading's standard deviations, degrees.
+    ///
+    /// Returns:
+    ///     sdem.Relocalization: ``world_from_sensor`` with ``trusted`` and ``doubts``.
+    ///
+    /// Raises:
+    ///     sdem.NotFoundError: no node matches (``tried`` says why for each).
+    ///     sdem.InvalidInputError, sdem.TooFewPointsError: bad input.
+    #[pyo3(signature = (points, attitude_deg=None, *, near=None, near_sigma_m=None, max_nodes=3, roll_pitch_sigma_deg=None, yaw_sigma_deg=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn localize(
+        &self,
+        py: Python<'_>,
+        points: &Bound<'_, PyAny>,
+        attitude_deg: Option<&Bound<'_, PyAny>>,
+        near: Option<&Bound<'_, PyAny>>,
+        near_sigma_m: Option<f64>,
+        max_nodes: usize,
+        roll_pitch_sigma_deg: Option<f64>,
+        yaw_sigma_deg: Option<f64>,
+    ) -> PyResult<Relocalization> {
+        let points = points_from(points, "points")?;
+        let attitude = attitude_from(attitude_deg, roll_pitch_sigma_deg, yaw_sigma_deg)?;
+        let near = near_from(near, near_sigma_m)?;
+        if max_nodes == 0 {
+            return Err(invalid_input(
+                "max_nodes",
+                "at least one node must be tried",
+            ));
+        }
+        let saved = &self.saved;
+        let found = py.detach(|| {
+            // The checks of a scan (finite, enough cells on the map's grid), then its points.
+            let scan = sdem::Scan::with_grid(&points, attitude, &saved.config.sdem)?;
+            relocalize(
+                &saved.map,
+                &saved.config,
+                scan.points_in_sensor(),
+                attitude,
+                near,
+                max_nodes,
+            )
+        });
+        Relocalization::new(&found.map_err(sdem_error)?)
+    }
+
+    /// ``world_from_sensor`` of every node, ``(n, 4, 4)`` float64.
+    fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        let poses: Vec<Pose> = self
+            .saved
+            .map
+            .nodes
+            .iter()
+            .map(|n| n.world_from_sensor)
+            .collect();
+        matrices4(py, &poses)
+    }
+
+    /// The options the map was made with, a dict of ``SlamOptions`` fields.
+    #[getter]
+    fn options<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &self.saved.config)
+    }
+
+    /// The folder the map was loaded from.
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.folder.clone()
+    }
+
+    /// The number of nodes.
+    fn __len__(&self) -> usize {
+        self.saved.map.nodes.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "sdem.Map({} nodes, from {})",
+            self.__len__(),
+            self.folder.display()
+        )
+    }
+}
+
+/// `near` and its σ as the library's `Near`.
+fn near_from(near: Option<&Bound<'_, PyAny>>, sigma_m: Option<f64>) -> PyResult<Option<Near>> {
+    match (near.filter(|n| !n.is_none()), sigma_m) {
+        (Some(near), sigma_m) => Ok(Some(Near {
+            position: Vec3::from(numbers::<3>(near, "near")?),
+            sigma_m,
+        })),
+        (None, Some(_)) => Err(invalid_input(
+            "near_sigma_m",
+            "it says how well `near` is known; give near=(x, y, z) too",
+        )),
+        (None, None) => Ok(None),
+    }
+}
+
+/// A scan relocalized in a saved map (``Map.localize``).
+#[pyclass(module = "sdem", frozen)]
+pub struct Relocalization {
+    world_from_sensor: Pose,
+    node_id: usize,
+    tried: Vec<(usize, String)>,
+    cost: f64,
+    diagnostics: Value,
+    doubts: Vec<RustDoubt>,
+    trusted: bool,
+    time_ms: f64,
+}
+
+impl Relocalization {
+    fn new(found: &sdem::slam::Relocalization) -> PyResult<Self> {
+        Ok(Self {
+            world_from_sensor: Pose::from(&found.world_from_sensor),
+            node_id: found.node_id,
+            tried: found.tried.clone(),
+            cost: found.cost,
+            diagnostics: to_json(&found.diagnostics, "diagnostics")?,
+            doubts: found.doubts.clone(),
+            trusted: found.trusted,
+            time_ms: found.time_ms,
+        })
+    }
+}
+
+#[pymethods]
+impl Relocalization {
+    /// The scan's pose in the map's world frame, ``(4, 4)`` float64.
+    #[getter]
+    fn world_from_sensor<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
+        matrix4(py, &self.world_from_sensor).into_any()
+    }
+
+    /// The node it was matched against.
+    #[getter]
+    fn node_id(&self) -> usize {
+        self.node_id
+    }
+
+    /// The nodes tried before it, each ``(node_id, why it did not match)``.
+    #[getter]
+    fn tried(&self) -> Vec<(usize, String)> {
+        self.tried.clone()
+    }
+
+    /// Eq. (1) at the best grid candidate, m².
+    #[getter]
+    fn cost(&self) -> f64 {
+        self.cost
+    }
+
+    /// The match's figures (as ``sdem.Localization.diagnostics`` without the search's).
+    #[getter]
+    fn diagnostics<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, &self.diagnostics)
+    }
+
+    /// Every reason not to trust the pose, a list of ``sdem.Doubt``.
+    #[getter]
+    fn doubts<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
+        doubt_list(py, &self.doubts)
+    }
+
+    /// No doubt: the pose can be used as it is.
+    #[getter]
+    fn trusted(&self) -> bool {
+        self.trusted
+    }
+
+    /// Wall time, milliseconds.
+    #[getter]
+    fn time_ms(&self) -> f64 {
+        self.time_ms
+    }
+
+    fn __repr__(&self) -> String {
+        let t = self.world_from_sensor.translation.vector;
+        format!(
+            "sdem.Relocalization(trusted={}, node_id={}, x={:.4}, y={:.4}, z={:.4}, \
+             doubts={:?}, time_ms={:.1})",
+            if self.trusted { "True" } else { "False" },
+            self.node_id,
+            t.x,
+            t.y,
+            t.z,
+            self.doubts.iter().map(|d| d.kind()).collect::<Vec<_>>(),
+            self.time_ms
+        )
+    }
+}
+
+/// The library's loop options with ``overrides`` laid over them, as a dict: every
+/// ``SlamOptions`` field with its default (``sdem.Slam(**options)`` takes the same names).
+///
+/// Raises:
+///     sdem.InvalidError: an unknown name or a value of the wrong type.
+#[pyfunction]
+#[pyo3(signature = (**overrides))]
+pub fn slam_options<'py>(
+    py: Python<'py>,
+    overrides: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    to_python(
+        py,
+        &with_overrides(&SlamOptions::default(), overrides, "slam options")?,
+    )
+}
