@@ -69,13 +69,18 @@ fn sdem_exception<'py>(py: Python<'py>, error: &sdem::Error) -> Bound<'py, PyAny
                 ("needed", py_value(py, needed)),
             ],
         ),
-        E::NoOverlap { needed, compared } => instance(
+        E::NoOverlap {
+            needed,
+            compared,
+            max_cost_m2,
+        } => instance(
             py,
             "NoOverlapError",
             (message,),
             vec![
                 ("needed", py_value(py, needed)),
                 ("compared", py_value(py, compared)),
+                ("max_cost_m2", py_value(py, max_cost_m2)),
             ],
         ),
         E::NoMatch {

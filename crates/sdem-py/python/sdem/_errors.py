@@ -71,16 +71,18 @@ class MatchError(Error):
 
 
 class NoOverlapError(MatchError):
-    """No candidate in the search window shares enough cells with the query
-    (``Error::NoOverlap``).
+    """No candidate in the search window shares enough cells with the query at a cost low
+    enough to be a match (``Error::NoOverlap``).
 
     Attributes:
         needed: cells a candidate must share.
         compared: query points compared.
+        max_cost_m2: the highest cost a match may have, m².
     """
 
     needed: int
     compared: int
+    max_cost_m2: float
 
 
 class NoMatchError(MatchError):
