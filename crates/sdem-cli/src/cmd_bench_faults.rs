@@ -176,7 +176,9 @@ fn reason_kind(doubt: &Doubt) -> &'static str {
     match doubt {
         Doubt::RunnerUp { .. } | Doubt::AnotherRotation { .. } => "runner-up close",
         Doubt::RefinementFailed { .. } => "refinement failed",
-        Doubt::FlatCovariance { .. } | Doubt::FlatCost { .. } => "flat cost",
+        Doubt::FlatCovariance { .. } | Doubt::FlatCost { .. } | Doubt::Unconstrained { .. } => {
+            "flat cost"
+        }
         Doubt::FewInliers { .. } => "thin match",
         Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. } => "other",
         Doubt::AttitudeCorrected { .. } => "attitude corrected",

@@ -179,8 +179,8 @@ pub fn attitude_from(
 ///         - ``runner_up`` (True): search again outside the peak for a runner-up (doubles the
 ///           time); ``peak_radius_m`` (0.1).
 ///         - ``ambiguous_cost_ratio`` (1.1), ``ambiguous_sigma_ratio`` (10.0),
-///           ``ambiguous_rise_ratio`` (0.05), ``min_trusted_inlier_fraction`` (0.25): when the
-///           result is doubted.
+///           ``ambiguous_rise_ratio`` (0.05), ``min_trusted_inlier_fraction`` (0.25),
+///           ``min_trusted_support`` (0.01): when the result is doubted.
 ///
 /// Returns:
 ///     sdem.Localization: the pose ``reference_from_query`` with ``trusted``, ``doubts``,
@@ -406,6 +406,8 @@ impl Localization {
 ///   ``cost``, ``best_cost``).
 /// - ``flat_covariance``: the pose is free along ``direction`` (``sigma_m``,
 ///   ``across_sigma_m``).
+/// - ``unconstrained``: hardly any matched surface faces along ``direction``
+///   (``facing_fraction``, ``needed_fraction``).
 /// - ``flat_cost``: the cost barely rises along ``direction`` (``distance_m``, ``rise``,
 ///   ``across_rise``).
 /// - ``few_inliers``: too few of the query's points matched (``fraction``,

@@ -112,7 +112,7 @@ def test_a_window_short_of_the_truth_gives_doubts_or_an_error_never_a_wrong_trus
                 assert getattr(doubt, name) == value and as_dict[name] == value
             assert repr(doubt).startswith("sdem.Doubt(kind='")
     assert "on_window_edge" in kinds_seen, kinds_seen
-    assert kinds_seen <= {"runner_up", "flat_covariance", "flat_cost", "few_inliers",
+    assert kinds_seen <= {"runner_up", "flat_covariance", "flat_cost", "unconstrained", "few_inliers",
                           "refinement_failed", "on_window_edge", "attitude_corrected",
                           "another_rotation", "taken_from_prediction"}
 

@@ -36,6 +36,17 @@ pub enum Doubt {
         /// σ along the best-constrained direction, metres.
         across_sigma_m: f64,
     },
+    /// Hardly any matched surface faces along the direction the refinement fixes worst: the
+    /// position along it rests on the noise of the other surfaces' normals, not on geometry (a
+    /// featureless corridor or pipe, whose covariance alone can look well conditioned).
+    Unconstrained {
+        /// The direction (the refinement's least certain).
+        direction: [f64; 3],
+        /// The share of the matched points on surfaces facing along it within 60°.
+        facing_fraction: f64,
+        /// The share a trusted pose needs.
+        needed_fraction: f64,
+    },
     /// The search's cost barely rises along one direction from the optimum.
     FlatCost {
         /// The flattest direction.
@@ -110,6 +121,7 @@ impl Doubt {
             Doubt::RunnerUp { .. } => "runner_up",
             Doubt::FlatCovariance { .. } => "flat_covariance",
             Doubt::FlatCost { .. } => "flat_cost",
+            Doubt::Unconstrained { .. } => "unconstrained",
             Doubt::FewInliers { .. } => "few_inliers",
             Doubt::RefinementFailed { .. } => "refinement_failed",
             Doubt::OnWindowEdge => "on_window_edge",
@@ -145,6 +157,20 @@ impl fmt::Display for Doubt {
                 v[2],
                 sigma_m * 1e3,
                 across_sigma_m * 1e3
+            ),
+            Doubt::Unconstrained {
+                direction: v,
+                facing_fraction,
+                needed_fraction,
+            } => write!(
+                f,
+                "nothing fixes the position along ({:.2}, {:.2}, {:.2}): only {:.1} % of the \
+                 matched points lie on surfaces facing that way (a trusted pose needs {:.1} %)",
+                v[0],
+                v[1],
+                v[2],
+                facing_fraction * 100.0,
+                needed_fraction * 100.0
             ),
             Doubt::FlatCost {
                 direction: v,
@@ -251,6 +277,15 @@ mod tests {
                     across_sigma_m: 0.001,
                 },
                 "flat_covariance",
+                true,
+            ),
+            (
+                Doubt::Unconstrained {
+                    direction: [1.0, 0.0, 0.0],
+                    facing_fraction: 0.001,
+                    needed_fraction: 0.02,
+                },
+                "unconstrained",
                 true,
             ),
             (

@@ -80,6 +80,10 @@ pub struct LocalizeOptions {
     /// after refinement: too little in common to trust (the fault bench's wrong answers matched
     /// 14–21 %).
     pub min_trusted_inlier_fraction: f64,
+    /// … or when fewer than this fraction of the refinement's matched points lie on surfaces
+    /// facing along its least certain direction ([`Refinement::support`]): nothing but normal
+    /// noise fixes the position along it (a featureless pipe).
+    pub min_trusted_support: f64,
 }
 
 impl Default for LocalizeOptions {
@@ -100,6 +104,7 @@ impl Default for LocalizeOptions {
             ambiguous_sigma_ratio: 10.0,
             ambiguous_rise_ratio: 0.05,
             min_trusted_inlier_fraction: 0.25,
+            min_trusted_support: MIN_TRUSTED_SUPPORT,
         }
     }
 }
@@ -180,6 +185,9 @@ impl LocalizeOptions {
         }
     }
 }
+
+/// Default of [`LocalizeOptions::min_trusted_support`].
+pub const MIN_TRUSTED_SUPPORT: f64 = 0.01;
 
 /// The smallest step [`LocalizeOptions::for_scan`] derives, metres (`sdem bench`'s, for the
 /// tilting SICK in rubble).
@@ -289,6 +297,10 @@ pub struct Diagnostics {
     pub weakest_direction: Option<[f64; 3]>,
     /// Standard deviation along it, metres.
     pub weakest_sigma_m: Option<f64>,
+    /// The share of the refinement's matched points on surfaces facing along
+    /// `weakest_direction` within 60° ([`Refinement::support`]); below
+    /// [`LocalizeOptions::min_trusted_support`] the doubt [`Doubt::Unconstrained`].
+    pub weakest_support: Option<f64>,
     /// Standard deviation along the best-constrained direction, metres.
     pub strongest_sigma_m: Option<f64>,
     /// The translational direction along which the pose is free (a corridor's axis; unit
@@ -811,6 +823,19 @@ fn diagnose(
         Some(eigen) => covariance_shape(eigen, config, &mut doubts),
         None => (None, None),
     };
+    let weakest_support = refinement
+        .zip(weakest)
+        .map(|(r, (w, _, _))| r.support(&Vec3::from(w)));
+    if let (Some(support), Some((w, _, _))) = (weakest_support, weakest) {
+        if support < config.min_trusted_support {
+            doubts.push(Doubt::Unconstrained {
+                direction: w,
+                facing_fraction: support,
+                needed_fraction: config.min_trusted_support,
+            });
+            flat.get_or_insert(w);
+        }
+    }
     // The cost's shape is probed about the grid optimum, or, on a grid as coarse as half the
     // probe's distance (a LiDAR's), about the refined offset: the grid optimum may then lie half
     // a step from the cost's minimum, so that one probe lies nearer the minimum than it does.
@@ -860,6 +885,7 @@ fn diagnose(
         covariance: covariance.map(|c| std::array::from_fn(|i| std::array::from_fn(|j| c[(i, j)]))),
         weakest_direction: weakest.map(|w| w.0),
         weakest_sigma_m: weakest.map(|w| w.1),
+        weakest_support,
         strongest_sigma_m: weakest.map(|w| w.2),
         flat_direction: flat,
         ambiguous: doubts.iter().any(Doubt::is_ambiguity),

@@ -130,6 +130,39 @@ pub struct Refinement {
     /// Information matrix of `[x, y, z, rx, ry, rz]` (metres, radians; rotation about the
     /// reference levelled frame's axes), `JᵀWJ / σ²`.
     pub information: Matrix6<f64>,
+    /// The reference normals (levelled frame) of the last iteration's residuals within the
+    /// robust kernel (weight at least ½), each with the square of its point's range: the
+    /// surfaces that carry the estimate, and the area each point stands for (the S-DEM's cells
+    /// are equal in angle, so a near surface holds many more points per square metre than a
+    /// far one).
+    pub supporting_normals: Vec<([f32; 3], f32)>,
+}
+
+impl Refinement {
+    /// The share of the area of [`Self::supporting_normals`] facing along `direction` (a unit
+    /// vector) within 60° (|n · direction| ≥ ½): the matched surfaces that fix the position
+    /// along it.
+    ///
+    /// The information matrix weighs every residual by the square of its normal's component,
+    /// so on a featureless corridor the noise of thousands of normals on its walls (a few
+    /// degrees each, near the sensor) adds up to as much information along the axis as a real
+    /// surface would give; counting the surfaces that truly face that way does not.
+    pub fn support(&self, direction: &Vec3) -> f64 {
+        let (mut facing, mut total) = (0.0, 0.0);
+        for (n, area) in &self.supporting_normals {
+            let along =
+                n[0] as f64 * direction.x + n[1] as f64 * direction.y + n[2] as f64 * direction.z;
+            total += *area as f64;
+            if along.abs() >= 0.5 {
+                facing += *area as f64;
+            }
+        }
+        if total > 0.0 {
+            facing / total
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Surface normals of an S-DEM's boundary points, from a plane fit over neighbouring cells.
@@ -166,6 +199,13 @@ impl SurfaceNormals {
                 let centre = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
                 // Neighbours must lie within the patch the cells span at this range, plus noise.
                 let reach = 2.5 * k as f64 * grid.resolution() * centre.norm() + 0.02;
+                // A patch of (2k + 1)² cells spreads by about k/√3 cells each way. One spread
+                // by less than a fifth of a cell's width across its longer direction is a line
+                // (a floor seen at a grazing angle keeps only the neighbours beside it, not
+                // those beyond), and one narrower than MIN_PATCH_WIDTH_M is a cluster of returns
+                // (the floor straight below, where the cells meet at the pole): either way the
+                // range noise, not a surface, would set its "normal".
+                let min_width = (0.2 * grid.resolution() * centre.norm()).max(MIN_PATCH_WIDTH_M);
                 let reach_sq = reach * reach;
                 let mut sum = Vec3::zeros();
                 let mut outer = Matrix3::zeros();
@@ -202,7 +242,7 @@ impl SurfaceNormals {
                 let mean = sum / count as f64;
                 let cov = outer / count as f64 - mean * mean.transpose();
                 // Not a surface patch (a line, a corner, a blob): no normal.
-                let Some(mut n) = plane_normal(&cov) else {
+                let Some(mut n) = plane_normal(&cov, min_width) else {
                     return [f32::NAN; 3];
                 };
                 if n.dot(&centre) > 0.0 {
@@ -252,15 +292,20 @@ const REASSOCIATE_STEP: f64 = 1e-3;
 /// its scale (see [`refine`]).
 const SETTLED_STEP: f64 = 1e-4;
 
+/// The least spread (standard deviation, metres) a surface patch must have across its longer
+/// direction for its normal to be fitted: well above a laser range finder's noise (5 mm for the
+/// SICK), so the noise of a cluster of returns is not taken for a surface.
+const MIN_PATCH_WIDTH_M: f64 = 0.01;
+
 /// The unit normal of a surface patch with point covariance `cov`: the eigenvector of its
-/// smallest eigenvalue `λ0`, or `None` where the patch is not a surface (`λ0 > λ1 / 4`: a line, a
-/// corner, a blob).
+/// smallest eigenvalue `λ0`, or `None` where the patch is not a surface (`λ0 > λ1 / 4`: a
+/// corner, a blob; or `λ1 < min_width²`: a line, whose second spread is only its noise).
 ///
 /// In closed form: the eigenvalues are the roots of the characteristic cubic (its trigonometric
 /// solution), the eigenvector the longest cross product of two rows of `cov − λ0 I` (of rank 2
 /// when `λ0 < λ1`). With nalgebra's iterative `symmetric_eigen` instead, the normals of a
 /// 10,000-point S-DEM took 7.6 ms on one core, 4.5 ms with this.
-fn plane_normal(cov: &Matrix3<f64>) -> Option<Vec3> {
+fn plane_normal(cov: &Matrix3<f64>, min_width: f64) -> Option<Vec3> {
     let off = cov[(0, 1)].powi(2) + cov[(0, 2)].powi(2) + cov[(1, 2)].powi(2);
     let mean = cov.trace() / 3.0;
     let spread = (0..3).map(|i| (cov[(i, i)] - mean).powi(2)).sum::<f64>() + 2.0 * off;
@@ -274,7 +319,7 @@ fn plane_normal(cov: &Matrix3<f64>) -> Option<Vec3> {
     let largest = mean + 2.0 * p * phi.cos();
     let smallest = mean + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
     let middle = 3.0 * mean - largest - smallest;
-    if middle <= 0.0 || smallest > 0.25 * middle {
+    if middle <= 0.0 || smallest > 0.25 * middle || middle < min_width * min_width {
         return None;
     }
     let m = cov - Matrix3::identity() * smallest;
@@ -309,13 +354,17 @@ const CHUNK: usize = 256;
 
 /// The Gauss-Newton normal equations of a set of point-to-plane residuals: `JᵀWJ` (its upper
 /// triangle, row by row), `JᵀWr`, `Σ w r²`, `Σ w` and the number of residuals.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Default)]
 struct NormalEquations {
     h: [f64; 21],
     g: [f64; 6],
     chi2: f64,
     wsum: f64,
     count: usize,
+    /// The normals of the residuals within the kernel (robust weight at least ½), each with
+    /// the square of its point's range (the area a cell of the S-DEM stands for grows with
+    /// it).
+    normals: Vec<([f32; 3], f32)>,
 }
 
 impl NormalEquations {
@@ -345,6 +394,7 @@ impl NormalEquations {
         self.chi2 += other.chi2;
         self.wsum += other.wsum;
         self.count += other.count;
+        self.normals.extend_from_slice(&other.normals);
         self
     }
 
@@ -454,7 +504,12 @@ impl Pairing<'_> {
             let y = rotated[i];
             let jr = Vec3::new(y[0] as f64, y[1] as f64, y[2] as f64).cross(&normal);
             let jac = [normal.x, normal.y, normal.z, jr.x, jr.y, jr.z];
-            acc.add(robust_weight(r, scale), r, jac);
+            let w = robust_weight(r, scale);
+            if w >= 0.5 {
+                let area = x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
+                acc.normals.push((self.normals.normals[j as usize], area));
+            }
+            acc.add(w, r, jac);
         }
         acc
     }
@@ -524,6 +579,7 @@ pub fn refine(
             .map(|(points, pairs)| pairing.accumulate(&pose, points, pairs, fresh, scale))
             .reduce(NormalEquations::default, NormalEquations::merged);
         let (h, g, chi2, wsum, inliers) = normal_equations.parts();
+        let supporting = normal_equations.normals;
         if inliers < config.min_inliers {
             return Err(Error::RefinementFailed {
                 reason: format!(
@@ -535,7 +591,7 @@ pub fn refine(
         let sigma_sq = (chi2 / wsum.max(1e-12)).max(1e-12);
         // The information reported is the scans' alone: the prediction steers the estimate
         // where they say nothing, and a pose graph holds the odometry as its own edge.
-        last = Some((h, sigma_sq, inliers));
+        last = Some((h, sigma_sq, inliers, supporting));
         let delta = solve_step(h, g, &translation, prior, config)?;
         let omega = Vec3::new(delta[3], delta[4], delta[5]);
         let step_rotation = Rotation3::new(omega);
@@ -557,7 +613,7 @@ pub fn refine(
         // schedule only crept, ~20 % less a step, for another 5-10 iterations.
         settled |= step < SETTLED_STEP;
     }
-    let (h, sigma_sq, inliers) = last.expect("at least one iteration ran");
+    let (h, sigma_sq, inliers, supporting) = last.expect("at least one iteration ran");
     check_plausible(initial, &rotation, &translation, config)?;
     Ok(Refinement {
         reference_level_from_query_level: Isometry3::from_parts(
@@ -569,6 +625,7 @@ pub fn refine(
         inliers,
         rms_m: sigma_sq.sqrt(),
         information: h / sigma_sq,
+        supporting_normals: supporting,
     })
 }
 
@@ -681,7 +738,7 @@ mod tests {
             if (l0 / l1 - 0.25).abs() < 1e-9 {
                 continue;
             }
-            match plane_normal(&cov) {
+            match plane_normal(&cov, 0.0) {
                 Some(n) => {
                     assert!(surface, "{l:?}: a normal where nalgebra sees no surface");
                     let expected = eigen.eigenvectors.column(order[0]);

@@ -27,6 +27,7 @@ DoubtKind = Literal[
     "runner_up",
     "flat_covariance",
     "flat_cost",
+    "unconstrained",
     "few_inliers",
     "refinement_failed",
     "on_window_edge",
