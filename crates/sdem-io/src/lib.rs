@@ -29,7 +29,7 @@
 //! | extension | format |
 //! |---|---|
 //! | `.ply` | PLY, `ascii`, `binary_little_endian` or `binary_big_endian`; element `vertex` with properties `x`, `y`, `z` stored as `float` or `double`; other properties and elements are ignored; vertices with a NaN coordinate are skipped (no return) |
-//! | `.pcd` | PCL PCD, `DATA ascii` or `DATA binary` (little-endian); fields `x`, `y`, `z` of `TYPE F`, `SIZE 4` or `8`, `COUNT 1`; other fields ignored; points with a NaN coordinate are skipped. `DATA binary_compressed` is not supported. `VIEWPOINT` is ignored |
+//! | `.pcd` | PCL PCD, `DATA ascii`, `binary` (little-endian) or `binary_compressed` (LZF, as PCL and Open3D write it); fields `x`, `y`, `z` of `TYPE F`, `SIZE 4` or `8`, `COUNT 1`, in any order among other fields of any type and count, which are ignored; organized clouds (`HEIGHT` > 1) row after row; points with a NaN coordinate are skipped. `VIEWPOINT` is ignored |
 //! | `.xyz`, `.txt` | text, one point per line: `x y z` separated by spaces, tabs or commas; further columns ignored; blank lines and everything after `#` (or a line starting with `//`) ignored |
 //! | `.bin` | KITTI Velodyne: little-endian `f32` records `x y z intensity`, 16 bytes per point, no header |
 //! | `.3d` | 3DTK "uos": text `x y z` in **centimetres**, left-handed with x right, y up, z forward; converted to metres with x forward, y left, z up: `(z, −x, y) / 100`. An optional first line like `360 x 225` is skipped; further columns ignored |

@@ -306,6 +306,24 @@ fn f32_le(points: &[[f32; 3]]) -> Vec<u8> {
         .collect()
 }
 
+/// The body of a `DATA binary_compressed` PCD of fields `x y z` (`F 4`): the compressed and
+/// uncompressed sizes, then every x, every y, every z as an LZF stream of literal runs only
+/// (ctrl byte `len - 1`, then `len` bytes), which any LZF decoder reads.
+fn pcd_lzf_block(points: &[[f32; 3]]) -> Vec<u8> {
+    let columns: Vec<u8> = (0..3)
+        .flat_map(|axis| points.iter().flat_map(move |p| p[axis].to_le_bytes()))
+        .collect();
+    let mut packed = Vec::new();
+    for run in columns.chunks(32) {
+        packed.push(run.len() as u8 - 1);
+        packed.extend_from_slice(run);
+    }
+    let mut block = (packed.len() as u32).to_le_bytes().to_vec();
+    block.extend((columns.len() as u32).to_le_bytes());
+    block.extend(packed);
+    block
+}
+
 /// KITTI records: x y z intensity.
 fn kitti_bin(points: &[[f32; 3]]) -> Vec<u8> {
     points
@@ -525,7 +543,7 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Count, n, ply_binary(true, Some("18446744073709551615"), &POINTS), &[Line(3)]));
     c.push(file(r, f, Units, n, ply_binary(true, None, &POINTS_MM), &[Has("millimetres")]));
 
-    // --- PCD, ascii and binary ----------------------------------------------------------------
+    // --- PCD, ascii, binary and binary_compressed ------------------------------------------
     let (f, n) = ("pcd ascii", "scan.pcd");
     c.push(file(r, f, Empty, n, "", &[Has("empty")]));
     c.push(file(r, f, Truncated, n, "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOU", &[Line(4), Has("DATA")]));
@@ -537,7 +555,6 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Inf, n, pcd("3", "ascii", b"-inf 2 0.5\n-3 0 1.5\n2 -1 -0.5\n"), &[Line(9)]));
     c.push(file(r, f, Header, n, "FIELDS x y\nSIZE 4 4\nTYPE F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2\n", &[Has("'z'")]));
     c.push(file(r, f, Header, n, "FIELDS x y z\nSIZE 4 4 3\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3\n", &[Line(2)]));
-    c.push(file(r, f, Header, n, pcd("3", "binary_compressed", b"\x00\x01"), &[Line(8), Has("binary_compressed")]));
     c.push(file(r, f, Header, n, pcd("3", "zip", TEXT_POINTS.as_bytes()), &[Line(8)]));
     c.push(file(r, f, Count, n, pcd("999999999999", "ascii", TEXT_POINTS.as_bytes()), &[Line(7), Has("999999999999")]));
     c.push(file(r, f, Units, n, pcd("3", "ascii", TEXT_POINTS_MM.as_bytes()), &[Has("point 0"), Has("millimetres")]));
@@ -551,6 +568,24 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Inf, n, pcd("3", "binary", &f32_le(&[POINTS[0], [0.0, 0.0, f32::INFINITY], POINTS[2]]),), &[Has("point 1")]));
     c.push(file(r, f, Count, n, pcd("999999999999", "binary", &f32_le(&POINTS)), &[Line(7), Has("999999999999")]));
     c.push(file(r, f, Units, n, pcd("3", "binary", &f32_le(&POINTS_MM)), &[Has("millimetres")]));
+
+    let (f, n) = ("pcd binary_compressed", "scan_lzf.pcd");
+    let good = pcd("3", "binary_compressed", &pcd_lzf_block(&POINTS));
+    let sizes_at = good.len() - pcd_lzf_block(&POINTS).len();
+    c.push(file(r, f, Truncated, n, cut(&good, sizes_at + 5), &[Has("inside the 8 bytes"), Has("truncated")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 5), &[Has("byte offset"), Has("truncated")]));
+    c.push(file(r, f, Nan, n, pcd("2", "binary_compressed", &pcd_lzf_block(&[[f32::NAN; 3], [0.0, f32::NAN, 0.0]])), &[Has("no points")]));
+    c.push(file(r, f, Inf, n, pcd("3", "binary_compressed", &pcd_lzf_block(&[POINTS[0], [0.0, f32::INFINITY, 0.0], POINTS[2]])), &[Has("point 1")]));
+    c.push(file(r, f, Count, n, pcd("999999999999", "binary_compressed", &pcd_lzf_block(&POINTS)), &[Line(7), Has("declares 999999999999 points")]));
+    c.push(file(r, f, Count, n, pcd("4", "binary_compressed", &pcd_lzf_block(&POINTS)), &[Line(7), Has("unpacks to 36 bytes")]));
+    let mut huge = pcd("100000", "binary_compressed", &pcd_lzf_block(&POINTS));
+    let at = huge.len() - pcd_lzf_block(&POINTS).len() + 4;
+    huge[at..at + 4].copy_from_slice(&1_200_000u32.to_le_bytes());
+    c.push(file(r, f, Count, n, huge, &[Has("more than LZF")]));
+    let mut damaged = good.clone();
+    damaged[sizes_at + 8] = 0xE0; // a back reference before the first byte
+    c.push(file(r, f, Header, n, damaged, &[Has("damaged"), Has("byte offset")]));
+    c.push(file(r, f, Units, n, pcd("3", "binary_compressed", &pcd_lzf_block(&POINTS_MM)), &[Has("millimetres")]));
 
     // --- XYZ text -----------------------------------------------------------------------------
     let (f, n) = ("xyz", "scan.xyz");
@@ -1195,6 +1230,11 @@ fn the_valid_inputs_the_table_starts_from_are_read() {
             Reader::Points,
             "b.pcd",
             pcd("3", "binary", &f32_le(&POINTS)),
+        ),
+        (
+            Reader::Points,
+            "c.pcd",
+            pcd("3", "binary_compressed", &pcd_lzf_block(&POINTS)),
         ),
         (Reader::Points, "a.xyz", TEXT_POINTS.into()),
         (Reader::Points, "a.bin", kitti_bin(&POINTS)),

@@ -752,6 +752,11 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
             }
             vec![bytes]
         }
+        // Written by Open3D (tests/fixtures/open3d): real LZF blocks with back references.
+        Target::Points("compressed.pcd") => vec![
+            include_bytes!("fixtures/open3d/legacy_compressed.pcd").to_vec(),
+            include_bytes!("fixtures/open3d/tensor_compressed.pcd").to_vec(),
+        ],
         Target::Points("scan.xyz") => text("# x y z\n1 2 0.5\n-3,0.25,1.5,0.9\n\t2 -1 -0.5 # c\n"),
         Target::Points("scan.bin") => vec![POINTS
             .iter()
@@ -943,6 +948,7 @@ fuzz_targets! {
     ply_binary_big_endian => Target::Points("be.ply"),
     pcd_ascii => Target::Points("ascii.pcd"),
     pcd_binary => Target::Points("binary.pcd"),
+    pcd_binary_compressed => Target::Points("compressed.pcd"),
     xyz => Target::Points("scan.xyz"),
     kitti_bin => Target::Points("scan.bin"),
     uos_3d => Target::Points("scan000.3d"),
