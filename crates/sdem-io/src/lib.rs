@@ -33,6 +33,7 @@
 //! | `.xyz`, `.txt` | text, one point per line: `x y z` separated by spaces, tabs or commas; further columns ignored; blank lines and everything after `#` (or a line starting with `//`) ignored |
 //! | `.bin` | KITTI Velodyne: little-endian `f32` records `x y z intensity`, 16 bytes per point, no header |
 //! | `.3d` | 3DTK "uos": text `x y z` in **centimetres**, left-handed with x right, y up, z forward; converted to metres with x forward, y left, z up: `(z, −x, y) / 100`. An optional first line like `360 x 225` is skipped; further columns ignored |
+//! | `.las`, `.laz` | ASPRS LAS 1.0–1.4, any point format, uncompressed or LASzip-compressed (`las` and `laz` crates); the header's scale and offset applied; other attributes ignored |
 //! | `.sweep` | a raw tilting-LRF sweep (below), turned into points with [`Sweep::points_in_sensor`] |
 //!
 //! A cloud with no points is an error on reading and on writing: sdem cannot use an empty scan.
@@ -218,6 +219,7 @@ mod attitude;
 mod dataset;
 mod error;
 mod import;
+mod las;
 mod mapfile;
 mod pcd;
 mod ply;

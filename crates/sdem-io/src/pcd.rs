@@ -485,7 +485,7 @@ fn read_compressed(
     let (compressed, uncompressed) = (compressed as usize, uncompressed as usize);
     let point_count = header.point_count;
     let point_bytes = header.point_bytes();
-    let needed = point_count.checked_mul(point_bytes).unwrap_or(usize::MAX);
+    let needed = point_count.saturating_mul(point_bytes);
     if uncompressed != needed {
         return Err(Error::parse(
             path,

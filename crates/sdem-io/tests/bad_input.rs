@@ -324,6 +324,42 @@ fn pcd_lzf_block(points: &[[f32; 3]]) -> Vec<u8> {
     block
 }
 
+/// A LAS 1.4 file (LAZ when `compressed`) written by the `las` crate: point format 0, stored
+/// as millimetre steps from an offset of (100, -200, 5) m.
+fn las_file(points: &[[f32; 3]], compressed: bool) -> Vec<u8> {
+    let mut builder = las::Builder::from((1, 4));
+    builder.point_format = las::point::Format::new(0).unwrap();
+    builder.point_format.is_compressed = compressed;
+    let transform = |offset| las::Transform {
+        scale: 0.001,
+        offset,
+    };
+    builder.transforms = las::Vector {
+        x: transform(100.0),
+        y: transform(-200.0),
+        z: transform(5.0),
+    };
+    let header = builder.into_header().unwrap();
+    let mut writer = las::Writer::new(std::io::Cursor::new(Vec::new()), header).unwrap();
+    for p in points {
+        let point = las::Point {
+            x: f64::from(p[0]),
+            y: f64::from(p[1]),
+            z: f64::from(p[2]),
+            ..Default::default()
+        };
+        writer.write_point(point).unwrap();
+    }
+    writer.into_inner().unwrap().into_inner()
+}
+
+/// `bytes` of a LAS 1.4 file with the point count set to `count` in both of its places.
+fn las_count(mut bytes: Vec<u8>, count: u32) -> Vec<u8> {
+    bytes[107..111].copy_from_slice(&count.to_le_bytes());
+    bytes[247..255].copy_from_slice(&u64::from(count).to_le_bytes());
+    bytes
+}
+
 /// KITTI records: x y z intensity.
 fn kitti_bin(points: &[[f32; 3]]) -> Vec<u8> {
     points
@@ -586,6 +622,33 @@ fn cases() -> Vec<Case> {
     damaged[sizes_at + 8] = 0xE0; // a back reference before the first byte
     c.push(file(r, f, Header, n, damaged, &[Has("damaged"), Has("byte offset")]));
     c.push(file(r, f, Units, n, pcd("3", "binary_compressed", &pcd_lzf_block(&POINTS_MM)), &[Has("millimetres")]));
+
+    // --- LAS and LAZ -------------------------------------------------------------------------
+    let (f, n) = ("las", "scan.las");
+    let good = las_file(&POINTS, false);
+    let mut magic = good.clone();
+    magic[..4].copy_from_slice(b"LAZF");
+    let mut scale = good.clone();
+    scale[131..139].copy_from_slice(&f64::NAN.to_le_bytes());
+    c.push(file(r, f, Empty, n, "", &[Has("empty")]));
+    c.push(file(r, f, Truncated, n, cut(&good, 200), &[Has("ends inside the LAS header")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 7), &[Has("declares 3 points"), Has("byte offset")]));
+    c.push(file(r, f, Header, n, magic, &[Has("'LASF'")]));
+    c.push(file(r, f, Count, n, las_count(good.clone(), 4_000_000_000), &[Has("declares 4000000000 points"), Has("holds 3")]));
+    c.push(file(r, f, Units, n, las_file(&POINTS_MM, false), &[Has("millimetres")]));
+    c.push(file(r, f, Range, n, scale, &[Has("scale factors")]));
+
+    let (f, n) = ("laz", "scan.laz");
+    let good = las_file(&POINTS, true);
+    let data_start = u32::from_le_bytes(good[96..100].try_into().unwrap()) as usize;
+    let table = u64::from_le_bytes(good[data_start..data_start + 8].try_into().unwrap()) as usize;
+    let mut chunks = good.clone();
+    chunks[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
+    c.push(file(r, f, Truncated, n, minus(&good, 9), &[Has("truncated")]));
+    c.push(file(r, f, Truncated, n, cut(&good, table + 2), &[Has("past the end of the file")]));
+    c.push(file(r, f, Count, n, las_count(good.clone(), 60_000), &[Has("declares 60000 points"), Has("chunk table")]));
+    c.push(file(r, f, Count, n, chunks, &[Has("4294967295 chunks"), Has("byte offset")]));
+    c.push(file(r, f, Units, n, las_file(&POINTS_MM, true), &[Has("millimetres")]));
 
     // --- XYZ text -----------------------------------------------------------------------------
     let (f, n) = ("xyz", "scan.xyz");
@@ -1231,6 +1294,8 @@ fn the_valid_inputs_the_table_starts_from_are_read() {
             "b.pcd",
             pcd("3", "binary", &f32_le(&POINTS)),
         ),
+        (Reader::Points, "a.las", las_file(&POINTS, false)),
+        (Reader::Points, "a.laz", las_file(&POINTS, true)),
         (
             Reader::Points,
             "c.pcd",

@@ -757,6 +757,31 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
             include_bytes!("fixtures/open3d/legacy_compressed.pcd").to_vec(),
             include_bytes!("fixtures/open3d/tensor_compressed.pcd").to_vec(),
         ],
+        // Point formats 3 (LAZ: point-wise chunks) and 7 (LAS 1.4; LAZ: layered chunks).
+        Target::Points(name @ ("scan.las" | "scan.laz")) => [3, 7]
+            .into_iter()
+            .map(|format| {
+                let mut builder = las::Builder::from((1, 4));
+                builder.point_format = las::point::Format::new(format).unwrap();
+                builder.point_format.is_compressed = name == "scan.laz";
+                let header = builder.into_header().unwrap();
+                let cursor = std::io::Cursor::new(Vec::new());
+                let mut writer = las::Writer::new(cursor, header).unwrap();
+                for (i, p) in POINTS.iter().enumerate() {
+                    let point = las::Point {
+                        x: f64::from(p[0]),
+                        y: f64::from(p[1]),
+                        z: f64::from(p[2]),
+                        intensity: 100 * i as u16,
+                        gps_time: Some(i as f64),
+                        color: Some(las::Color::new(1, 2, 3)),
+                        ..Default::default()
+                    };
+                    writer.write_point(point).unwrap();
+                }
+                writer.into_inner().unwrap().into_inner()
+            })
+            .collect(),
         Target::Points("scan.xyz") => text("# x y z\n1 2 0.5\n-3,0.25,1.5,0.9\n\t2 -1 -0.5 # c\n"),
         Target::Points("scan.bin") => vec![POINTS
             .iter()
@@ -949,6 +974,8 @@ fuzz_targets! {
     pcd_ascii => Target::Points("ascii.pcd"),
     pcd_binary => Target::Points("binary.pcd"),
     pcd_binary_compressed => Target::Points("compressed.pcd"),
+    las => Target::Points("scan.las"),
+    laz => Target::Points("scan.laz"),
     xyz => Target::Points("scan.xyz"),
     kitti_bin => Target::Points("scan.bin"),
     uos_3d => Target::Points("scan000.3d"),
