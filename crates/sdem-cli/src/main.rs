@@ -12,11 +12,13 @@ mod cmd_bench;
 mod cmd_bench_faults;
 mod cmd_bench_suites;
 mod cmd_demo;
+mod cmd_export;
 mod cmd_import;
 mod cmd_localize;
 mod cmd_simulate;
 mod cmd_slam;
 mod cmd_view;
+mod export_e57;
 mod output;
 mod progress;
 
@@ -63,8 +65,10 @@ enum Command {
     /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs;
     /// --faults and --suite measure other cases.
     Bench(cmd_bench::Args),
-    /// Turn a 3DTK folder or a KITTI odometry sequence into a dataset folder.
+    /// Turn a 3DTK folder, a KITTI odometry sequence or an E57 survey into a dataset folder.
     Import(cmd_import::Args),
+    /// Write a map made by `sdem slam` for other tools: the aligned scans as an E57 survey.
+    Export(cmd_export::Args),
     /// Pictures for people: S-DEM panorama and slice, map plan and section, cost surface, and
     /// the 3D viewer page.
     View(cmd_view::Args),
@@ -79,6 +83,7 @@ fn main() -> ExitCode {
         Command::Localize(args) => cmd_localize::run(args),
         Command::Bench(args) => done(cmd_bench::run(args)),
         Command::Import(args) => done(cmd_import::run(args)),
+        Command::Export(args) => done(cmd_export::run(args)),
         Command::Slam(args) => cmd_slam::run(args),
         Command::View(args) => done(cmd_view::run(args)),
     };

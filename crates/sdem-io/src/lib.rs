@@ -204,8 +204,13 @@
 //!   copied unchanged (the Velodyne frame is sdem's), the camera poses become Velodyne poses
 //!   `Tr⁻¹ · P_i · Tr` re-based on the first imported scan in `poses_truth.txt`, and no
 //!   `attitude.csv` is written (no gyro/compass).
+//! - **E57 surveys** (one `.e57` file, [`import_e57`]): every scan ([`read_e57`]: Cartesian or
+//!   spherical, invalid points dropped) in its own frame as `scans/NNNNNN.ply`; the registered
+//!   poses, when every scan has one, become `odometry.txt` (translations re-based on the first
+//!   scan) and their roll, pitch and yaw `attitude.csv` — a prior, never `poses_truth.txt`.
+//!   [`write_e57`] writes scans with poses the same way (`sdem export MAP --e57`).
 //!
-//! Scans are renumbered from `000000` in the order of their source numbers.
+//! Scans are renumbered from `000000` in the order of their source numbers (E57: of the file).
 
 pub use crate::error::{Error, Result};
 use sdem::geometry::Vec3;
@@ -217,6 +222,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 mod attitude;
 mod dataset;
+mod e57;
 mod error;
 mod import;
 mod las;
@@ -229,6 +235,7 @@ mod sensor_file;
 mod sweep;
 mod voxels;
 
+pub use self::e57::{read_e57, write_e57, E57Scan, E57ScanOut};
 pub use attitude::{
     read_attitude_csv, read_attitude_readings, write_attitude_csv, AttitudeReadings,
     ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG,
@@ -238,10 +245,10 @@ pub use dataset::{
     ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
 };
 pub use import::{
-    import_3dtk, import_dataset, import_kitti, kitti_velodyne_poses, parse_kitti_calib_tr,
-    read_kitti_calib_tr, read_uos_frames_last, read_uos_pose, uos_matrix_to_world_from_sensor,
-    uos_pose_to_world_from_sensor, ImportFormat, ImportOptions, ImportSummary, UOS_MAX_RANGE_M,
-    UOS_MIN_RANGE_M,
+    import_3dtk, import_dataset, import_e57, import_kitti, kitti_velodyne_poses,
+    parse_kitti_calib_tr, read_kitti_calib_tr, read_uos_frames_last, read_uos_pose,
+    uos_matrix_to_world_from_sensor, uos_pose_to_world_from_sensor, ImportFormat, ImportOptions,
+    ImportSummary, UOS_MAX_RANGE_M, UOS_MIN_RANGE_M,
 };
 pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
 pub use ply::write_points_ply;

@@ -115,7 +115,7 @@ pub const MAX_MEDIAN_RANGE_M: f64 = 1000.0;
 
 /// Checks what every format shares: each coordinate fits in `f32` (sdem keeps points as `f32`),
 /// and the median distance from the sensor is at most [`MAX_MEDIAN_RANGE_M`].
-fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
+pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
     let limit = f64::from(f32::MAX);
     if let Some((i, p)) = points
         .iter()

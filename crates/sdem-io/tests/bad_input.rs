@@ -34,6 +34,7 @@
 
 mod common;
 
+use common::formats::{e57_file, e57_without_scans, las_count, las_file, pcd_lzf_block};
 use common::{crc32, resealed};
 
 use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
@@ -87,6 +88,8 @@ enum Reader {
     Map,
     /// `sdem_io::Dataset::open`, then every scan and sweep of it.
     Dataset,
+    /// `sdem_io::read_e57`, an E57 survey.
+    E57,
 }
 
 /// What the error message must contain besides the file name.
@@ -171,6 +174,7 @@ fn read(reader: Reader, path: &Path) -> sdem_io::Result<()> {
         Reader::SlamOptions => sdem_io::read_slam_config(path).map(drop),
         Reader::VoxelMap => sdem_io::read_voxel_map(path).map(drop),
         Reader::Map => sdem_io::load_map(path).map(drop),
+        Reader::E57 => sdem_io::read_e57(path).map(drop),
         Reader::Dataset => {
             let dataset = sdem_io::Dataset::open(path)?;
             for i in 0..dataset.len() {
@@ -304,60 +308,6 @@ fn f32_le(points: &[[f32; 3]]) -> Vec<u8> {
         .flatten()
         .flat_map(|v| v.to_le_bytes())
         .collect()
-}
-
-/// The body of a `DATA binary_compressed` PCD of fields `x y z` (`F 4`): the compressed and
-/// uncompressed sizes, then every x, every y, every z as an LZF stream of literal runs only
-/// (ctrl byte `len - 1`, then `len` bytes), which any LZF decoder reads.
-fn pcd_lzf_block(points: &[[f32; 3]]) -> Vec<u8> {
-    let columns: Vec<u8> = (0..3)
-        .flat_map(|axis| points.iter().flat_map(move |p| p[axis].to_le_bytes()))
-        .collect();
-    let mut packed = Vec::new();
-    for run in columns.chunks(32) {
-        packed.push(run.len() as u8 - 1);
-        packed.extend_from_slice(run);
-    }
-    let mut block = (packed.len() as u32).to_le_bytes().to_vec();
-    block.extend((columns.len() as u32).to_le_bytes());
-    block.extend(packed);
-    block
-}
-
-/// A LAS 1.4 file (LAZ when `compressed`) written by the `las` crate: point format 0, stored
-/// as millimetre steps from an offset of (100, -200, 5) m.
-fn las_file(points: &[[f32; 3]], compressed: bool) -> Vec<u8> {
-    let mut builder = las::Builder::from((1, 4));
-    builder.point_format = las::point::Format::new(0).unwrap();
-    builder.point_format.is_compressed = compressed;
-    let transform = |offset| las::Transform {
-        scale: 0.001,
-        offset,
-    };
-    builder.transforms = las::Vector {
-        x: transform(100.0),
-        y: transform(-200.0),
-        z: transform(5.0),
-    };
-    let header = builder.into_header().unwrap();
-    let mut writer = las::Writer::new(std::io::Cursor::new(Vec::new()), header).unwrap();
-    for p in points {
-        let point = las::Point {
-            x: f64::from(p[0]),
-            y: f64::from(p[1]),
-            z: f64::from(p[2]),
-            ..Default::default()
-        };
-        writer.write_point(point).unwrap();
-    }
-    writer.into_inner().unwrap().into_inner()
-}
-
-/// `bytes` of a LAS 1.4 file with the point count set to `count` in both of its places.
-fn las_count(mut bytes: Vec<u8>, count: u32) -> Vec<u8> {
-    bytes[107..111].copy_from_slice(&count.to_le_bytes());
-    bytes[247..255].copy_from_slice(&u64::from(count).to_le_bytes());
-    bytes
 }
 
 /// KITTI records: x y z intensity.
@@ -649,6 +599,25 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Count, n, las_count(good.clone(), 60_000), &[Has("declares 60000 points"), Has("chunk table")]));
     c.push(file(r, f, Count, n, chunks, &[Has("4294967295 chunks"), Has("byte offset")]));
     c.push(file(r, f, Units, n, las_file(&POINTS_MM, true), &[Has("millimetres")]));
+
+    // --- E57 surveys (sdem import) -----------------------------------------------------------
+    let (r, f, n) = (Reader::E57, "e57", "survey.e57");
+    let good = e57_file(&[&POINTS, &POINTS[..2]]);
+    let mut magic = good.clone();
+    magic[..8].copy_from_slice(b"ASTM-E58");
+    let mut lying_xml = good.clone();
+    lying_xml[32..40].copy_from_slice(&(u64::MAX / 2).to_le_bytes());
+    let mut damaged = good.clone();
+    damaged[700] ^= 0x10;
+    c.push(file(r, f, Empty, n, "", &[Has("empty")]));
+    c.push(file(r, f, Empty, n, e57_without_scans(), &[Has("no scans")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 1024), &[Has("truncated")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 100), &[Has("truncated")]));
+    c.push(file(r, f, Header, n, magic, &[Has("'ASTM-E57'")]));
+    c.push(file(r, f, Header, n, damaged, &[Has("checksum")]));
+    c.push(file(r, f, Count, n, lying_xml, &[Has("XML")]));
+    c.push(file(r, f, Units, n, e57_file(&[&POINTS, &POINTS_MM]), &[Has("scan 1"), Has("millimetres")]));
+    let r = Reader::Points;
 
     // --- XYZ text -----------------------------------------------------------------------------
     let (f, n) = ("xyz", "scan.xyz");
@@ -1294,6 +1263,7 @@ fn the_valid_inputs_the_table_starts_from_are_read() {
             "b.pcd",
             pcd("3", "binary", &f32_le(&POINTS)),
         ),
+        (Reader::E57, "a.e57", e57_file(&[&POINTS, &POINTS[..1]])),
         (Reader::Points, "a.las", las_file(&POINTS, false)),
         (Reader::Points, "a.laz", las_file(&POINTS, true)),
         (

@@ -129,3 +129,65 @@ fn las_and_laz_written_by_laspy_read_with_scale_and_offset() {
         }
     }
 }
+
+/// Writes `out/survey.e57` with pye57 (libE57Format): scan "A" with 300 points at
+/// (2 cos 0.1k, 2 sin 0.1k, 0.01k − 1), intensity and colour, then 20 points flagged invalid
+/// (`cartesianInvalidState` 2) at (9, 9, 9), posed at (10, −5, 0.5) turned 90° about z; scan
+/// "B" with the first 100 of those points and nothing else, at the identity.
+const PYE57_SCRIPT: &str = r#"
+import sys
+import numpy as np
+import pye57
+
+out = sys.argv[1]
+k = np.arange(300)
+xyz = np.stack([2 * np.cos(0.1 * k), 2 * np.sin(0.1 * k), 0.01 * k - 1])
+bad = np.full((3, 20), 9.0)
+survey = pye57.E57(f"{out}/survey.e57", mode="w")
+a = {
+    "cartesianX": np.concatenate([xyz[0], bad[0]]),
+    "cartesianY": np.concatenate([xyz[1], bad[1]]),
+    "cartesianZ": np.concatenate([xyz[2], bad[2]]),
+    "cartesianInvalidState": np.concatenate([np.zeros(300), np.full(20, 2)]).astype(np.int8),
+    "intensity": np.linspace(0.0, 1.0, 320),
+    "colorRed": np.full(320, 200, np.uint8),
+    "colorGreen": np.full(320, 100, np.uint8),
+    "colorBlue": np.full(320, 50, np.uint8),
+}
+half = np.sqrt(0.5)
+survey.write_scan_raw(a, name="A", rotation=np.array([half, 0, 0, half]),
+                      translation=np.array([10.0, -5.0, 0.5]))
+b = {"cartesianX": xyz[0][:100], "cartesianY": xyz[1][:100], "cartesianZ": xyz[2][:100]}
+survey.write_scan_raw(b, name="B")
+survey.close()
+"#;
+
+#[test]
+fn an_e57_survey_written_by_pye57_reads_every_scan_in_its_own_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    run_python(PYE57_SCRIPT, &[dir.path()]);
+    let scans = sdem_io::read_e57(&dir.path().join("survey.e57")).unwrap();
+    assert_eq!(scans.len(), 2);
+    let expected = |k: usize| {
+        let k = k as f64;
+        Vec3::new(2.0 * (0.1 * k).cos(), 2.0 * (0.1 * k).sin(), 0.01 * k - 1.0)
+    };
+    let (a, b) = (&scans[0], &scans[1]);
+    assert_eq!(a.name.as_deref(), Some("A"));
+    assert_eq!((a.points_in_sensor.len(), a.dropped), (300, 20));
+    assert_eq!((b.points_in_sensor.len(), b.dropped), (100, 0));
+    for scan in [a, b] {
+        for (k, p) in scan.points_in_sensor.iter().enumerate() {
+            // pye57 stores coordinates as scaled integers of 0.1 mm or finer.
+            assert!((p - expected(k)).norm() < 1e-4, "point {k}: {p:?}");
+        }
+    }
+    let pose = a.world_from_sensor.expect("scan A has a pose");
+    assert!((pose.translation.vector - Vec3::new(10.0, -5.0, 0.5)).norm() < 1e-9);
+    let x_axis = pose.rotation * Vec3::x();
+    assert!((x_axis - Vec3::y()).norm() < 1e-9, "{x_axis:?}");
+    let identity = b
+        .world_from_sensor
+        .expect("pye57 writes a pose for every scan");
+    assert!(identity.to_homogeneous().is_identity(1e-12));
+}

@@ -1,5 +1,7 @@
 //! Helpers shared by the integration tests of the readers.
 
+pub mod formats;
+
 /// CRC-32 (IEEE), as zlib computes it: the checksum of voxel maps, node files and manifests.
 pub fn crc32(bytes: &[u8]) -> u32 {
     crc32fast::hash(bytes)
