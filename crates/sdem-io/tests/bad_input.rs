@@ -599,6 +599,12 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Count, n, las_count(good.clone(), 60_000), &[Has("declares 60000 points"), Has("chunk table")]));
     c.push(file(r, f, Count, n, chunks, &[Has("4294967295 chunks"), Has("byte offset")]));
     c.push(file(r, f, Units, n, las_file(&POINTS_MM, true), &[Has("millimetres")]));
+    // The LASzip VLR's first item (its data start 54 bytes after the record's user id - 2)
+    // declares a size its type does not have.
+    let mut items = good.clone();
+    let vlr = items.windows(14).position(|w| w == b"laszip encoded").unwrap() - 2 + 54;
+    items[vlr + 36..vlr + 38].copy_from_slice(&21u16.to_le_bytes());
+    c.push(file(r, f, Header, n, items, &[Has("LASzip VLR's item 0"), Has("21 bytes")]));
 
     // --- E57 surveys (sdem import) -----------------------------------------------------------
     let (r, f, n) = (Reader::E57, "e57", "survey.e57");
