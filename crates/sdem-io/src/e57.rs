@@ -14,11 +14,11 @@
 //! within [`crate::MAX_MEDIAN_RANGE_M`] of the scanner). A pose's quaternion is normalized, and
 //! one that is zero or not finite is an error naming the scan.
 
-use super::{read_bytes, write_atomic};
+use super::write_atomic;
 use crate::error::{Error, Result};
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use sdem::geometry::{Pose, Vec3};
-use std::io::Cursor;
+use std::io::{BufReader, Cursor, Read, Seek, SeekFrom};
 use std::path::Path;
 
 /// One scan of an E57 survey, as read.
@@ -46,26 +46,57 @@ pub struct E57ScanOut<'a> {
 }
 
 /// Reads every scan of an E57 survey, in the order of the file (see the module documentation).
+/// For surveys too large to hold at once, [`for_each_e57_scan`] reads one scan at a time.
 ///
 /// # Errors
 /// [`Error::Io`] when the file cannot be read; [`Error::Parse`] naming the file (and the scan)
 /// when it is not an E57 file, is truncated or damaged (its pages carry checksums), holds no
 /// scan, or a scan's pose is not a rotation.
 pub fn read_e57(path: &Path) -> Result<Vec<E57Scan>> {
-    let bytes = read_bytes(path)?;
+    let mut scans = Vec::new();
+    for_each_e57_scan(
+        path,
+        |_| true,
+        |_, scan| {
+            scans.push(scan);
+            Ok(())
+        },
+    )?;
+    Ok(scans)
+}
+
+/// Reads the scans of an E57 survey one at a time, in the order of the file: `visit(index,
+/// scan)` gets each scan for which `wanted(index)` is true (the others' points are not decoded),
+/// so only one scan is in memory at a time. Returns the number of scans in the survey.
+///
+/// # Errors
+/// As [`read_e57`], and whatever `visit` returns.
+pub fn for_each_e57_scan(
+    path: &Path,
+    wanted: impl Fn(usize) -> bool,
+    mut visit: impl FnMut(usize, E57Scan) -> Result<()>,
+) -> Result<usize> {
     let err = |message: String| Error::parse(path, None, message);
-    if bytes.is_empty() {
+    let mut file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut magic = Vec::with_capacity(8);
+    (&mut file)
+        .take(8)
+        .read_to_end(&mut magic)
+        .map_err(|e| Error::io(path, e))?;
+    if magic.is_empty() {
         return Err(err(
             "the file is empty; expected an E57 header starting with 'ASTM-E57'".into(),
         ));
     }
-    if !bytes.starts_with(b"ASTM-E57") {
-        let start = String::from_utf8_lossy(bytes.get(..8).unwrap_or(&bytes)).into_owned();
+    if magic != b"ASTM-E57" {
+        let start = String::from_utf8_lossy(&magic).into_owned();
         return Err(err(format!(
             "the file starts with {start:?}, not the E57 magic 'ASTM-E57'; it is not an E57 file"
         )));
     }
-    let mut reader = ::e57::E57Reader::new(Cursor::new(bytes))
+    file.seek(SeekFrom::Start(0))
+        .map_err(|e| Error::io(path, e))?;
+    let mut reader = ::e57::E57Reader::new(BufReader::new(file))
         .map_err(|e| err(format!("not a readable E57 file: {}", one_line(&e))))?;
     let clouds = reader.pointclouds();
     if clouds.is_empty() {
@@ -74,27 +105,26 @@ pub fn read_e57(path: &Path) -> Result<Vec<E57Scan>> {
                 .into(),
         ));
     }
-    let mut scans = Vec::with_capacity(clouds.len());
     for (index, cloud) in clouds.iter().enumerate() {
-        let scan = read_scan(&mut reader, cloud).map_err(|message| {
-            err(format!(
-                "scan {index}{}: {message}",
-                cloud
-                    .name
-                    .as_ref()
-                    .map_or(String::new(), |n| format!(" ('{n}')"))
-            ))
-        })?;
+        if !wanted(index) {
+            continue;
+        }
+        let name = cloud
+            .name
+            .as_ref()
+            .map_or(String::new(), |n| format!(" ('{n}')"));
+        let scan = read_scan(&mut reader, cloud)
+            .map_err(|message| err(format!("scan {index}{name}: {message}")))?;
         if !scan.points_in_sensor.is_empty() {
             // As every scan: metres in the sensor frame (see `read_points`).
             crate::points::check_magnitudes(path, &scan.points_in_sensor).map_err(|e| match e {
-                Error::Parse { message, .. } => err(format!("scan {index}: {message}")),
+                Error::Parse { message, .. } => err(format!("scan {index}{name}: {message}")),
                 other => other,
             })?;
         }
-        scans.push(scan);
+        visit(index, scan)?;
     }
-    Ok(scans)
+    Ok(clouds.len())
 }
 
 /// Reads one scan's points and pose; the error says what is wrong with it.
