@@ -1,5 +1,5 @@
-//! `sdem import`: a 3DTK folder, a KITTI odometry sequence or a ROS 2 bag turned into a
-//! dataset folder.
+//! `sdem import`: a 3DTK folder, a KITTI odometry sequence, a ROS 2 bag or an E57 survey turned
+//! into a dataset folder.
 
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
@@ -11,18 +11,21 @@ use std::path::PathBuf;
 pub struct Args {
     /// What to import: a 3DTK folder (scanNNN.3d + scanNNN.pose, optionally
     /// slam6d_frames_2009/ or scanNNN.frames), a KITTI odometry sequence (velodyne/NNNNNN.bin,
-    /// poses.txt, calib.txt), or a ROS 2 bag (a rosbag2 folder, or one .mcap or .db3 file).
+    /// poses.txt, calib.txt), a ROS 2 bag (a rosbag2 folder, or one .mcap or .db3 file) or an
+    /// E57 survey (SURVEY.e57: every scan in its own frame).
     source: PathBuf,
     /// The dataset folder to write (scans/ and, for 3DTK, odometry.txt, attitude.csv and
     /// poses_slam6d.txt; for KITTI, poses_truth.txt; for a ROS 2 bag, attitude.csv, odometry.txt
-    /// and, for a tilting laser, sensor.toml).
+    /// and, for a tilting laser, sensor.toml; for E57, odometry.txt and attitude.csv from the
+    /// registered poses when every scan has one).
     #[arg(long)]
     out: PathBuf,
-    /// The source's format [default: guessed: a bag means ros2, velodyne/ means kitti,
-    /// scanNNN.3d means 3dtk].
+    /// The source's format [default: guessed: a bag means ros2, a .e57 file e57, velodyne/
+    /// kitti, scanNNN.3d 3dtk].
     #[arg(long, value_enum)]
     format: Option<Format>,
-    /// The first scan number to import (the NNN in the file names).
+    /// The first scan number to import (the NNN in the file names; for E57 the scan's position
+    /// in the survey, from 0).
     #[arg(long, default_value_t = 0)]
     first: usize,
     /// How many scans to import from --first on [default: all].
@@ -54,6 +57,8 @@ enum Format {
     Kitti,
     /// A ROS 2 bag: a rosbag2 folder (metadata.yaml + .mcap or .db3), or one .mcap file.
     Ros2,
+    /// An E57 survey: one .e57 file of scans with their registered poses.
+    E57,
 }
 
 /// Runs `sdem import`.
@@ -81,6 +86,7 @@ pub fn run(args: Args) -> Result<()> {
     let format = args.format.map(|f| match f {
         Format::Uos3dtk => ImportFormat::Uos3dtk,
         Format::Kitti | Format::Ros2 => ImportFormat::Kitti,
+        Format::E57 => ImportFormat::E57,
     });
     let options = ImportOptions {
         first: args.first,
@@ -117,7 +123,8 @@ fn clear_for_force(args: &Args) -> Result<()> {
 fn check_args(args: &Args) -> Result<()> {
     if !args.source.exists() {
         bail!(
-            "{} does not exist; import reads a 3DTK folder, a KITTI sequence folder or a ROS 2 bag",
+            "{} does not exist; import reads a 3DTK folder, a KITTI sequence folder, a ROS 2 \
+             bag or an .e57 file",
             args.source.display()
         );
     }
@@ -150,6 +157,7 @@ fn print_text(args: &Args, summary: &ImportSummary) {
     let name = match summary.format {
         ImportFormat::Uos3dtk => "3DTK",
         ImportFormat::Kitti => "KITTI",
+        ImportFormat::E57 => "E57",
     };
     println!(
         "imported {} {name} scans from {} to {}",
@@ -171,6 +179,15 @@ fn print_text(args: &Args, summary: &ImportSummary) {
             summary.dropped_near,
             sdem_io::UOS_MIN_RANGE_M
         );
+    }
+    if summary.dropped_invalid > 0 {
+        println!(
+            "  dropped {} invalid points (no return, or a direction without a range)",
+            summary.dropped_invalid
+        );
+    }
+    for note in &summary.notes {
+        println!("  note: {note}");
     }
     println!("  wrote {}", summary.written.join(", "));
 }

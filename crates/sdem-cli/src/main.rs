@@ -20,6 +20,7 @@ mod cmd_localize;
 mod cmd_simulate;
 mod cmd_slam;
 mod cmd_view;
+mod export_e57;
 mod export_mcap;
 mod output;
 mod progress;
@@ -67,11 +68,13 @@ enum Command {
     /// Measure the exact search against the exhaustive oracle, and accuracy over seeded pairs;
     /// --faults and --suite measure other cases.
     Bench(cmd_bench::Args),
-    /// Turn a 3DTK folder, a KITTI odometry sequence or a ROS 2 bag into a dataset folder.
+    /// Turn a 3DTK folder, a KITTI odometry sequence, a ROS 2 bag or an E57 survey into a
+    /// dataset folder.
     Import(cmd_import::Args),
     /// Say what a ROS 2 bag holds: files, storage, time span, topics with types, counts, rates.
     Info(cmd_info::Args),
-    /// Write a saved map for other tools: --mcap for Foxglove and RViz.
+    /// Write a map made by `sdem slam` for other tools: --mcap for Foxglove and RViz, --e57 the
+    /// aligned scans as an E57 survey.
     Export(cmd_export::Args),
     /// Pictures for people: S-DEM panorama and slice, map plan and section, cost surface, and
     /// the 3D viewer page.

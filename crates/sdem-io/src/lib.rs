@@ -29,10 +29,11 @@
 //! | extension | format |
 //! |---|---|
 //! | `.ply` | PLY, `ascii`, `binary_little_endian` or `binary_big_endian`; element `vertex` with properties `x`, `y`, `z` stored as `float` or `double`; other properties and elements are ignored; vertices with a NaN coordinate are skipped (no return) |
-//! | `.pcd` | PCL PCD, `DATA ascii` or `DATA binary` (little-endian); fields `x`, `y`, `z` of `TYPE F`, `SIZE 4` or `8`, `COUNT 1`; other fields ignored; points with a NaN coordinate are skipped. `DATA binary_compressed` is not supported. `VIEWPOINT` is ignored |
+//! | `.pcd` | PCL PCD, `DATA ascii`, `binary` (little-endian) or `binary_compressed` (LZF, as PCL and Open3D write it); fields `x`, `y`, `z` of `TYPE F`, `SIZE 4` or `8`, `COUNT 1`, in any order among other fields of any type and count, which are ignored; organized clouds (`HEIGHT` > 1) row after row; points with a NaN coordinate are skipped. `VIEWPOINT` is ignored |
 //! | `.xyz`, `.txt` | text, one point per line: `x y z` separated by spaces, tabs or commas; further columns ignored; blank lines and everything after `#` (or a line starting with `//`) ignored |
 //! | `.bin` | KITTI Velodyne: little-endian `f32` records `x y z intensity`, 16 bytes per point, no header |
 //! | `.3d` | 3DTK "uos": text `x y z` in **centimetres**, left-handed with x right, y up, z forward; converted to metres with x forward, y left, z up: `(z, −x, y) / 100`. An optional first line like `360 x 225` is skipped; further columns ignored |
+//! | `.las`, `.laz` | ASPRS LAS 1.0–1.4, any point format, uncompressed or LASzip-compressed (`las` and `laz` crates); the header's scale and offset applied; other attributes ignored |
 //! | `.sweep` | a raw tilting-LRF sweep (below), turned into points with [`Sweep::points_in_sensor`] |
 //!
 //! A cloud with no points is an error on reading and on writing: sdem cannot use an empty scan.
@@ -203,8 +204,13 @@
 //!   copied unchanged (the Velodyne frame is sdem's), the camera poses become Velodyne poses
 //!   `Tr⁻¹ · P_i · Tr` re-based on the first imported scan in `poses_truth.txt`, and no
 //!   `attitude.csv` is written (no gyro/compass).
+//! - **E57 surveys** (one `.e57` file, [`import_e57`]): every scan ([`read_e57`]: Cartesian or
+//!   spherical, invalid points dropped) in its own frame as `scans/NNNNNN.ply`; the registered
+//!   poses, when every scan has one, become `odometry.txt` (translations re-based on the first
+//!   scan) and their roll, pitch and yaw `attitude.csv` — a prior, never `poses_truth.txt`.
+//!   [`write_e57`] writes scans with poses the same way (`sdem export MAP --e57`).
 //!
-//! Scans are renumbered from `000000` in the order of their source numbers.
+//! Scans are renumbered from `000000` in the order of their source numbers (E57: of the file).
 //!
 //! # ROS 2 bags ([`rosbag`]) and MCAP output ([`write_map_mcap`])
 //!
@@ -225,8 +231,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 mod attitude;
 mod dataset;
+mod e57;
 mod error;
 mod import;
+mod las;
 mod mapfile;
 mod mcap_out;
 mod pcd;
@@ -238,6 +246,7 @@ mod sensor_file;
 mod sweep;
 mod voxels;
 
+pub use self::e57::{for_each_e57_scan, read_e57, write_e57, E57Scan, E57ScanOut};
 pub use attitude::{
     read_attitude_csv, read_attitude_readings, write_attitude_csv, AttitudeReadings,
     ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG,
@@ -247,10 +256,10 @@ pub use dataset::{
     ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
 };
 pub use import::{
-    import_3dtk, import_dataset, import_kitti, kitti_velodyne_poses, parse_kitti_calib_tr,
-    read_kitti_calib_tr, read_uos_frames_last, read_uos_pose, uos_matrix_to_world_from_sensor,
-    uos_pose_to_world_from_sensor, ImportFormat, ImportOptions, ImportSummary, UOS_MAX_RANGE_M,
-    UOS_MIN_RANGE_M,
+    import_3dtk, import_dataset, import_e57, import_kitti, kitti_velodyne_poses,
+    parse_kitti_calib_tr, read_kitti_calib_tr, read_uos_frames_last, read_uos_pose,
+    uos_matrix_to_world_from_sensor, uos_pose_to_world_from_sensor, ImportFormat, ImportOptions,
+    ImportSummary, UOS_MAX_RANGE_M, UOS_MIN_RANGE_M,
 };
 pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
 pub use mcap_out::{

@@ -1,10 +1,14 @@
-//! PCL `.pcd` point clouds, `DATA ascii` and `DATA binary`.
+//! PCL `.pcd` point clouds: `DATA ascii`, `binary` and `binary_compressed` (LZF, by the `lzf`
+//! crate).
 //!
 //! The header is a sequence of `KEY values` lines ending with `DATA`; see
 //! <https://pointclouds.org/documentation/tutorials/pcd_file_format.html>. sdem needs fields `x`,
-//! `y`, `z` of type `F` (size 4 or 8) with count 1; other fields are skipped using their `SIZE`
-//! and `COUNT`. Binary data is little-endian, one point after another. `VERSION` and
-//! `VIEWPOINT` are ignored, as are unknown keys.
+//! `y`, `z` of type `F` (size 4 or 8) with count 1, in any order among the other fields, which
+//! may be of any type and count and are skipped using their `SIZE` and `COUNT`. Binary data is
+//! little-endian, one point after another; compressed data is an LZF block of the fields one
+//! after another (see [`read_compressed`]). An organized cloud (`HEIGHT` > 1) is read row after
+//! row; its points with a NaN coordinate (no return) are dropped. `VERSION` and `VIEWPOINT` are
+//! ignored, as are unknown keys.
 
 use super::{count_newlines, parse_count, read_bytes};
 use crate::error::{Error, Result};
@@ -50,6 +54,19 @@ struct Layout {
     data_line: Option<usize>,
 }
 
+impl Layout {
+    /// The bytes of one point: every field's `SIZE × COUNT`. Sizes are at most 8 and counts at
+    /// most 2^20, so the sum cannot overflow in practice; checked anyway.
+    fn point_bytes(&self) -> usize {
+        self.fields
+            .iter()
+            .try_fold(0usize, |acc, f| {
+                acc.checked_add(f.size.checked_mul(f.count)?)
+            })
+            .unwrap_or(usize::MAX)
+    }
+}
+
 /// Reads the x, y, z of every point of a PCD file (see the module documentation).
 pub(super) fn read_pcd(path: &Path) -> Result<Vec<Vec3>> {
     let bytes = read_bytes(path)?;
@@ -71,12 +88,7 @@ pub(super) fn read_pcd(path: &Path) -> Result<Vec<Vec3>> {
     match header.data.as_str() {
         "ascii" => read_ascii(path, &body, &header, axes),
         "binary" => read_binary(path, &body, &header, axes),
-        "binary_compressed" => Err(Error::parse(
-            path,
-            header.data_line,
-            "DATA binary_compressed is not supported; convert the file to binary or ascii, e.g. \
-             `pcl_convert_pcd_ascii_binary IN.pcd OUT.pcd 1`",
-        )),
+        "binary_compressed" => read_compressed(path, &body, &header, axes),
         other => Err(Error::parse(
             path,
             header.data_line,
@@ -401,15 +413,7 @@ fn check_point(
 
 fn read_binary(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) -> Result<Vec<Vec3>> {
     let point_count = header.point_count;
-    // Field sizes are at most 8 and counts at most 2^20, so this sum cannot overflow in practice;
-    // checked anyway.
-    let point_bytes = header
-        .fields
-        .iter()
-        .try_fold(0usize, |acc, f| {
-            acc.checked_add(f.size.checked_mul(f.count)?)
-        })
-        .unwrap_or(usize::MAX);
+    let point_bytes = header.point_bytes();
     let needed = point_count.checked_mul(point_bytes);
     let body_start = body.start;
     let body = body.bytes;
@@ -440,16 +444,131 @@ fn read_binary(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) ->
                 .checked_add(size)
                 .and_then(|end| record.get(offset..end))
                 .unwrap_or_default();
-            *value = match size {
-                4 => f64::from(f32::from_le_bytes(raw.try_into().unwrap_or([0; 4]))),
-                _ => f64::from_le_bytes(raw.try_into().unwrap_or([0; 8])),
-            };
+            *value = le_float(raw);
         }
         if let Some(p) = check_point(path, None, index, xyz)? {
             points.push(p);
         }
     }
     Ok(points)
+}
+
+/// LZF's largest expansion: a back reference of 3 bytes repeats at most 264 bytes.
+const LZF_MAX_RATIO: usize = 88;
+
+/// `DATA binary_compressed`, as PCL and Open3D write it: the `u32` compressed size, the `u32`
+/// uncompressed size, then an LZF block. Uncompressed, the data are field after field (every
+/// point's `x`, then every point's `y`, …), each field `SIZE × COUNT` bytes per point.
+fn read_compressed(
+    path: &Path,
+    body: &Body,
+    header: &Layout,
+    layout: AxisLayout,
+) -> Result<Vec<Vec3>> {
+    let at = |offset: usize| body.start + offset;
+    let word = |offset: usize| {
+        body.bytes
+            .get(offset..offset + 4)
+            .and_then(|b| b.try_into().ok())
+            .map(u32::from_le_bytes)
+    };
+    let (Some(compressed), Some(uncompressed)) = (word(0), word(4)) else {
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "the file ends at byte offset {}, inside the 8 bytes of sizes that follow DATA                  binary_compressed; the file is truncated",
+                at(body.bytes.len())
+            ),
+        ));
+    };
+    let (compressed, uncompressed) = (compressed as usize, uncompressed as usize);
+    let point_count = header.point_count;
+    let point_bytes = header.point_bytes();
+    let needed = point_count.saturating_mul(point_bytes);
+    if uncompressed != needed {
+        return Err(Error::parse(
+            path,
+            header.count_line,
+            format!(
+                "the header declares {point_count} points of {point_bytes} bytes ({needed} \
+                 bytes), but the compressed block at byte offset {} unpacks to {uncompressed} \
+                 bytes; the header is wrong or the file is damaged",
+                at(0)
+            ),
+        ));
+    }
+    let data = body.bytes.get(8..8 + compressed).ok_or_else(|| {
+        Error::parse(
+            path,
+            None,
+            format!(
+                "the compressed block declares {compressed} bytes from byte offset {}, but the \
+                 file ends at byte offset {}; the file is truncated",
+                at(8),
+                at(body.bytes.len())
+            ),
+        )
+    })?;
+    if point_count == 0 {
+        return Ok(Vec::new());
+    }
+    if uncompressed > compressed.saturating_mul(LZF_MAX_RATIO) {
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "the compressed block at byte offset {} declares {uncompressed} bytes unpacked \
+                 from {compressed}, more than LZF can pack into so few; the sizes are damaged",
+                at(0)
+            ),
+        ));
+    }
+    let damaged = |why: String| {
+        Error::parse(
+            path,
+            None,
+            format!(
+                "the compressed block ({compressed} bytes at byte offset {}) is damaged: {why}",
+                at(8)
+            ),
+        )
+    };
+    let unpacked = lzf::decompress(data, uncompressed).map_err(|e| {
+        damaged(match e {
+            lzf::LzfError::BufferTooSmall => {
+                format!("it unpacks to more than the {uncompressed} bytes declared")
+            }
+            _ => "it is not valid LZF data".to_string(),
+        })
+    })?;
+    if unpacked.len() != uncompressed {
+        return Err(damaged(format!(
+            "it unpacks to {} bytes, not the {uncompressed} declared",
+            unpacked.len()
+        )));
+    }
+    let mut points = Vec::with_capacity(point_count);
+    for index in 0..point_count {
+        let mut xyz = [0f64; 3];
+        for (value, &(offset, _, size)) in xyz.iter_mut().zip(&layout) {
+            // Field after field: this field's column starts at `point_count × offset`.
+            let start = point_count * offset + index * size;
+            *value = le_float(unpacked.get(start..start + size).unwrap_or_default());
+        }
+        if let Some(p) = check_point(path, None, index, xyz)? {
+            points.push(p);
+        }
+    }
+    Ok(points)
+}
+
+/// A little-endian `f32` (4 bytes) or `f64` (8 bytes).
+fn le_float(raw: &[u8]) -> f64 {
+    match raw.try_into() {
+        Ok(four) => f64::from(f32::from_le_bytes(four)),
+        Err(_) => f64::from_le_bytes(raw.try_into().unwrap_or([0; 8])),
+    }
 }
 
 fn read_ascii(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) -> Result<Vec<Vec3>> {
@@ -625,6 +744,88 @@ mod tests {
         );
     }
 
+    /// The points of [`binary_pcd`], organized 2 × 2, as `DATA binary_compressed`: the fields
+    /// one after another, then LZF.
+    fn compressed_pcd() -> Vec<u8> {
+        let points = [
+            (1.5f32, 2.25f64, -3.0f32),
+            (f32::NAN, f64::NAN, f32::NAN),
+            (0.1, 0.2, 0.3),
+            (-7.0, 1e-9, 100.0),
+        ];
+        let mut columns = Vec::new();
+        points
+            .iter()
+            .for_each(|p| columns.extend(p.0.to_le_bytes()));
+        points.iter().for_each(|_| columns.extend([0xAA; 4]));
+        points
+            .iter()
+            .for_each(|p| columns.extend(p.1.to_le_bytes()));
+        points
+            .iter()
+            .for_each(|_| columns.extend(7u16.to_le_bytes()));
+        points
+            .iter()
+            .for_each(|p| columns.extend(p.2.to_le_bytes()));
+        let packed = lzf::compress(&columns).unwrap();
+        let mut bytes = b"VERSION 0.7\nFIELDS x _ y intensity z\nSIZE 4 1 8 2 4\nTYPE F U F U F\n\
+                          COUNT 1 4 1 1 1\nWIDTH 2\nHEIGHT 2\nPOINTS 4\nDATA binary_compressed\n"
+            .to_vec();
+        bytes.extend((packed.len() as u32).to_le_bytes());
+        bytes.extend((columns.len() as u32).to_le_bytes());
+        bytes.extend(packed);
+        bytes
+    }
+
+    #[test]
+    fn compressed_organized_pcd_drops_nan_points() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = write(dir.path(), "c.pcd", &compressed_pcd());
+        assert_eq!(
+            read_points(&path).unwrap(),
+            vec![
+                Vec3::new(1.5, 2.25, -3.0),
+                Vec3::new(f64::from(0.1f32), 0.2, f64::from(0.3f32)),
+                Vec3::new(-7.0, 1e-9, 100.0),
+            ]
+        );
+    }
+
+    #[test]
+    fn malformed_compressed_pcd() {
+        let good = compressed_pcd();
+        let data = good.windows(5).position(|w| w == b"ssed\n").unwrap() + 5;
+        let mut cut = good.clone();
+        cut.truncate(good.len() - 3);
+        assert!(expect_err(&cut, None).contains("truncated"));
+        cut.truncate(data + 6);
+        assert!(expect_err(&cut, None).contains("truncated"));
+        // A header that declares more points than the block holds.
+        let lying = String::from_utf8_lossy(&good[..data])
+            .replace("HEIGHT 2\nPOINTS 4", "HEIGHT 3\nPOINTS 6");
+        let mut bytes = lying.into_bytes();
+        bytes.extend(&good[data..]);
+        let msg = expect_err(&bytes, None);
+        assert!(msg.contains("declares 6 points"), "{msg}");
+        // A block that declares a size its LZF data cannot hold (checked before the allocation).
+        let huge = String::from_utf8_lossy(&good[..data]).replace(
+            "WIDTH 2\nHEIGHT 2\nPOINTS 4",
+            "WIDTH 100000\nHEIGHT 1\nPOINTS 100000",
+        );
+        let mut bytes = huge.into_bytes();
+        let sizes = bytes.len();
+        bytes.extend(&good[data..]);
+        bytes[sizes + 4..sizes + 8].copy_from_slice(&2_200_000u32.to_le_bytes());
+        let msg = expect_err(&bytes, None);
+        assert!(msg.contains("more than LZF"), "{msg}");
+        // A damaged block.
+        let mut damaged = good.clone();
+        for b in &mut damaged[data + 8..] {
+            *b = 0xFF;
+        }
+        assert!(expect_err(&damaged, None).contains("damaged"));
+    }
+
     #[test]
     fn malformed_pcd() {
         expect_err(b"", None);
@@ -632,7 +833,7 @@ mod tests {
             b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA binary_compressed\n",
             None,
         );
-        assert!(msg.contains("binary_compressed"), "{msg}");
+        assert!(msg.contains("truncated"), "{msg}");
         expect_err(
             b"FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\n",
             None,
@@ -714,7 +915,7 @@ mod tests {
     #[test]
     fn no_input_prefix_panics() {
         let dir = tempfile::tempdir().unwrap();
-        for file in [ASCII.as_bytes().to_vec(), binary_pcd()] {
+        for file in [ASCII.as_bytes().to_vec(), binary_pcd(), compressed_pcd()] {
             for len in 0..file.len() {
                 let p = write(dir.path(), "cut.pcd", &file[..len]);
                 let _ = read_points(&p);

@@ -6,7 +6,9 @@ use sdem::geometry::Vec3;
 use std::path::Path;
 
 /// The file extensions [`read_points`] understands (lower case, without the dot).
-pub const POINT_EXTENSIONS: &[&str] = &["ply", "pcd", "xyz", "txt", "bin", "3d", "sweep"];
+pub const POINT_EXTENSIONS: &[&str] = &[
+    "ply", "pcd", "xyz", "txt", "bin", "3d", "sweep", "las", "laz",
+];
 
 /// A point-cloud file format, chosen by file extension.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -23,6 +25,8 @@ pub enum PointFormat {
     Uos3d,
     /// `.sweep`: sdem's raw tilting-LRF sweep.
     Sweep,
+    /// `.las` or `.laz`: ASPRS LAS, uncompressed or LASzip-compressed.
+    Las,
 }
 
 impl PointFormat {
@@ -43,13 +47,14 @@ impl PointFormat {
             "bin" => PointFormat::KittiBin,
             "3d" => PointFormat::Uos3d,
             "sweep" => PointFormat::Sweep,
+            "las" | "laz" => PointFormat::Las,
             _ => return None,
         })
     }
 }
 
 /// Reads a point cloud, in metres in the file's (sensor) frame, choosing the format by extension:
-/// `.ply`, `.pcd`, `.xyz`/`.txt`, KITTI `.bin`, 3DTK `.3d` or sdem's `.sweep` (see the
+/// `.ply`, `.pcd`, `.xyz`/`.txt`, KITTI `.bin`, 3DTK `.3d`, `.las`/`.laz` or sdem's `.sweep` (see the
 /// [module documentation](crate) for each format's details).
 ///
 /// Points with a NaN coordinate are skipped in PLY, PCD and KITTI files (no return); any other
@@ -69,18 +74,18 @@ impl PointFormat {
 /// ```
 pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
     let format = PointFormat::from_path(path).ok_or_else(|| {
-        let ext = path
-            .extension()
-            .map(|e| format!("'.{}'", e.to_string_lossy()))
-            .unwrap_or_else(|| "no extension".to_string());
-        Error::parse(
-            path,
-            None,
-            format!(
-                "{ext} is not a point-cloud format sdem reads; use .ply, .pcd, .xyz or .txt, \
-                 .bin (KITTI), .3d (3DTK) or .sweep"
+        let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase());
+        let message = match ext.as_deref() {
+            Some("e57") => "an E57 file holds a survey of scans, not one scan; turn it into a \
+                            dataset with `sdem import FILE.e57 --out DATASET`"
+                .to_string(),
+            _ => format!(
+                "{} is not a point-cloud format sdem reads; use .ply, .pcd, .xyz or .txt, .bin \
+                 (KITTI), .3d (3DTK), .las or .laz, or .sweep",
+                ext.map_or_else(|| "no extension".to_string(), |e| format!("'.{e}'"))
             ),
-        )
+        };
+        Error::parse(path, None, message)
     })?;
     let points = match format {
         PointFormat::Ply => super::ply::read_ply(path)?,
@@ -89,6 +94,7 @@ pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
         PointFormat::KittiBin => read_kitti_bin(path)?,
         PointFormat::Uos3d => read_uos_3d(path)?,
         PointFormat::Sweep => sweep_points(path)?,
+        PointFormat::Las => super::las::read_las(path)?,
     };
     if points.is_empty() {
         return Err(Error::parse(
@@ -109,7 +115,7 @@ pub const MAX_MEDIAN_RANGE_M: f64 = 1000.0;
 
 /// Checks what every format shares: each coordinate fits in `f32` (sdem keeps points as `f32`),
 /// and the median distance from the sensor is at most [`MAX_MEDIAN_RANGE_M`].
-fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
+pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
     let limit = f64::from(f32::MAX);
     if let Some((i, p)) = points
         .iter()
@@ -357,11 +363,13 @@ mod tests {
 
     #[test]
     fn unknown_extension_lists_the_supported_ones() {
-        let msg = expect_err("cloud.las", b"whatever", None);
+        let msg = expect_err("cloud.obj", b"whatever", None);
         assert!(
             msg.contains(".ply") && msg.contains(".pcd") && msg.contains(".3d"),
             "{msg}"
         );
+        let msg = expect_err("survey.E57", b"ASTM-E57", None);
+        assert!(msg.contains("sdem import"), "{msg}");
         expect_err("noext", b"1 2 3", None);
     }
 

@@ -237,54 +237,10 @@ impl Reader<'_> {
     }
 }
 
-/// The CRC-32 table (IEEE 802.3 polynomial, reflected: 0xEDB88320), built at compile time.
-const CRC_TABLE: [[u32; 256]; 4] = {
-    let mut table = [[0u32; 256]; 4];
-    let mut i = 0;
-    while i < 256 {
-        let mut c = i as u32;
-        let mut k = 0;
-        while k < 8 {
-            c = if c & 1 != 0 {
-                0xEDB8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-            k += 1;
-        }
-        table[0][i] = c;
-        i += 1;
-    }
-    // Slicing-by-4: table[t][i] is the CRC of byte i followed by t zero bytes.
-    let mut t = 1;
-    while t < 4 {
-        let mut i = 0;
-        while i < 256 {
-            let prev = table[t - 1][i];
-            table[t][i] = (prev >> 8) ^ table[0][(prev & 0xFF) as usize];
-            i += 1;
-        }
-        t += 1;
-    }
-    table
-};
-
-/// CRC-32 as in zlib, PNG and gzip (`zlib.crc32` in Python gives the same number), four bytes
-/// per step.
+/// CRC-32 as in zlib, PNG and gzip (CRC-32/ISO-HDLC: polynomial 0x04C11DB7, reflected;
+/// `zlib.crc32` in Python gives the same number), computed by `crc32fast`.
 pub(super) fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = !0u32;
-    let mut chunks = bytes.chunks_exact(4);
-    for chunk in &mut chunks {
-        let word = crc ^ u32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]);
-        crc = CRC_TABLE[3][(word & 0xFF) as usize]
-            ^ CRC_TABLE[2][((word >> 8) & 0xFF) as usize]
-            ^ CRC_TABLE[1][((word >> 16) & 0xFF) as usize]
-            ^ CRC_TABLE[0][(word >> 24) as usize];
-    }
-    for &b in chunks.remainder() {
-        crc = CRC_TABLE[0][((crc ^ u32::from(b)) & 0xFF) as usize] ^ (crc >> 8);
-    }
-    !crc
+    crc32fast::hash(bytes)
 }
 
 #[cfg(test)]

@@ -34,6 +34,7 @@
 
 mod common;
 
+use common::formats::{e57_file, e57_without_scans, las_count, las_file, pcd_lzf_block};
 use common::{crc32, resealed};
 
 use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
@@ -87,6 +88,8 @@ enum Reader {
     Map,
     /// `sdem_io::Dataset::open`, then every scan and sweep of it.
     Dataset,
+    /// `sdem_io::read_e57`, an E57 survey.
+    E57,
 }
 
 /// What the error message must contain besides the file name.
@@ -171,6 +174,7 @@ fn read(reader: Reader, path: &Path) -> sdem_io::Result<()> {
         Reader::SlamOptions => sdem_io::read_slam_config(path).map(drop),
         Reader::VoxelMap => sdem_io::read_voxel_map(path).map(drop),
         Reader::Map => sdem_io::load_map(path).map(drop),
+        Reader::E57 => sdem_io::read_e57(path).map(drop),
         Reader::Dataset => {
             let dataset = sdem_io::Dataset::open(path)?;
             for i in 0..dataset.len() {
@@ -525,7 +529,7 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Count, n, ply_binary(true, Some("18446744073709551615"), &POINTS), &[Line(3)]));
     c.push(file(r, f, Units, n, ply_binary(true, None, &POINTS_MM), &[Has("millimetres")]));
 
-    // --- PCD, ascii and binary ----------------------------------------------------------------
+    // --- PCD, ascii, binary and binary_compressed ------------------------------------------
     let (f, n) = ("pcd ascii", "scan.pcd");
     c.push(file(r, f, Empty, n, "", &[Has("empty")]));
     c.push(file(r, f, Truncated, n, "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOU", &[Line(4), Has("DATA")]));
@@ -537,7 +541,6 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Inf, n, pcd("3", "ascii", b"-inf 2 0.5\n-3 0 1.5\n2 -1 -0.5\n"), &[Line(9)]));
     c.push(file(r, f, Header, n, "FIELDS x y\nSIZE 4 4\nTYPE F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2\n", &[Has("'z'")]));
     c.push(file(r, f, Header, n, "FIELDS x y z\nSIZE 4 4 3\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n1 2 3\n", &[Line(2)]));
-    c.push(file(r, f, Header, n, pcd("3", "binary_compressed", b"\x00\x01"), &[Line(8), Has("binary_compressed")]));
     c.push(file(r, f, Header, n, pcd("3", "zip", TEXT_POINTS.as_bytes()), &[Line(8)]));
     c.push(file(r, f, Count, n, pcd("999999999999", "ascii", TEXT_POINTS.as_bytes()), &[Line(7), Has("999999999999")]));
     c.push(file(r, f, Units, n, pcd("3", "ascii", TEXT_POINTS_MM.as_bytes()), &[Has("point 0"), Has("millimetres")]));
@@ -551,6 +554,76 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Inf, n, pcd("3", "binary", &f32_le(&[POINTS[0], [0.0, 0.0, f32::INFINITY], POINTS[2]]),), &[Has("point 1")]));
     c.push(file(r, f, Count, n, pcd("999999999999", "binary", &f32_le(&POINTS)), &[Line(7), Has("999999999999")]));
     c.push(file(r, f, Units, n, pcd("3", "binary", &f32_le(&POINTS_MM)), &[Has("millimetres")]));
+
+    let (f, n) = ("pcd binary_compressed", "scan_lzf.pcd");
+    let good = pcd("3", "binary_compressed", &pcd_lzf_block(&POINTS));
+    let sizes_at = good.len() - pcd_lzf_block(&POINTS).len();
+    c.push(file(r, f, Truncated, n, cut(&good, sizes_at + 5), &[Has("inside the 8 bytes"), Has("truncated")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 5), &[Has("byte offset"), Has("truncated")]));
+    c.push(file(r, f, Nan, n, pcd("2", "binary_compressed", &pcd_lzf_block(&[[f32::NAN; 3], [0.0, f32::NAN, 0.0]])), &[Has("no points")]));
+    c.push(file(r, f, Inf, n, pcd("3", "binary_compressed", &pcd_lzf_block(&[POINTS[0], [0.0, f32::INFINITY, 0.0], POINTS[2]])), &[Has("point 1")]));
+    c.push(file(r, f, Count, n, pcd("999999999999", "binary_compressed", &pcd_lzf_block(&POINTS)), &[Line(7), Has("declares 999999999999 points")]));
+    c.push(file(r, f, Count, n, pcd("4", "binary_compressed", &pcd_lzf_block(&POINTS)), &[Line(7), Has("unpacks to 36 bytes")]));
+    let mut huge = pcd("100000", "binary_compressed", &pcd_lzf_block(&POINTS));
+    let at = huge.len() - pcd_lzf_block(&POINTS).len() + 4;
+    huge[at..at + 4].copy_from_slice(&1_200_000u32.to_le_bytes());
+    c.push(file(r, f, Count, n, huge, &[Has("more than LZF")]));
+    let mut damaged = good.clone();
+    damaged[sizes_at + 8] = 0xE0; // a back reference before the first byte
+    c.push(file(r, f, Header, n, damaged, &[Has("damaged"), Has("byte offset")]));
+    c.push(file(r, f, Units, n, pcd("3", "binary_compressed", &pcd_lzf_block(&POINTS_MM)), &[Has("millimetres")]));
+
+    // --- LAS and LAZ -------------------------------------------------------------------------
+    let (f, n) = ("las", "scan.las");
+    let good = las_file(&POINTS, false);
+    let mut magic = good.clone();
+    magic[..4].copy_from_slice(b"LAZF");
+    let mut scale = good.clone();
+    scale[131..139].copy_from_slice(&f64::NAN.to_le_bytes());
+    c.push(file(r, f, Empty, n, "", &[Has("empty")]));
+    c.push(file(r, f, Truncated, n, cut(&good, 200), &[Has("ends inside the LAS header")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 7), &[Has("declares 3 points"), Has("byte offset")]));
+    c.push(file(r, f, Header, n, magic, &[Has("'LASF'")]));
+    c.push(file(r, f, Count, n, las_count(good.clone(), 4_000_000_000), &[Has("declares 4000000000 points"), Has("holds 3")]));
+    c.push(file(r, f, Units, n, las_file(&POINTS_MM, false), &[Has("millimetres")]));
+    c.push(file(r, f, Range, n, scale, &[Has("scale factors")]));
+
+    let (f, n) = ("laz", "scan.laz");
+    let good = las_file(&POINTS, true);
+    let data_start = u32::from_le_bytes(good[96..100].try_into().unwrap()) as usize;
+    let table = u64::from_le_bytes(good[data_start..data_start + 8].try_into().unwrap()) as usize;
+    let mut chunks = good.clone();
+    chunks[table + 4..table + 8].copy_from_slice(&u32::MAX.to_le_bytes());
+    c.push(file(r, f, Truncated, n, minus(&good, 9), &[Has("truncated")]));
+    c.push(file(r, f, Truncated, n, cut(&good, table + 2), &[Has("past the end of the file")]));
+    c.push(file(r, f, Count, n, las_count(good.clone(), 60_000), &[Has("declares 60000 points"), Has("chunk table")]));
+    c.push(file(r, f, Count, n, chunks, &[Has("4294967295 chunks"), Has("byte offset")]));
+    c.push(file(r, f, Units, n, las_file(&POINTS_MM, true), &[Has("millimetres")]));
+    // The LASzip VLR's first item (its data start 54 bytes after the record's user id - 2)
+    // declares a size its type does not have.
+    let mut items = good.clone();
+    let vlr = items.windows(14).position(|w| w == b"laszip encoded").unwrap() - 2 + 54;
+    items[vlr + 36..vlr + 38].copy_from_slice(&21u16.to_le_bytes());
+    c.push(file(r, f, Header, n, items, &[Has("LASzip VLR's item 0"), Has("21 bytes")]));
+
+    // --- E57 surveys (sdem import) -----------------------------------------------------------
+    let (r, f, n) = (Reader::E57, "e57", "survey.e57");
+    let good = e57_file(&[&POINTS, &POINTS[..2]]);
+    let mut magic = good.clone();
+    magic[..8].copy_from_slice(b"ASTM-E58");
+    let mut lying_xml = good.clone();
+    lying_xml[32..40].copy_from_slice(&(u64::MAX / 2).to_le_bytes());
+    let mut damaged = good.clone();
+    damaged[700] ^= 0x10;
+    c.push(file(r, f, Empty, n, "", &[Has("empty")]));
+    c.push(file(r, f, Empty, n, e57_without_scans(), &[Has("no scans")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 1024), &[Has("truncated")]));
+    c.push(file(r, f, Truncated, n, minus(&good, 100), &[Has("truncated")]));
+    c.push(file(r, f, Header, n, magic, &[Has("'ASTM-E57'")]));
+    c.push(file(r, f, Header, n, damaged, &[Has("checksum")]));
+    c.push(file(r, f, Count, n, lying_xml, &[Has("XML")]));
+    c.push(file(r, f, Units, n, e57_file(&[&POINTS, &POINTS_MM]), &[Has("scan 1"), Has("millimetres")]));
+    let r = Reader::Points;
 
     // --- XYZ text -----------------------------------------------------------------------------
     let (f, n) = ("xyz", "scan.xyz");
@@ -1195,6 +1268,14 @@ fn the_valid_inputs_the_table_starts_from_are_read() {
             Reader::Points,
             "b.pcd",
             pcd("3", "binary", &f32_le(&POINTS)),
+        ),
+        (Reader::E57, "a.e57", e57_file(&[&POINTS, &POINTS[..1]])),
+        (Reader::Points, "a.las", las_file(&POINTS, false)),
+        (Reader::Points, "a.laz", las_file(&POINTS, true)),
+        (
+            Reader::Points,
+            "c.pcd",
+            pcd("3", "binary_compressed", &pcd_lzf_block(&POINTS)),
         ),
         (Reader::Points, "a.xyz", TEXT_POINTS.into()),
         (Reader::Points, "a.bin", kitti_bin(&POINTS)),

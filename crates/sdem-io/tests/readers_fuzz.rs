@@ -29,6 +29,7 @@
 
 mod common;
 
+use common::formats::{e57_file, e57_resealed, las_seed};
 use common::{crc32, resealed};
 
 use proptest::prelude::*;
@@ -89,6 +90,8 @@ enum Target {
     MapNode,
     /// A dataset whose `attitude.csv`, `odometry.txt`, `sensor.toml` or first scan is the input.
     Dataset(&'static str),
+    /// An E57 survey (`sdem_io::read_e57`).
+    E57,
 }
 
 impl Target {
@@ -109,6 +112,7 @@ impl Target {
             Target::MapManifest => "map.json",
             Target::MapNode => "000001.pts",
             Target::Dataset(name) => name,
+            Target::E57 => "survey.e57",
         }
     }
 }
@@ -238,6 +242,20 @@ fn read_and_check(target: Target, path: &Path) -> Result<Result<(), String>, Str
                 .map_err(|e| format!("Ok but invalid: {e}")),
             Err(err) => return e(err),
         },
+        Target::E57 => match sdem_io::read_e57(path) {
+            Ok(scans) if scans.is_empty() => Err("Ok with no scans".into()),
+            Ok(scans) => all(&scans, |scan| {
+                if let Some(pose) = &scan.world_from_sensor {
+                    proper(pose)?;
+                }
+                // A scan may be empty (every point invalid): the import skips it.
+                match scan.points_in_sensor.is_empty() {
+                    true => Ok(()),
+                    false => check_points(&scan.points_in_sensor),
+                }
+            }),
+            Err(err) => return e(err),
+        },
         Target::VoxelMap => match sdem_io::read_voxel_map(path) {
             Ok(map) => map
                 .config()
@@ -361,6 +379,7 @@ impl Fixture {
                 let path = self.dir.path().join(target.file_name());
                 let bytes = match target {
                     Target::VoxelMap if reseal && bytes.len() >= 4 => resealed(bytes.to_vec()),
+                    Target::E57 if reseal => e57_resealed(bytes.to_vec()),
                     _ => bytes.to_vec(),
                 };
                 rewrite(&path, bytes);
@@ -752,6 +771,16 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
             }
             vec![bytes]
         }
+        // Written by Open3D (tests/fixtures/open3d): real LZF blocks with back references.
+        Target::Points("compressed.pcd") => vec![
+            include_bytes!("fixtures/open3d/legacy_compressed.pcd").to_vec(),
+            include_bytes!("fixtures/open3d/tensor_compressed.pcd").to_vec(),
+        ],
+        // Point formats 3 (LAZ: point-wise chunks) and 7 (LAS 1.4; LAZ: layered chunks).
+        Target::Points(name @ ("scan.las" | "scan.laz")) => [3, 7]
+            .into_iter()
+            .map(|format| las_seed(&POINTS, format, name == "scan.laz"))
+            .collect(),
         Target::Points("scan.xyz") => text("# x y z\n1 2 0.5\n-3,0.25,1.5,0.9\n\t2 -1 -0.5 # c\n"),
         Target::Points("scan.bin") => vec![POINTS
             .iter()
@@ -801,6 +830,7 @@ fn seeds(target: Target) -> Vec<Vec<u8>> {
             .unwrap()
             .into_bytes()],
         Target::VoxelMap => vec![voxel_bytes()],
+        Target::E57 => vec![e57_file(&[&POINTS, &POINTS[..2]])],
         Target::MapManifest | Target::MapNode => {
             let dir = tempfile::tempdir().unwrap();
             save_small_map(dir.path());
@@ -943,6 +973,9 @@ fuzz_targets! {
     ply_binary_big_endian => Target::Points("be.ply"),
     pcd_ascii => Target::Points("ascii.pcd"),
     pcd_binary => Target::Points("binary.pcd"),
+    pcd_binary_compressed => Target::Points("compressed.pcd"),
+    las => Target::Points("scan.las"),
+    laz => Target::Points("scan.laz"),
     xyz => Target::Points("scan.xyz"),
     kitti_bin => Target::Points("scan.bin"),
     uos_3d => Target::Points("scan000.3d"),
@@ -956,6 +989,7 @@ fuzz_targets! {
     sensor_toml => Target::SensorToml,
     slam_config => Target::SlamOptions,
     voxel_map => Target::VoxelMap,
+    e57 => Target::E57,
     map_manifest => Target::MapManifest,
     map_node_file => Target::MapNode,
     dataset_attitude => Target::Dataset("attitude.csv"),

@@ -1,7 +1,7 @@
-//! Drawing primitives over an [`RgbImage`]: lines, discs, text in the built-in font, colour
-//! maps, axes with ticks, colour bars, legends and scale bars.
+//! Drawing primitives over an [`RgbImage`]: lines, discs, colour maps, axes with ticks, colour
+//! bars, legends and scale bars (text is `text.rs`'s).
 
-use super::font::{descends, glyph, GLYPH_H, GLYPH_W};
+pub(crate) use super::text::{text_height, text_width};
 use image::{Rgb, RgbImage};
 
 /// White.
@@ -19,7 +19,7 @@ pub(crate) const TRAJECTORY: Rgb<u8> = Rgb([220, 20, 60]);
 /// Loop-closure lines.
 pub(crate) const LOOP: Rgb<u8> = Rgb([230, 0, 230]);
 
-/// Text size: each font pixel drawn as a `scale`×`scale` square.
+/// Text size of labels and titles (see `text.rs`: an 18-pixel em).
 pub(crate) const LABEL_SCALE: i64 = 2;
 
 /// Where a text's reference point lies on it.
@@ -182,77 +182,6 @@ impl Canvas {
         }
     }
 
-    /// Text in the built-in font, `scale` pixels per font pixel, placed by `anchor` at `(x, y)`.
-    pub(crate) fn text(
-        &mut self,
-        x: i64,
-        y: i64,
-        text: &str,
-        scale: i64,
-        anchor: Anchor,
-        color: Rgb<u8>,
-    ) {
-        let (left, top) = text_origin(x, y, text, scale, anchor);
-        for (i, c) in text.chars().enumerate() {
-            let gx = left + i as i64 * (GLYPH_W as i64 + 1) * scale;
-            let drop = if descends(c) { 2 } else { 0 };
-            for (row, bits) in glyph(c).iter().enumerate() {
-                for col in 0..GLYPH_W {
-                    if bits & (1 << (GLYPH_W - 1 - col)) != 0 {
-                        let px = gx + col as i64 * scale;
-                        let py = top + (row as i64 + drop) * scale;
-                        self.fill_rect(px, py, px + scale, py + scale, color);
-                    }
-                }
-            }
-        }
-    }
-
-    /// Text with a white box behind it, so it stays legible over data.
-    pub(crate) fn text_boxed(
-        &mut self,
-        x: i64,
-        y: i64,
-        text: &str,
-        scale: i64,
-        anchor: Anchor,
-        color: Rgb<u8>,
-    ) {
-        let (w, h) = (text_width(text, scale), GLYPH_H as i64 * scale);
-        let (left, top) = text_origin(x, y, text, scale, anchor);
-        let pad = scale;
-        for yy in top - pad..top + h + pad {
-            for xx in left - pad..left + w + pad {
-                self.blend(xx, yy, WHITE, 0.8);
-            }
-        }
-        self.text(x, y, text, scale, anchor, color);
-    }
-
-    /// Text turned a quarter counter-clockwise (read bottom to top), centred on `(x, y)`.
-    pub(crate) fn text_vertical(&mut self, x: i64, y: i64, text: &str, scale: i64, color: Rgb<u8>) {
-        let w = text_width(text, scale);
-        let h = GLYPH_H as i64 * scale;
-        // The text's own (u, v) frame: u along the text, v down. Turned: screen x = v, y = -u.
-        let left = x - h / 2;
-        let bottom = y + w / 2;
-        for (i, c) in text.chars().enumerate() {
-            let gu = i as i64 * (GLYPH_W as i64 + 1) * scale;
-            let drop = if descends(c) { 2 } else { 0 };
-            for (row, bits) in glyph(c).iter().enumerate() {
-                for col in 0..GLYPH_W {
-                    if bits & (1 << (GLYPH_W - 1 - col)) != 0 {
-                        let u = gu + col as i64 * scale;
-                        let v = (row as i64 + drop) * scale;
-                        let px = left + v;
-                        let py = bottom - u - scale;
-                        self.fill_rect(px, py, px + scale, py + scale, color);
-                    }
-                }
-            }
-        }
-    }
-
     /// Unknown cells' look at pixel `(x, y)`: grey with a diagonal hatch.
     pub(crate) fn unknown_at(x: i64, y: i64) -> Rgb<u8> {
         if (x + y).rem_euclid(8) < 2 {
@@ -261,34 +190,6 @@ impl Canvas {
             UNKNOWN
         }
     }
-}
-
-/// The top-left corner of `text` drawn at `scale` so that `anchor` falls on `(x, y)`.
-fn text_origin(x: i64, y: i64, text: &str, scale: i64, anchor: Anchor) -> (i64, i64) {
-    let w = text_width(text, scale);
-    let h = GLYPH_H as i64 * scale;
-    match anchor {
-        Anchor::Left => (x, y - h / 2),
-        Anchor::Right => (x - w, y - h / 2),
-        Anchor::Top => (x - w / 2, y),
-        Anchor::Bottom => (x - w / 2, y - h),
-        Anchor::Center => (x - w / 2, y - h / 2),
-    }
-}
-
-/// Width in pixels of `text` at `scale`.
-pub(crate) fn text_width(text: &str, scale: i64) -> i64 {
-    let n = text.chars().count() as i64;
-    if n == 0 {
-        0
-    } else {
-        (n * (GLYPH_W as i64 + 1) - 1) * scale
-    }
-}
-
-/// Height in pixels of one line of text at `scale`.
-pub(crate) fn text_height(scale: i64) -> i64 {
-    GLYPH_H as i64 * scale
 }
 
 /// A colour map from [0, 1] to a colour.

@@ -4,8 +4,9 @@
 //! detected environment information for a human").
 //!
 //! Every function here is pure: it takes plain values and returns an image or a string; the
-//! caller writes them (see [`encode_png`]). Each picture has axes, a scale and a legend, drawn
-//! with a built-in 5×7 font.
+//! caller writes them (see [`encode_png`]). Each picture has axes, a scale and a legend; text is
+//! set in Noto Sans (embedded, SIL Open Font License 1.1, `fonts/OFL.txt`) and anti-aliased, as
+//! are lines and discs.
 //!
 //! | picture | function |
 //! |---|---|
@@ -31,10 +32,10 @@
 
 mod cost_view;
 mod draw;
-mod font;
 mod html;
 mod map_view;
 mod sdem_view;
+mod text;
 
 pub use cost_view::{cost_surface, sample_cost_slice, CostSlice};
 pub use html::{viewer_html, VIEWER_MAX_POINTS};

@@ -348,6 +348,7 @@ mod tests {
                 | Doubt::AttitudeCorrected { .. } => 2,
                 Doubt::RunnerUp { .. }
                 | Doubt::FlatCovariance { .. }
+                | Doubt::Unconstrained { .. }
                 | Doubt::AnotherRotation { .. } => 3,
                 Doubt::FlatCost { .. } => 4,
             };

@@ -114,3 +114,37 @@ pub fn doubt_kinds(result: &Value) -> Vec<String> {
         })
         .collect()
 }
+
+/// The Python that has the packages of `scripts/test-requirements.txt` (pye57, laspy, …), from
+/// `SDEM_TEST_PYTHON`. Without it the test fails saying how to make one: it is never skipped.
+pub fn test_python() -> std::path::PathBuf {
+    match std::env::var_os("SDEM_TEST_PYTHON") {
+        Some(python) if !python.is_empty() => std::path::PathBuf::from(python),
+        _ => panic!(
+            "SDEM_TEST_PYTHON is not set: this test writes its input with pye57 or laspy. Run \
+             scripts/test (it makes target/test-venv from scripts/test-requirements.txt and sets \
+             it), or make one: python3 -m venv target/test-venv && target/test-venv/bin/pip \
+             install -r scripts/test-requirements.txt, then SDEM_TEST_PYTHON=$PWD/target/\
+             test-venv/bin/python cargo test"
+        ),
+    }
+}
+
+/// Runs the Python `script` with `args` in `dir`; panics with its output when it fails.
+pub fn run_python(dir: &Path, script: &str, args: &[&str]) {
+    let python = test_python();
+    let out = std::process::Command::new(&python)
+        .current_dir(dir)
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run SDEM_TEST_PYTHON={}: {e}", python.display()));
+    assert!(
+        out.status.success(),
+        "the Python script failed ({}):\n{}\n{}",
+        python.display(),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

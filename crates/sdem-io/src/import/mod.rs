@@ -1,8 +1,10 @@
-//! Importing other datasets into sdem's dataset layout: 3DTK folders and KITTI odometry sequences.
+//! Importing other datasets into sdem's dataset layout: 3DTK folders, KITTI odometry sequences
+//! and E57 surveys.
 //!
 //! Each format has its own file, with its frames and the files it writes: `threedtk.rs`
-//! (3DTK folders: `.3d` scans, `.pose` and `.frames` files) and `kitti.rs` (KITTI odometry
-//! sequences: Velodyne `.bin` scans, `calib.txt`, `poses.txt`). What they share lives here:
+//! (3DTK folders: `.3d` scans, `.pose` and `.frames` files), `kitti.rs` (KITTI odometry
+//! sequences: Velodyne `.bin` scans, `calib.txt`, `poses.txt`) and `e57.rs` (E57 surveys: one
+//! file of scans with registered poses). What they share lives here:
 //! the options and summary of an import, format detection, and the folder helpers (finding
 //! numbered scan files, selecting them, refusing a folder that holds a dataset, rolling back a
 //! failed write).
@@ -12,9 +14,11 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
+mod e57;
 mod kitti;
 mod threedtk;
 
+pub use self::e57::import_e57;
 pub use kitti::{import_kitti, kitti_velodyne_poses, parse_kitti_calib_tr, read_kitti_calib_tr};
 pub use threedtk::{
     import_3dtk, read_uos_frames_last, read_uos_pose, uos_matrix_to_world_from_sensor,
@@ -30,15 +34,25 @@ pub enum ImportFormat {
     /// A KITTI odometry sequence: `velodyne/NNNNNN.bin`, optionally `poses.txt` + `calib.txt`.
     #[serde(rename = "kitti")]
     Kitti,
+    /// An E57 survey: one `.e57` file of scans, each with its registered pose when it has one.
+    #[serde(rename = "e57")]
+    E57,
 }
 
 impl ImportFormat {
-    /// Guesses the format of `source` from its content: a `velodyne/` folder means KITTI, a
-    /// `scanNNN.3d` file means 3DTK.
+    /// Guesses the format of `source` from its content: a file `*.e57` is an E57 survey, a
+    /// folder with `velodyne/` KITTI, one with `scanNNN.3d` files 3DTK.
     ///
     /// # Errors
-    /// [`Error::Invalid`] when `source` is not a folder or looks like neither.
+    /// [`Error::Invalid`] when `source` is neither an `.e57` file nor a folder, or looks like
+    /// none of them.
     pub fn detect(source: &Path) -> Result<ImportFormat> {
+        let e57 = source
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("e57"));
+        if e57 && source.is_file() {
+            return Ok(ImportFormat::E57);
+        }
         check_source(source)?;
         if source.join("velodyne").is_dir() {
             return Ok(ImportFormat::Kitti);
@@ -86,8 +100,13 @@ pub struct ImportSummary {
     pub dropped_far: usize,
     /// Points dropped as nearer than [`UOS_MIN_RANGE_M`] (3DTK), over all scans.
     pub dropped_near: usize,
+    /// Points dropped as invalid (E57: no return, a direction without a range), over all scans.
+    pub dropped_invalid: usize,
     /// The files written, relative to `out` (`scans/` stands for the scan files).
     pub written: Vec<String>,
+    /// What a user should know about the import (scans skipped, files not written, and why).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 impl ImportSummary {
@@ -102,7 +121,9 @@ impl ImportSummary {
             points_per_scan: Vec::with_capacity(scans.len()),
             dropped_far: 0,
             dropped_near: 0,
+            dropped_invalid: 0,
             written: Vec::new(),
+            notes: Vec::new(),
         }
     }
 }
@@ -131,6 +152,7 @@ pub fn import_dataset(
             }
             import_kitti(source, out, options)
         }
+        ImportFormat::E57 => import_e57(source, out, options),
     }
 }
 
@@ -143,12 +165,14 @@ fn check_source(source: &Path) -> Result<()> {
         Ok(())
     } else if source.exists() {
         Err(Error::Invalid(format!(
-            "{} is not a folder; import reads a 3DTK folder or a KITTI sequence folder",
+            "{} is not a folder; import reads a 3DTK folder, a KITTI sequence folder or an \
+             .e57 file",
             source.display()
         )))
     } else {
         Err(Error::Invalid(format!(
-            "{} does not exist; import reads a 3DTK folder or a KITTI sequence folder",
+            "{} does not exist; import reads a 3DTK folder, a KITTI sequence folder or an .e57 \
+             file",
             source.display()
         )))
     }
