@@ -229,7 +229,7 @@ fn a_held_out_run_delivered_as_one_e57_survey_maps_within_2_cm_and_exports_back(
         dir.path(),
         &["export", s(&mapped), "--e57", s(&out), "--json"],
     );
-    assert_eq!(exported["points_from"], "dataset", "{exported}");
+    assert_eq!(exported["e57"]["points_from"], "dataset", "{exported}");
     let printed = python_output(dir.path(), PYE57_READ, &[s(&out)]);
     let lines: Vec<&str> = printed.lines().collect();
     let poses = kitti_rows(&mapped.join("poses.txt"));

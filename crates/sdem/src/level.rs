@@ -542,22 +542,65 @@ mod tests {
     }
 
     #[test]
-    fn no_horizontal_surface_no_levelling() {
-        // A sphere around the sensor: every normal points at the sensor, none along a
-        // vertical more than its own cells.
-        let points: Vec<Vec3> = (0..200)
+    fn the_heading_between_two_levelled_rooms_is_among_the_hypotheses() {
+        let config = SdemConfig::default();
+        // The scan of a sensor at `world_from_sensor`: its cells in its levelled frame, and the
+        // attitude that levels it.
+        let levelled = |world_from_sensor: &Rotation3<f64>| {
+            let sdem = Sdem::from_points(
+                &room(&world_from_sensor.inverse()),
+                &Attitude::default(),
+                &config,
+            )
+            .unwrap();
+            let level = level_from_surfaces(&sdem, &Vec3::z(), 45f64.to_radians()).unwrap();
+            let cells = rotated(&oriented_cells(&sdem), &level.attitude.rotation());
+            (cells, level.attitude.rotation())
+        };
+        let world_from_reference = Attitude::from_degrees(2.0, -3.0, 0.0).rotation();
+        let (reference, reference_level) = levelled(&world_from_reference);
+        for (roll, pitch, yaw) in [(10.0, -15.0, 25.0), (-25.0, 5.0, -140.0), (0.0, 0.0, 91.0)] {
+            let world_from_query = Attitude::from_degrees(roll, pitch, yaw).rotation();
+            let (query, query_level) = levelled(&world_from_query);
+            // The rotation from the query's levelled frame to the reference's: a heading.
+            let turn = reference_level
+                * world_from_reference.inverse()
+                * world_from_query
+                * query_level.inverse();
+            let heading = turn.euler_angles().2;
+            let hypotheses = heading_hypotheses(&reference, &query, PI, 6);
+            let nearest = (hypotheses.iter())
+                .map(|(h, _)| crate::geometry::wrap_pi(h - heading).abs())
+                .fold(f64::INFINITY, f64::min)
+                .to_degrees();
+            assert!(
+                nearest < 0.5,
+                "{yaw}°: nearest hypothesis {nearest:.2}° off, {hypotheses:?}"
+            );
+            assert!(!hypotheses.is_empty() && hypotheses.len() <= 6);
+        }
+    }
+
+    #[test]
+    fn walls_alone_give_no_levelling() {
+        // Inside a vertical shaft of radius 2 m, seen within ±40° of elevation: walls all round,
+        // no floor or ceiling in view. Nothing says which way is up within 30° of the sensor's
+        // z axis, and the levelling must not make it up.
+        let points: Vec<Vec3> = (0..360)
             .flat_map(|i| {
-                (0..100).map(move |j| {
-                    crate::geometry::direction(i as f64 * 2.0 * PI / 200.0, -1.2 + j as f64 * 0.024)
-                        * (3.0 + 0.2 * (i as f64 * 0.3).sin())
+                (0..80).map(move |j| {
+                    let (az, el) = ((i as f64).to_radians(), (j as f64 - 39.5).to_radians());
+                    let wobble = 0.05 * (3.0 * az).sin();
+                    crate::geometry::direction(az, el) * ((2.0 + wobble) / el.cos())
                 })
             })
             .collect();
         let sdem =
             Sdem::from_points(&points, &Attitude::default(), &SdemConfig::default()).unwrap();
-        // Whatever it finds, it must not claim a confident vertical with no floor in view.
-        if let Some(found) = level_from_surfaces(&sdem, &Vec3::z(), 30f64.to_radians()) {
-            assert!(found.horizontal_share < 0.5, "{found:?}");
-        }
+        assert!(oriented_cells(&sdem).len() > 10_000);
+        assert_eq!(
+            level_from_surfaces(&sdem, &Vec3::z(), 30f64.to_radians()),
+            None
+        );
     }
 }
