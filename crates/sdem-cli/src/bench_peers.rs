@@ -259,6 +259,76 @@ impl Peers {
     }
 }
 
+/// KISS-ICP's odometry over a sequence ([`Peers::run_odometry`]).
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct PeerOdometry {
+    /// Absolute translation error, RMSE, both trajectories anchored at their first pose (evo
+    /// APE without alignment), metres.
+    pub ate_rmse_m: Option<f64>,
+    /// Relative translation error between consecutive scans, RMSE, metres.
+    pub rpe_translation_rmse_m: Option<f64>,
+    /// … and rotation, degrees.
+    pub rpe_rotation_rmse_deg: Option<f64>,
+    /// Median time of a scan's registration (`register_frame`), ms.
+    pub time_ms_median: Option<f64>,
+    /// Its poses, one per scan (KITTI format), for the caller to score as it scores its own.
+    #[serde(skip)]
+    pub poses_file: Option<PathBuf>,
+    /// Why it did not run, when it did not.
+    pub error: Option<String>,
+}
+
+impl Peers {
+    /// Runs KISS-ICP odometry (`odometry_seq.py`, beside the pairs' script) over the clouds in
+    /// `scans` (`*.ply`, in name order) against the truth `truth` (KITTI poses), with the
+    /// sensor's `max_range_m`.
+    pub(crate) fn run_odometry(&self, scans: &Path, truth: &Path, max_range_m: f64) -> PeerOdometry {
+        let failed = |why: String| PeerOdometry {
+            ate_rmse_m: None,
+            rpe_translation_rmse_m: None,
+            rpe_rotation_rmse_deg: None,
+            time_ms_median: None,
+            poses_file: None,
+            error: Some(why),
+        };
+        let script = self.script.with_file_name("odometry_seq.py");
+        let output = Command::new(&self.python)
+            .arg(&script)
+            .arg(scans)
+            .arg("--gt")
+            .arg(truth)
+            .args(["--methods", "kiss_icp"])
+            .args(["--max-range", &max_range_m.to_string()])
+            .arg("--out")
+            .arg(scans.join("peer_results"))
+            .output();
+        let output = match output {
+            Ok(o) => o,
+            Err(e) => return failed(format!("cannot run {}: {e}", self.python.display())),
+        };
+        if !output.status.success() {
+            let stderr = String::from_utf8_lossy(&output.stderr);
+            let last = stderr.lines().last().unwrap_or("").to_string();
+            return failed(format!("odometry_seq.py exited with {}: {last}", output.status));
+        }
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let Some(v) = (stdout.lines())
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .find(|v| v["method"] == "kiss_icp")
+        else {
+            return failed("odometry_seq.py printed no line for kiss_icp".into());
+        };
+        PeerOdometry {
+            ate_rmse_m: v["ape_trans_rmse_m"].as_f64(),
+            rpe_translation_rmse_m: v["rpe_trans_rmse_m"].as_f64(),
+            rpe_rotation_rmse_deg: v["rpe_rot_rmse_deg"].as_f64(),
+            time_ms_median: v["per_scan_ms_median"].as_f64(),
+            poses_file: v["poses_file"].as_str().map(PathBuf::from),
+            error: v["error"].as_str().map(str::to_string),
+        }
+    }
+}
+
 /// A 4×4 matrix as JSON rows (register_pair.py's `T`, rounded to 6 decimals) as a pose: the
 /// rotation the nearest to its 3×3 block.
 fn transform(value: &serde_json::Value) -> Option<Pose> {

@@ -150,6 +150,7 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
         &[],
         &sdem::slam::SlamOptions::default(),
         &map,
+        &[],
     )?;
     let text = serde_json::to_string_pretty(report)?;
     sdem_io::write_atomic(&out.join("report.json"), |w| w.write_all(text.as_bytes()))?;

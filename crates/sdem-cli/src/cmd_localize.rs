@@ -31,7 +31,7 @@ pub struct Args {
     /// With attitude.csv the heading is searched over 3σ of the two readings' difference (σ
     /// from attitude.csv's σ columns, sensor.toml's attitude_sigma_*_deg, or 0.5° roll/pitch and
     /// 3.5° heading). Without it the attitude is unknown: roll, pitch and heading are searched
-    /// (or give --assume-level).
+    /// (or give --assume-level). With --map: the scan file to relocalize (as --scan).
     #[arg(required_unless_present = "map")]
     dataset: Option<PathBuf>,
     /// Index of the reference scan (the map).
@@ -41,14 +41,20 @@ pub struct Args {
     #[arg(long, required_unless_present = "map")]
     query: Option<usize>,
     /// Relocalize a scan in a saved map instead: the folder `sdem slam` wrote (OUT or OUT/map).
-    /// The search then uses the map's own settings (its config.toml).
-    #[arg(long, conflicts_with_all = ["dataset", "reference", "query"], requires = "scan")]
+    /// The search then uses the map's own settings (its config.toml). Without --near or
+    /// --prior, the nodes whose places look most like the scan are searched over every heading
+    /// (`sdem localize --map DIR SCAN`); the answer is the best match with no doubt, unless
+    /// another place compares almost as well; else the scan is not found (exit status 1),
+    /// with the candidates tried.
+    #[arg(long, conflicts_with_all = ["reference", "query"])]
     map: Option<PathBuf>,
-    /// With --map: the scan file to relocalize (any point-cloud format sdem reads).
-    #[arg(long, requires = "map")]
+    /// With --map: the scan file to relocalize (any point-cloud format sdem reads); or give it
+    /// as the first argument.
+    #[arg(long, requires = "map", conflicts_with = "dataset")]
     scan: Option<PathBuf>,
     /// With --map: the gyro/compass reading of the scan, roll,pitch,yaw in degrees [default:
-    /// level, heading searched ±15°].
+    /// none: the tilt and the heading are searched]. Without --near or --prior the heading is
+    /// searched over a full turn whatever the reading says.
     #[arg(long, requires = "map", allow_hyphen_values = true)]
     attitude: Option<String>,
     /// How far the attitude readings can be off, standard deviations in degrees:
@@ -283,12 +289,27 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     } else {
         map.join("map")
     };
+    let scan = (args.scan.as_ref())
+        .or(args.dataset.as_ref())
+        .context("--map needs the scan to relocalize: --map DIR SCAN (or --scan SCAN)")?;
     let saved = sdem_io::load_map(&folder)?;
-    let scan = args.scan.as_ref().context("--map needs --scan FILE")?;
     let points = sdem_io::read_points(scan)?;
     // The map's own search settings (its config.toml), not this command's --step.
-    let found = sdem::slam::relocalize(&saved.map, &saved.config, &points, attitude, near, 3)
-        .with_context(|| format!("{} in the map {}", scan.display(), folder.display()))?;
+    let nodes = match near {
+        Some(_) => 3,
+        None => saved.config.recovery.relocalize_candidates,
+    };
+    let found = sdem::slam::relocalize(&saved.map, &saved.config, &points, attitude, near, nodes);
+    let found = match found {
+        Err(sdem::Error::NotFound { tried }) => bail!(
+            "{} is not found in the map {}: no place matches it with confidence; tried {}",
+            scan.display(),
+            folder.display(),
+            tried_words(&tried)
+        ),
+        other => other
+            .with_context(|| format!("{} in the map {}", scan.display(), folder.display()))?,
+    };
     let outcome = Outcome::of(found.trusted, args.accept_doubtful);
     if args.json {
         let value = serde_json::to_value(&found).context("cannot encode the result as JSON")?;
@@ -305,12 +326,29 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         found.diagnostics.inlier_fraction * 100.0,
         found.time_ms
     );
+    if found.segment != 0 {
+        println!(
+            "  in map segment {}, whose place in the world is not known: the pose is in its frame",
+            found.segment
+        );
+    }
     for (node, why) in &found.tried {
         println!("  node {node} did not match: {why}");
     }
     print_doubts("  ", &found.doubts);
     print_accepted(found.trusted, args.accept_doubtful);
     Ok(outcome)
+}
+
+/// The candidates a relocalization tried, in words: `node N (why); …`.
+fn tried_words(tried: &[(usize, String)]) -> String {
+    if tried.is_empty() {
+        return "no node (none shares enough of the scan's place)".to_string();
+    }
+    (tried.iter())
+        .map(|(node, why)| format!("node {node} ({why})"))
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// Says that a doubtful result was taken as the best guess, when `--accept-doubtful` asked.
@@ -329,7 +367,7 @@ pub fn run(args: Args) -> Result<Outcome> {
     let (Some(dataset_path), Some(reference_index), Some(query_index)) =
         (args.dataset.clone(), args.reference, args.query)
     else {
-        bail!("give DATASET --reference I --query J, or --map DIR --scan FILE");
+        bail!("give DATASET --reference I --query J, or --map DIR SCAN");
     };
     if !(args.step.is_finite() && args.step > 0.0) {
         bail!("--step {} must be a positive number of metres", args.step);

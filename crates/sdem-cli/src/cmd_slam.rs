@@ -4,7 +4,8 @@ use crate::output::{degrees, elapsed_ms, pose_line, print_json, with_doubt_messa
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Attitude, AttitudeSigma, Pose, Vec3};
 use sdem::slam::{
-    trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport, TrajectoryErrors,
+    trajectory_errors, Odometry, PredictionSource, ScanInput, Segment, Slam, SlamOptions,
+    StepReport, StepStatus, TrajectoryErrors,
 };
 use sdem_io::{
     load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
@@ -34,7 +35,9 @@ pub struct Args {
     out: PathBuf,
     /// A TOML file with the loop's settings (the fields of config.toml, which every run writes;
     /// missing keys take the defaults). Without it, the defaults, with the S-DEM's resolution
-    /// matched to the scanner's angular step when the dataset has a sensor.toml.
+    /// matched to the scanner's angular step when the dataset has a sensor.toml; without one,
+    /// derived from the first scan when it is a spinning multi-beam LiDAR's (every azimuth
+    /// within a band of elevation: `SlamOptions::for_scan`).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Grid step of the search, metres [default: 0.02, or the config file's].
@@ -46,6 +49,12 @@ pub struct Args {
     /// Continue the run saved in OUT/map (after a crash or a kill), with its configuration.
     #[arg(long)]
     resume: bool,
+    /// A saved map (the folder `sdem slam` wrote, OUT or OUT/map) to extend with this dataset
+    /// as a second run: its first scan is relocalized in the map with no known pose (or starts
+    /// a new map segment until a later scan is found), and OUT/map holds both runs, in the
+    /// saved map's frame and with its configuration. The saved map is left as it was.
+    #[arg(long, value_name = "EXISTING", conflicts_with_all = ["resume", "config", "step", "no_loop_closure"])]
+    map: Option<PathBuf>,
     /// Replace a map already in OUT.
     #[arg(long)]
     force: bool,
@@ -79,6 +88,17 @@ struct Report {
     scans: usize,
     nodes: usize,
     resumed_at: Option<usize>,
+    /// With --map: the saved map this run extends, and how many nodes it held.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    extends: Option<ExtendedMap>,
+    /// This run's index in the map (0: the run that started it).
+    run: usize,
+    /// The steps of this run by status: first, tracked, recovered, relocalized,
+    /// new_segment, doubtful.
+    statuses: std::collections::BTreeMap<&'static str, usize>,
+    /// The map's segments at the end; more than one: pieces of the map whose place in the
+    /// world is not known (their poses are in their own frames).
+    segments: Vec<Segment>,
     time_ms: f64,
     step_time_ms_median: f64,
     localize_time_ms_median: f64,
@@ -106,6 +126,15 @@ struct Report {
     #[serde(skip_serializing_if = "Option::is_none")]
     compare: Option<TrajectoryErrors>,
     steps: Vec<Value>,
+}
+
+/// The saved map a second run extends (the `extends` of report.json).
+#[derive(Serialize)]
+struct ExtendedMap {
+    /// Its folder.
+    map: PathBuf,
+    /// Its nodes, before this run.
+    nodes: usize,
 }
 
 /// What the loop was told about the attitudes (the `attitude` of report.json).
@@ -188,6 +217,8 @@ struct Run {
     steps: Vec<Value>,
     /// With `--resume`: the number of nodes the saved map held.
     resumed_at: Option<usize>,
+    /// With `--map`: the map extended.
+    extends: Option<ExtendedMap>,
     /// The node files OUT/map holds, as far as this run knows (see `sdem_io::save_map`).
     node_files: NodeFiles,
 }
@@ -211,14 +242,14 @@ pub fn run(args: Args) -> Result<Outcome> {
         crate::export_mcap::check_target(mcap, args.force)?;
     }
     prepare_out(&args, &map_dir)?;
-    let mut run = if args.resume {
-        resume(&args, &map_dir)?
-    } else {
-        start_fresh(&args, &dataset)?
+    let mut run = match (&args.map, args.resume) {
+        (Some(existing), _) => extend(existing, &map_dir)?,
+        (None, true) => resume(&args, &map_dir)?,
+        (None, false) => start_fresh(&args, &dataset)?,
     };
     write_config(&args.out, run.slam.config())?;
     let total = map_scans(&args, &dataset, sigma, &map_dir, &mut run)?;
-    let outputs = write_outputs(&args, &run.slam)?;
+    let outputs = write_outputs(&args, &run.slam, &run.steps)?;
     let attitude = slam_attitude(&dataset, sigma);
     let report = make_report(&args, &dataset, run, total, outputs, attitude, start)?;
     let report_text = serde_json::to_vec_pretty(&report).context("cannot encode the report")?;
@@ -257,15 +288,55 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
     if args.config.is_some() || args.step.is_some() || args.no_loop_closure {
         bail!("--resume continues with the saved map's configuration; drop --config, --step and --no-loop-closure");
     }
-    let steps = read_steps(&args.out.join(STEPS_FILE), saved.map.nodes.len())?;
     let next = saved.map.nodes.len();
     let slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+    let steps = read_steps(&args.out.join(STEPS_FILE), run_nodes(&slam))?;
     Ok(Run {
         slam,
         steps,
         resumed_at: Some(next),
+        extends: None,
         node_files: saved.node_files,
     })
+}
+
+/// `--map EXISTING`: the saved map, with its configuration, ready for a new run; OUT/map must
+/// be another folder.
+fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
+    let folder = if existing.join(sdem_io::MAP_MANIFEST).exists() {
+        existing.to_path_buf()
+    } else {
+        existing.join(MAP_DIR)
+    };
+    let saved = load_map(&folder).with_context(|| format!("--map {}", existing.display()))?;
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same(&folder, map_dir) {
+        bail!(
+            "--map {}: the extended map is written to {}, the map it extends; choose another \
+             --out (the saved map is left as it was)",
+            existing.display(),
+            map_dir.display()
+        );
+    }
+    let nodes = saved.map.nodes.len();
+    let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+    slam.begin_run();
+    Ok(Run {
+        slam,
+        steps: Vec::new(),
+        resumed_at: None,
+        extends: Some(ExtendedMap { map: folder, nodes }),
+        node_files: NodeFiles::default(),
+    })
+}
+
+/// The nodes of the loop's current run.
+fn run_nodes(slam: &Slam) -> usize {
+    let run = slam.run();
+    slam.map.nodes.iter().filter(|n| n.run == run).count()
 }
 
 /// A new run with the configuration of `--config` (or the defaults, matched to the dataset's
@@ -273,13 +344,22 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
 fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
     let mut config = match &args.config {
         Some(path) => sdem_io::read_slam_config(path)?,
-        None => {
-            let mut config = SlamOptions::default();
-            if let Some(sensor) = &dataset.sensor {
+        None => match &dataset.sensor {
+            Some(sensor) => {
+                let mut config = SlamOptions::default();
                 config.sdem.resolution_deg = sensor.matched_sdem_resolution_deg();
+                config
             }
-            config
-        }
+            // No sensor model: the options follow the first scan's own sampling (a spinning
+            // LiDAR's grid and search; the tilting laser's defaults otherwise).
+            None if !dataset.is_empty() => {
+                let first = dataset
+                    .load_scan(0)
+                    .context("scan 0 cannot be read to choose the loop's options")?;
+                SlamOptions::for_scan(&first)
+            }
+            None => SlamOptions::default(),
+        },
     };
     if let Some(step) = args.step {
         if !(step.is_finite() && step > 0.0) {
@@ -294,6 +374,7 @@ fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
         slam: Slam::new(config)?,
         steps: Vec::new(),
         resumed_at: None,
+        extends: None,
         node_files: NodeFiles::default(),
     })
 }
@@ -317,7 +398,7 @@ fn map_scans(
     run: &mut Run,
 ) -> Result<usize> {
     let total = args.max_scans.unwrap_or(dataset.len()).min(dataset.len());
-    let first = run.slam.map.nodes.len();
+    let first = run_nodes(&run.slam);
     if first > total {
         bail!("the saved map has {first} nodes but only {total} scans are to be processed");
     }
@@ -403,23 +484,56 @@ fn step_line(index: usize, total: usize, step: &StepReport) -> String {
             }
         })
         .collect();
+    let joins: Vec<String> = (step.joined.iter())
+        .map(|j| format!("segment {} joined to {}", j.absorbed, j.into))
+        .collect();
     format!(
-        "scan {index:4}/{total}: {}  {:6.0} ms  refs {:?}{}{}",
+        "scan {index:4}/{total}: {}  {:6.0} ms  {}  refs {:?}{}{}{}",
         pose_line(&Pose::from(&step.world_from_sensor)),
         step.time_ms,
+        status_words(step),
         step.reference_nodes.iter().map(|r| r.0).collect::<Vec<_>>(),
         if closures.is_empty() {
             String::new()
         } else {
             format!("  {}", closures.join(", "))
         },
-        if step.trusted {
+        if joins.is_empty() {
+            String::new()
+        } else {
+            format!("  {}", joins.join(", "))
+        },
+        if step.trusted || step.doubts.is_empty() {
             String::new()
         } else {
             let kinds: Vec<&str> = step.doubts.iter().map(|d| d.kind()).collect();
             format!("  DOUBTFUL ({})", kinds.join(", "))
         }
     )
+}
+
+/// A step's status in words: `tracked`, `recovered (wider window)`, `NEW SEGMENT 12`, ….
+fn status_words(step: &StepReport) -> String {
+    match (step.status, step.recovery) {
+        (StepStatus::Recovered, Some(how)) => format!("recovered ({})", recovery_words(how)),
+        (StepStatus::NewSegment, _) => format!("NEW SEGMENT {}", step.segment),
+        (StepStatus::Doubtful, _) => "DOUBTFUL".to_string(),
+        (status, _) => status.name().replace('_', " "),
+    }
+}
+
+/// How a stop was recovered, in words.
+fn recovery_words(how: PredictionSource) -> &'static str {
+    match how {
+        PredictionSource::Odometry => "odometry",
+        PredictionSource::ConstantVelocity => "last motion repeated",
+        PredictionSource::NoMotion => "no motion",
+        PredictionSource::Neighbour => "a linked node's place",
+        PredictionSource::OtherNodes => "older nodes",
+        PredictionSource::WiderWindow => "wider window",
+        PredictionSource::EveryHeading => "every heading",
+        PredictionSource::Relocalization => "the whole map",
+    }
 }
 
 /// Saves the map, then the step log: a kill between the two loses one step's log line, never
@@ -442,8 +556,13 @@ fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
 
 /// Writes the final outputs: poses.txt (+ .tum), map.ply, map.sdemvox and, unless
 /// `--no-pictures`, the pictures and viewer.html.
-fn write_outputs(args: &Args, slam: &Slam) -> Result<Outputs> {
-    let poses = slam.poses();
+fn write_outputs(args: &Args, slam: &Slam, steps: &[Value]) -> Result<Outputs> {
+    // This run's poses, one per scan of the dataset, in the map's frame.
+    let run = slam.run();
+    let poses: Vec<Pose> = (slam.map.nodes.iter())
+        .filter(|n| n.run == run)
+        .map(|n| n.world_from_sensor)
+        .collect();
     write_poses(&args.out.join("poses.txt"), &poses)?;
     let cloud = slam.merged_cloud();
     write_points_ply(&args.out.join("map.ply"), &cloud)?;
@@ -458,6 +577,7 @@ fn write_outputs(args: &Args, slam: &Slam) -> Result<Outputs> {
             &slam.loop_closures,
             slam.config(),
             &cloud,
+            &node_statuses(slam, steps),
         )?
     };
     let mcap = match &args.mcap {
@@ -470,6 +590,19 @@ fn write_outputs(args: &Args, slam: &Slam) -> Result<Outputs> {
         pictures,
         mcap,
     })
+}
+
+/// Each node's status word from this run's step log (empty for the nodes of earlier runs).
+fn node_statuses(slam: &Slam, steps: &[Value]) -> Vec<String> {
+    let mut status = vec![String::new(); slam.map.nodes.len()];
+    for step in steps {
+        if let (Some(node), Some(word)) = (step["node_id"].as_u64(), step["status"].as_str()) {
+            if let Some(s) = status.get_mut(node as usize) {
+                *s = word.to_string();
+            }
+        }
+    }
+    status
 }
 
 /// The errors of `poses` against the `--compare` file, when given.
@@ -524,8 +657,15 @@ fn make_report(
         slam,
         steps,
         resumed_at,
+        extends,
         ..
     } = run;
+    let mut statuses = std::collections::BTreeMap::new();
+    for step in &steps {
+        if let Some(word) = step["status"].as_str().and_then(status_name) {
+            *statuses.entry(word).or_insert(0) += 1;
+        }
+    }
     let doubtful_scans: Vec<u64> = steps
         .iter()
         .filter(|s| s["trusted"] == Value::Bool(false))
@@ -543,6 +683,10 @@ fn make_report(
         scans: total,
         nodes: slam.map.nodes.len(),
         resumed_at,
+        extends,
+        run: slam.run(),
+        statuses,
+        segments: slam.segments(),
         time_ms: elapsed_ms(start),
         step_time_ms_median: median(field(&steps, "time_ms")),
         localize_time_ms_median: median(field(&steps, "localize_ms")),
@@ -569,6 +713,21 @@ fn make_report(
     })
 }
 
+/// The static name of a status word of the step log.
+fn status_name(word: &str) -> Option<&'static str> {
+    [
+        StepStatus::First,
+        StepStatus::Tracked,
+        StepStatus::Recovered,
+        StepStatus::Relocalized,
+        StepStatus::NewSegment,
+        StepStatus::Doubtful,
+    ]
+    .into_iter()
+    .map(StepStatus::name)
+    .find(|name| *name == word)
+}
+
 /// Prints the report as text.
 fn print_text(args: &Args, report: &Report) {
     println!(
@@ -579,6 +738,31 @@ fn print_text(args: &Args, report: &Report) {
         report.loop_closures_accepted,
         report.loop_closures_rejected
     );
+    if let Some(e) = &report.extends {
+        println!(
+            "run {} into the map {} ({} nodes before it); the map in {} holds both",
+            report.run,
+            e.map.display(),
+            e.nodes,
+            args.out.join(MAP_DIR).display()
+        );
+    }
+    let tally: Vec<String> = (report.statuses.iter())
+        .map(|(word, n)| format!("{n} {}", word.replace('_', " ")))
+        .collect();
+    println!("steps: {}", tally.join(", "));
+    if report.segments.len() > 1 {
+        let floating: Vec<String> = (report.segments.iter())
+            .filter(|s| !s.in_world)
+            .map(|s| format!("{} ({} nodes)", s.id, s.nodes))
+            .collect();
+        println!(
+            "{} map segments: the world's and {}, whose place in the world is not known (their \
+             poses are in their own frames)",
+            report.segments.len(),
+            floating.join(", ")
+        );
+    }
     println!("attitude: {}", report.attitude.summary);
     print_doubtful_steps(args, report);
     if let Some(t) = &report.truth {
@@ -639,12 +823,33 @@ fn print_doubtful_steps(args: &Args, report: &Report) {
             " (their poses are best guesses)"
         }
     );
-    for step in report
-        .steps
-        .iter()
-        .filter(|s| s["trusted"] == Value::Bool(false))
-    {
-        println!("  scan {} DOUBTFUL:", step["scan_index"]);
+    for step in &report.steps {
+        let status = step["status"].as_str().unwrap_or("");
+        match status {
+            "recovered" | "relocalized" => println!(
+                "  scan {} {}{}",
+                step["scan_index"],
+                status,
+                step["recovery"]
+                    .as_str()
+                    .map(|how| format!(" ({})", how.replace('_', " ")))
+                    .unwrap_or_default()
+            ),
+            "new_segment" => {
+                println!(
+                    "  scan {} NEW SEGMENT {}: found nowhere with confidence; its pose is a guess",
+                    step["scan_index"], step["segment"]
+                );
+                let attempts = step["attempts"].as_array().map(Vec::as_slice).unwrap_or(&[]);
+                if let Some(reason) = attempts.last().and_then(|a| a["reason"].as_str()) {
+                    println!("    last search: {reason}");
+                }
+            }
+            _ if step["trusted"] == Value::Bool(false) => {
+                println!("  scan {} DOUBTFUL:", step["scan_index"]);
+            }
+            _ => continue,
+        }
         let doubts = step["doubts"].as_array().map(Vec::as_slice).unwrap_or(&[]);
         for doubt in doubts {
             // A step log written by this command has messages; name the kind otherwise.

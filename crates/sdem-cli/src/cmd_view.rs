@@ -12,7 +12,7 @@ use sdem::slam::SlamOptions;
 use sdem_io::{load_map, read_points, write_atomic, Dataset};
 use sdem_viz::{
     cost_surface, encode_png, map_plan, map_section, sample_cost_slice, sdem_panorama,
-    sdem_polar_slice, viewer_html, MapView, RgbImage, Section,
+    sdem_polar_slice, viewer_html_with_status, MapView, RgbImage, Section,
 };
 use std::path::{Path, PathBuf};
 
@@ -185,6 +185,7 @@ fn write_map_view(map: MapArgs, json: bool) -> Result<Vec<PathBuf>> {
         &saved.loop_closures,
         &saved.config,
         &cloud,
+        &[],
     )?;
     bar.inc(1);
     bar.finish_and_clear();
@@ -218,6 +219,7 @@ pub fn write_map_pictures(
     loop_closures: &[LoopClosure],
     config: &SlamOptions,
     cloud: &[Vec3],
+    status: &[String],
 ) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("cannot create {}", out_dir.display()))?;
@@ -247,7 +249,8 @@ pub fn write_map_pictures(
         map_section(&view, &Section::through_trajectory(&view, 0.1), name),
     )?;
     write_last_node_pictures(name, map, config, &mut png)?;
-    let page = viewer_html(&view, &format!("sdem map: {name}"));
+    let status: Vec<&str> = status.iter().map(String::as_str).collect();
+    let page = viewer_html_with_status(&view, &format!("sdem map: {name}"), &status);
     let path = out_dir.join("viewer.html");
     write_atomic(&path, |w| w.write_all(page.as_bytes()))?;
     written.push(path);

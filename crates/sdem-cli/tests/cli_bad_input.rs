@@ -175,6 +175,8 @@ fn localize_map_names_a_damaged_node_file() {
             ),
             attitude_reading: None,
             points_in_sensor: (0..50).map(|k| [k as f32 * 0.1, 1.0, 0.3]).collect(),
+            segment: 0,
+            run: 0,
         })
         .collect();
     sdem_io::save_map(

@@ -104,6 +104,13 @@ struct NodeRecord {
     points_file: String,
     points: usize,
     points_crc32: u32,
+    /// The map segment (the id of its first node; 0 is the world's). Absent in maps saved
+    /// before segments: 0.
+    #[serde(default)]
+    segment: usize,
+    /// The run the scan came from (0: the first). Absent in maps saved before runs: 0.
+    #[serde(default)]
+    run: usize,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -271,6 +278,8 @@ pub fn save_map(
             points_file: name,
             points: node.points_in_sensor.len(),
             points_crc32: crc,
+            segment: node.segment,
+            run: node.run,
         });
     }
     let body = Body {
@@ -436,6 +445,13 @@ fn load_node(folder: &Path, manifest_path: &Path, i: usize, record: &NodeRecord)
         Some(_) => return Err(bad(format!("node {i}: non-finite attitude reading"))),
         None => None,
     };
+    if record.segment > i {
+        return Err(bad(format!(
+            "node {i} is in segment {}, which would start after it (a segment is named for its \
+             first node)",
+            record.segment
+        )));
+    }
     let path = folder.join(&record.points_file);
     let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
     let points_in_sensor = decode_points(&path, &bytes, record.points_crc32)?;
@@ -456,6 +472,8 @@ fn load_node(folder: &Path, manifest_path: &Path, i: usize, record: &NodeRecord)
         world_from_sensor,
         attitude_reading,
         points_in_sensor,
+        segment: record.segment,
+        run: record.run,
     })
 }
 
@@ -501,16 +519,13 @@ fn closures_from_records(
         let from_from_to = pose_from_row_major(&c.from_from_to)
             .ok_or_else(|| bad(format!("loop closure {k}: not a finite rigid transform")))?;
         loop_closures.push(LoopClosure {
-            from: c.from,
-            to: c.to,
             descriptor_distance: c.descriptor_distance,
             accepted: true,
-            reason: String::new(),
             cost: c.cost,
             inlier_fraction: c.inlier_fraction,
             correction_m: c.correction_m,
             from_from_to: Some(from_from_to),
-            covariance: None,
+            ..LoopClosure::unchecked(c.from, c.to)
         });
     }
     Ok(loop_closures)
@@ -535,6 +550,8 @@ mod tests {
                 points_in_sensor: (0..50 + i)
                     .map(|k| [k as f32 * 0.1, 1.0 - k as f32 * 0.01, 0.3])
                     .collect(),
+                segment: 0,
+                run: 0,
             })
             .collect();
         let edges = vec![Edge {
@@ -545,16 +562,13 @@ mod tests {
             kind: EdgeKind::LoopClosure,
         }];
         let closures = vec![LoopClosure {
-            from: 0,
-            to: 2,
             descriptor_distance: Some(0.01),
             accepted: true,
-            reason: String::new(),
             cost: Some(1e-3),
             inlier_fraction: Some(0.9),
             correction_m: Some(0.004),
             from_from_to: Some(edges[0].from_from_to),
-            covariance: None,
+            ..LoopClosure::unchecked(0, 2)
         }];
         (SlamOptions::default(), Map { nodes }, edges, closures)
     }

@@ -367,6 +367,8 @@ fn save_small_map(root: &Path) {
             points_in_sensor: (0..8)
                 .map(|k| [k as f32 * 0.25, 1.0 - k as f32 * 0.1, 0.3])
                 .collect(),
+            segment: 0,
+            run: 0,
         })
         .collect();
     let from_from_to = nodes[0].world_from_sensor.inverse() * nodes[2].world_from_sensor;
@@ -378,16 +380,13 @@ fn save_small_map(root: &Path) {
         kind: EdgeKind::LoopClosure,
     }];
     let closures = vec![LoopClosure {
-        from: 0,
-        to: 2,
         descriptor_distance: Some(0.01),
         accepted: true,
-        reason: String::new(),
         cost: Some(1e-3),
         inlier_fraction: Some(0.9),
         correction_m: Some(0.004),
         from_from_to: Some(from_from_to),
-        covariance: None,
+        ..LoopClosure::unchecked(0, 2)
     }];
     sdem_io::save_map(
         root,

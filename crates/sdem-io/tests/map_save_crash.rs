@@ -40,6 +40,8 @@ fn node(i: usize) -> Node {
                 [a.cos() * 2.0, a.sin() * 2.0, (k % 97) as f32 * 0.01 - 0.5]
             })
             .collect(),
+        segment: 0,
+        run: 0,
     }
 }
 

@@ -892,6 +892,8 @@ fn save_small_map(root: &Path) {
             ),
             attitude_reading: (i != 1).then(|| Attitude::from_degrees(0.5, -1.0, 9.0)),
             points_in_sensor: (0..4).map(|k| [k as f32 * 0.25, 1.0, 0.3]).collect(),
+            segment: 0,
+            run: 0,
         })
         .collect();
     let edges = vec![Edge {

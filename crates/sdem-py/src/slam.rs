@@ -32,9 +32,14 @@ use std::path::{Path, PathBuf};
 ///         ``prior_sigma_no_odometry_m`` (0.2), ``heading_half_deg`` (3.0),
 ///         ``heading_half_compass_deg`` (8.0), ``heading_half_no_prior_deg`` (15.0),
 ///         ``reference_radius_m`` (4.0), ``max_reference_nodes`` (3),
-///         ``min_reference_overlap_cells`` (300), ``edge_sigma_floor_m`` (0.005),
-///         ``edge_sigma_floor_deg`` (0.1), ``loop_closure``, ``optimize`` (the pose graph) and
-///         ``voxel`` (the fused occupancy map).
+///         ``min_reference_overlap_cells`` (300), ``min_tracking_inlier_fraction`` (0.5: a
+///         match from a prediction is taken at once only above it, else searched again wider),
+///         ``edge_sigma_floor_m`` (0.005), ``edge_sigma_floor_deg`` (0.1), ``recovery`` (what
+///         the loop does when its predictions fail: the widest window, every heading, the whole
+///         map), ``loop_closure``, ``optimize`` (the pose graph) and ``voxel`` (the fused
+///         occupancy map). A step's ``status`` is ``first``, ``tracked``, ``recovered``,
+///         ``relocalized``, ``new_segment`` (found nowhere with confidence: a new map segment,
+///         its pose a guess) or ``doubtful``.
 ///
 /// Raises:
 ///     sdem.InvalidError: an unknown option, a value of the wrong type or out of range.
@@ -105,10 +110,11 @@ impl Slam {
     ///     left it, ``(4, 4)`` float64 (later loop closures can move it: see ``poses()``).
     ///     ``last_step`` holds the step's status, doubts and report.
     ///
+    /// A scan found nowhere in the map with confidence is no error: it starts a new map
+    ///     segment (``last_step.status == "new_segment"``, its pose a guess).
+    ///
     /// Raises:
     ///     sdem.InvalidInputError, sdem.TooFewPointsError: bad input.
-    ///     sdem.AtScanError: the scan matches nothing in the map (its ``source`` says why);
-    ///         the map is then unchanged.
     #[pyo3(signature = (points, attitude_deg=None, odometry=None, *, roll_pitch_sigma_deg=None, yaw_sigma_deg=None))]
     fn add<'py>(
         mut slf: PyRefMut<'py, Self>,
@@ -273,8 +279,11 @@ impl Step {
         matrix4(py, &self.world_from_sensor).into_any()
     }
 
-    /// ``"first"`` (the scan defines the world frame), ``"tracked"`` (matched with no
-    /// doubt) or ``"doubtful"`` (matched with doubts: the pose is the best guess).
+    /// ``"first"`` (the scan defines the world frame), ``"tracked"`` (matched from the first
+    /// prediction with no doubt), ``"recovered"`` (matched with no doubt after the first
+    /// prediction failed), ``"relocalized"`` (found with no prior in the map),
+    /// ``"new_segment"`` (found nowhere with confidence: it starts a new map segment, its pose a
+    /// guess) or ``"doubtful"`` (matched, the position along a free direction the odometry's).
     #[getter]
     fn status(&self) -> &str {
         &self.status

@@ -93,17 +93,14 @@ def test_a_localization_where_nothing_matches_raises_a_match_error(pairs):
     assert isinstance(info.value, (sdem.NoOverlapError, sdem.NoMatchError))
 
 
-def test_a_slam_step_that_matches_nothing_is_at_scan_error_with_its_cause(run):
+def test_a_slam_step_that_matches_nothing_starts_a_new_segment_not_an_error(run):
     slam = sdem.Slam()
     slam.add(run["points"][0], attitude_deg=run["attitude_deg"][0])
     lifted = run["points"][6] + [0.0, 0.0, 2.5]  # another stop, seen 2.5 m off the floor
-    with pytest.raises(sdem.AtScanError) as info:
-        slam.add(lifted, attitude_deg=run["attitude_deg"][6])
-    error = info.value
-    assert error.scan_index == 1 and error.nodes == [0]
-    assert isinstance(error.source, sdem.MatchError) and error.__cause__ is error.source
-    assert error.is_no_match
-    assert len(slam) == 1  # the map is unchanged
+    slam.add(lifted, attitude_deg=run["attitude_deg"][6])
+    step = slam.last_step
+    assert step.status == "new_segment" and not step.trusted
+    assert len(slam) == 2  # the scan is kept, in a segment of its own
 
 
 def test_odometry_must_be_a_rigid_transform(run):

@@ -62,6 +62,25 @@ fn script_json(value: &serde_json::Value) -> String {
 /// assert!(page.starts_with("<!DOCTYPE html>") && !page.contains("https://"));
 /// ```
 pub fn viewer_html(view: &MapView, title: &str) -> String {
+    viewer_html_with_status(view, title, &[])
+}
+
+/// [`viewer_html`] with how the loop took each node: `status[i]` is node `i`'s status word
+/// (`tracked`, `recovered`, `relocalized`, `new_segment`, `doubtful`, or `first`; missing or
+/// empty: none). Every node not simply tracked is labelled with its status, in its own colour,
+/// whatever the zoom, and the page counts the nodes by status.
+///
+/// # Example
+/// ```
+/// use sdem::geometry::{Pose, Vec3};
+/// use sdem_viz::{viewer_html_with_status, MapView};
+/// let points = vec![Vec3::new(1.0, 0.0, 0.0)];
+/// let poses = vec![Pose::identity(), Pose::translation(0.5, 0.0, 0.0)];
+/// let view = MapView { points_in_world: &points, world_from_node: &poses, loop_closures: &[] };
+/// let page = viewer_html_with_status(&view, "two stops", &["first", "new_segment"]);
+/// assert!(page.contains("new_segment"));
+/// ```
+pub fn viewer_html_with_status(view: &MapView, title: &str, status: &[&str]) -> String {
     let finite: Vec<&sdem::geometry::Vec3> = view
         .points_in_world
         .iter()
@@ -117,6 +136,7 @@ pub fn viewer_html(view: &MapView, title: &str) -> String {
         "zHi": z_hi - center[2],
         "zCut": view.plan_ceiling_cut().map(|z| z - center[2]).unwrap_or(1e9),
         "extent": extent,
+        "status": status,
         "pointCount": view.points_in_world.len(),
         "shownCount": shown.len(),
     });
@@ -380,15 +400,20 @@ const PAGE: &str = r##"<!DOCTYPE html>
     ctx2d.font = "bold 13px sans-serif";
     ctx2d.textBaseline = "bottom";
     const every = Math.max(1, Math.ceil(nodes.length / 3 / 40));
+    const STATUS_COLOUR = { recovered: "#b35c00", relocalized: "#1f4fbf", new_segment: "#c00018", doubtful: "#7a4a00" };
+    const counts = {};
     for (let i = 0; i < nodes.length / 3; i++) {
-      if (i % every !== 0 && i !== nodes.length / 3 - 1) continue;
+      const status = DATA.status[i] || "";
+      if (status) counts[status] = (counts[status] || 0) + 1;
+      const marked = status in STATUS_COLOUR;
+      if (!marked && i % every !== 0 && i !== nodes.length / 3 - 1) continue;
       const p = project(m, nodes[3 * i], nodes[3 * i + 1], nodes[3 * i + 2], width, height);
       if (!p) continue;
-      const label = String(i);
+      const label = marked ? i + " " + status.replace("_", " ") : String(i);
       const x = p[0] / dpr + 7, y = p[1] / dpr - 5;
       ctx2d.fillStyle = "rgba(255,255,255,0.8)";
       ctx2d.fillRect(x - 2, y - 15, ctx2d.measureText(label).width + 4, 16);
-      ctx2d.fillStyle = "#111111";
+      ctx2d.fillStyle = marked ? STATUS_COLOUR[status] : "#111111";
       ctx2d.fillText(label, x, y);
     }
     // Title and help.
@@ -401,6 +426,8 @@ const PAGE: &str = r##"<!DOCTYPE html>
       DATA.loops.length + " loop closures" + (gl ? "" : " (2D fallback: no WebGL)"), 12, 32);
     ctx2d.fillText("drag: orbit, wheel: zoom, shift/right-drag: pan, c: ceiling " +
       (view.showCeiling ? "shown" : "hidden") + ", r: reset", 12, 50);
+    const tally = Object.keys(counts).map(function (k) { return counts[k] + " " + k.replace("_", " "); });
+    if (tally.length) ctx2d.fillText("stops: " + tally.join(", "), 12, 68);
     // Colour bar.
     const bx = w - 70, by = 40, bh = Math.min(240, h - 100);
     for (let y = 0; y < bh; y++) {

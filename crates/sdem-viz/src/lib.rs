@@ -38,7 +38,7 @@ mod sdem_view;
 mod text;
 
 pub use cost_view::{cost_surface, sample_cost_slice, CostSlice};
-pub use html::{viewer_html, VIEWER_MAX_POINTS};
+pub use html::{viewer_html, viewer_html_with_status, VIEWER_MAX_POINTS};
 pub use image::{Rgb, RgbImage};
 pub use map_view::{map_plan, map_section, MapView, Section};
 pub use sdem_view::{sdem_panorama, sdem_polar_slice};

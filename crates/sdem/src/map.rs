@@ -32,6 +32,15 @@ pub struct Node {
     pub attitude_reading: Option<Attitude>,
     /// The S-DEM's boundary points (nearest return per cell), sensor frame, metres.
     pub points_in_sensor: Vec<[f32; 3]>,
+    /// The map segment the node belongs to: the id of the segment's first node. Nodes of one
+    /// segment are placed in one frame by their matches; segment 0 holds node 0 and is the
+    /// world. A segment with another id is a piece of map whose place in the world is not known
+    /// yet (a robot lost, kidnapped, or started at an unknown place): its poses are a guess
+    /// until a confident match joins it to another segment ([`crate::slam`]).
+    pub segment: usize,
+    /// The run the scan came from: 0 for the run that started the map, 1 for the next run into
+    /// the same map, and so on. Scan indices count within a run.
+    pub run: usize,
 }
 
 impl Node {
@@ -71,6 +80,8 @@ impl Node {
             world_from_sensor,
             attitude_reading,
             points_in_sensor,
+            segment: 0,
+            run: 0,
         })
     }
 
@@ -113,22 +124,31 @@ impl Node {
     }
 }
 
-/// A place descriptor computed from an S-DEM: the mean range in each of `SECTORS` azimuth
-/// sectors × `BANDS` elevation bands of the levelled sphere (a coarse "what the place looks
-/// like from here", in the spirit of Scan Context, but on the S-DEM's own grid and keeping the
+/// A place descriptor: the mean range in each of [`SECTORS`] azimuth sectors × [`BANDS`]
+/// elevation bands of the levelled sphere around a sensor (a coarse "what the place looks like
+/// from here", in the spirit of Scan Context, on the S-DEM's own spherical grid and keeping the
 /// elevation, which a rubble void is all about). Unknown cells are NaN.
+///
+/// Two descriptors are compared over the cells both saw and over every azimuth shift
+/// ([`Descriptor::distance_any_heading`]), so a place is recognised whichever way the robot
+/// faces; and since unknown cells do not count, a scanner that sees only its front half is
+/// compared on that half. A map node's descriptor is best made from the node and its
+/// neighbours together ([`Map::place_descriptor`]): they cover more of the sphere than one
+/// scan, so a robot coming back facing the other way finds there what it sees.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Descriptor {
     /// Mean range per (band, sector), band-major, metres; NaN where nothing was seen.
     pub mean_range: Vec<f32>,
 }
 
-/// Azimuth sectors of a [`Descriptor`] (30° each).
-pub const SECTORS: usize = 12;
-/// Elevation bands of a [`Descriptor`] (30° each).
-pub const BANDS: usize = 6;
+/// Azimuth sectors of a [`Descriptor`] (10° each).
+pub const SECTORS: usize = 36;
+/// Elevation bands of a [`Descriptor`] (20° each).
+pub const BANDS: usize = 9;
 /// Two descriptors are compared only over at least this many cells both saw.
-pub const MIN_COMMON_CELLS: usize = 12;
+pub const MIN_COMMON_CELLS: usize = 24;
+/// A cell of a [`Descriptor`] is known when at least this many points fall in it.
+const MIN_POINTS_PER_CELL: u32 = 3;
 
 impl Descriptor {
     /// The descriptor of points in a levelled frame (world axes, origin at the sensor).
@@ -156,7 +176,7 @@ impl Descriptor {
             .iter()
             .zip(&count)
             .map(|(&s, &c)| {
-                if c >= 5 {
+                if c >= MIN_POINTS_PER_CELL {
                     (s / c as f64) as f32
                 } else {
                     f32::NAN
@@ -166,34 +186,53 @@ impl Descriptor {
         Self { mean_range }
     }
 
+    /// The cells this descriptor knows.
+    pub fn known_cells(&self) -> usize {
+        self.mean_range.iter().filter(|r| r.is_finite()).count()
+    }
+
     /// Dissimilarity of two places: the mean absolute log-ratio of ranges over the cells both
     /// saw, minimized over azimuth shifts of up to `max_shift` sectors (a compass error); `None`
-    /// when they share fewer than [`MIN_COMMON_CELLS`] cells (the paper's sensor sweeps a half
-    /// sphere, so about half the cells are known).
+    /// when they share fewer than [`MIN_COMMON_CELLS`] cells at every shift.
     pub fn distance(&self, other: &Descriptor, max_shift: usize) -> Option<f64> {
-        let mut best: Option<f64> = None;
         let shift_range = max_shift.min(SECTORS / 2) as isize;
-        for shift in -shift_range..=shift_range {
-            let (mut sum, mut n) = (0.0, 0usize);
-            for b in 0..BANDS {
-                for s in 0..SECTORS {
-                    let t = (s as isize + shift).rem_euclid(SECTORS as isize) as usize;
-                    let (ra, rb) = (
-                        self.mean_range[b * SECTORS + s],
-                        other.mean_range[b * SECTORS + t],
-                    );
-                    if ra.is_finite() && rb.is_finite() && ra > 0.0 && rb > 0.0 {
-                        sum += (ra as f64 / rb as f64).ln().abs();
-                        n += 1;
-                    }
+        (-shift_range..=shift_range)
+            .filter_map(|shift| self.distance_at(other, shift))
+            .min_by(f64::total_cmp)
+    }
+
+    /// [`Self::distance`] over every azimuth shift: how unlike the two places are whichever way
+    /// each sensor faced, and the heading to add to the yaw that levelled `self` for it to
+    /// look like `other` (radians, a multiple of the sector's 10°). `None` when no shift
+    /// leaves [`MIN_COMMON_CELLS`] cells in common.
+    pub fn distance_any_heading(&self, other: &Descriptor) -> Option<(f64, f64)> {
+        (0..SECTORS as isize)
+            .filter_map(|shift| Some((self.distance_at(other, shift)?, shift)))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(d, shift)| {
+                let heading = shift as f64 * std::f64::consts::TAU / SECTORS as f64;
+                (d, crate::geometry::wrap_pi(heading))
+            })
+    }
+
+    /// The dissimilarity with `other`'s sectors shifted by `shift`; `None` below
+    /// [`MIN_COMMON_CELLS`] common cells.
+    fn distance_at(&self, other: &Descriptor, shift: isize) -> Option<f64> {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for b in 0..BANDS {
+            for s in 0..SECTORS {
+                let t = (s as isize + shift).rem_euclid(SECTORS as isize) as usize;
+                let (ra, rb) = (
+                    self.mean_range[b * SECTORS + s],
+                    other.mean_range[b * SECTORS + t],
+                );
+                if ra.is_finite() && rb.is_finite() && ra > 0.0 && rb > 0.0 {
+                    sum += (ra as f64 / rb as f64).ln().abs();
+                    n += 1;
                 }
             }
-            if n >= MIN_COMMON_CELLS {
-                let d = sum / n as f64;
-                best = Some(best.map_or(d, |b: f64| b.min(d)));
-            }
         }
-        best
+        (n >= MIN_COMMON_CELLS).then(|| sum / n as f64)
     }
 }
 
@@ -218,12 +257,26 @@ impl Map {
         radius_m: f64,
         tolerance_m: f64,
     ) -> Vec<(usize, usize)> {
+        let near: Vec<usize> = (self.nodes.iter())
+            .filter(|n| (n.position() - origin).norm() <= radius_m)
+            .map(|n| n.node_id)
+            .collect();
+        self.overlaps_among(&near, query_levelled, origin, tolerance_m)
+    }
+
+    /// [`Self::overlaps`] for the nodes `node_ids` (unknown ids are skipped), most overlapping
+    /// first.
+    pub fn overlaps_among(
+        &self,
+        node_ids: &[usize],
+        query_levelled: &Sdem,
+        origin: &Vec3,
+        tolerance_m: f64,
+    ) -> Vec<(usize, usize)> {
         let spec = query_levelled.grid();
         let ranges = query_levelled.ranges();
-        let mut scored: Vec<(usize, usize)> = self
-            .nodes
-            .iter()
-            .filter(|n| (n.position() - origin).norm() <= radius_m)
+        let mut scored: Vec<(usize, usize)> = (node_ids.iter())
+            .filter_map(|&id| self.nodes.get(id))
             .map(|n| {
                 let mut seen = vec![false; ranges.len()];
                 let mut matching = 0usize;
@@ -269,6 +322,43 @@ impl Map {
         }
         Sdem::from_points(&points, &crate::geometry::Attitude::default(), sdem)
     }
+
+    /// The nodes of node `node_id`'s segment whose origins lie within `radius_m` of its own,
+    /// nearest first (the node itself first), at most `max_nodes`.
+    pub fn nearby_in_segment(&self, node_id: usize, radius_m: f64, max_nodes: usize) -> Vec<usize> {
+        let Some(node) = self.nodes.get(node_id) else {
+            return Vec::new();
+        };
+        let mut near: Vec<(usize, f64)> = (self.nodes.iter())
+            .filter(|n| n.segment == node.segment)
+            .map(|n| (n.node_id, (n.position() - node.position()).norm()))
+            .filter(|&(_, d)| d <= radius_m)
+            .collect();
+        near.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        near.into_iter().take(max_nodes).map(|(id, _)| id).collect()
+    }
+
+    /// The place descriptor of node `node_id` ([`Descriptor`]): its points and those of the
+    /// nearest nodes of its segment ([`Self::nearby_in_segment`] with `radius_m` and
+    /// `max_nodes`), carried into the world and seen from its origin on world axes. `None` for
+    /// an unknown node.
+    pub fn place_descriptor(
+        &self,
+        node_id: usize,
+        radius_m: f64,
+        max_nodes: usize,
+    ) -> Option<Descriptor> {
+        let origin = self.nodes.get(node_id)?.position();
+        let points: Vec<[f32; 3]> = (self.nearby_in_segment(node_id, radius_m, max_nodes))
+            .into_iter()
+            .flat_map(|id| self.nodes[id].points_in_world())
+            .map(|p| {
+                let q = p - origin;
+                [q.x as f32, q.y as f32, q.z as f32]
+            })
+            .collect();
+        Some(Descriptor::from_levelled(&points))
+    }
 }
 
 /// Settings of loop-closure proposal and verification.
@@ -279,23 +369,51 @@ pub struct LoopClosureConfig {
     pub enabled: bool,
     /// A revisit must be at least this many nodes back (nearer ones are the odometry chain).
     pub min_node_separation: usize,
-    /// Candidates lie within this of the new node's estimated position, metres (the drift the
-    /// map may have accumulated).
+    /// Candidates lie within this of the new node's estimated position, metres (a robot coming
+    /// back the other way sees what nodes behind it saw).
     pub search_radius_m: f64,
-    /// Candidates' descriptors must lie within this dissimilarity (mean |ln r₁/r₂|).
+    /// A candidate of the same segment must explain at least this many of the new scan's cells
+    /// at its estimated pose ([`Map::overlaps_among`]), whichever way either scan faced.
+    pub min_overlap_cells: usize,
+    /// Candidates in another segment (placed nowhere yet) are proposed by their place
+    /// descriptors ([`Map::place_descriptor`]), compared over every heading: within this
+    /// dissimilarity (mean |ln r₁/r₂|).
     pub max_descriptor_distance: f64,
-    /// At most this many candidates are verified per new node, most similar first.
+    /// At most this many candidates are verified per new node, most overlapping or most
+    /// similar first.
     pub max_candidates: usize,
+    /// The candidate's place is the candidate and up to this many nodes of its segment around
+    /// it (within `reference_radius_m`), merged: a robot coming back the other way sees what
+    /// the nodes behind the candidate saw.
+    pub reference_nodes: usize,
+    /// See `reference_nodes`, metres.
+    pub reference_radius_m: f64,
     /// Half-size of the verification window around the predicted relative position, metres.
     pub window_half_m: [f64; 3],
-    /// Heading searched around the predicted relative heading, ± degrees.
+    /// Heading searched around the predicted relative heading, ± degrees. Within a segment the
+    /// pose graph knows which way the robot faced, however it turned, so the search covers the
+    /// heading drift the map may hold (a match turned further is no closure:
+    /// `max_heading_correction_deg`); across segments, where nothing is known, the loop
+    /// searches every heading ([`crate::slam`]).
     pub heading_half_deg: f64,
     /// Grid step of the verification search, metres.
     pub step_m: f64,
-    /// A closure is accepted only when at least this fraction of the query's cells match.
+    /// A closure is accepted only when at least this fraction of the query's cells match…
     pub min_inlier_fraction: f64,
+    /// … or, for a scan that shares little with the place (a robot coming back the other way
+    /// with a scanner that sees its front half), when at least this share of the cells both saw
+    /// match…
+    pub min_shared_inlier_fraction: f64,
+    /// … and at least this many.
+    pub min_shared_inliers: usize,
     /// … and it moves the node by no more than this from its current estimate, metres.
     pub max_correction_m: f64,
+    /// … and turns it by no more than this, degrees.
+    pub max_heading_correction_deg: f64,
+    /// … and it agrees with the other closures it forms a loop with
+    /// ([`crate::slam`]: pairwise consistency): a loop of transforms that does not return to
+    /// where it began beyond this many standard deviations (χ with 6 degrees of freedom).
+    pub max_loop_sigmas: f64,
 }
 
 impl Default for LoopClosureConfig {
@@ -303,14 +421,21 @@ impl Default for LoopClosureConfig {
         Self {
             enabled: true,
             min_node_separation: 10,
-            search_radius_m: 1.5,
-            max_descriptor_distance: 0.2,
+            search_radius_m: 3.0,
+            min_overlap_cells: 300,
+            max_descriptor_distance: 0.25,
             max_candidates: 2,
+            reference_nodes: 3,
+            reference_radius_m: 1.5,
             window_half_m: [0.3, 0.3, 0.1],
-            heading_half_deg: 4.0,
+            heading_half_deg: 20.0,
             step_m: 0.02,
             min_inlier_fraction: 0.6,
+            min_shared_inlier_fraction: 0.75,
+            min_shared_inliers: 150,
             max_correction_m: 0.5,
+            max_heading_correction_deg: 20.0,
+            max_loop_sigmas: 5.0,
         }
     }
 }
@@ -322,7 +447,7 @@ pub struct LoopClosure {
     pub from: usize,
     /// The new node.
     pub to: usize,
-    /// Descriptor dissimilarity that proposed it (`None` when proposed by hand).
+    /// Descriptor dissimilarity that proposed it (`None` when proposed by overlap or by hand).
     pub descriptor_distance: Option<f64>,
     /// Accepted as a pose-graph edge.
     pub accepted: bool,
@@ -334,6 +459,8 @@ pub struct LoopClosure {
     pub inlier_fraction: Option<f64>,
     /// How far the match moves the new node from its estimate, metres.
     pub correction_m: Option<f64>,
+    /// How far the match turns the new node from its estimate, degrees.
+    pub heading_correction_deg: Option<f64>,
     /// The measured `from_from_to` (KITTI row-major 3×4) when accepted.
     #[serde(skip)]
     pub from_from_to: Option<Pose>,
@@ -342,14 +469,36 @@ pub struct LoopClosure {
     pub covariance: Option<Matrix6<f64>>,
 }
 
+impl LoopClosure {
+    /// A closure from `from` to `to` not checked yet: not accepted, no figures.
+    pub fn unchecked(from: usize, to: usize) -> Self {
+        Self {
+            from,
+            to,
+            descriptor_distance: None,
+            accepted: false,
+            reason: String::new(),
+            cost: None,
+            inlier_fraction: None,
+            correction_m: None,
+            heading_correction_deg: None,
+            from_from_to: None,
+            covariance: None,
+        }
+    }
+}
+
 /// Verifies that the scan of node `to`, placed at `world_from_to_prior`, sees the place of node
-/// `from`: the exact search over a window around the prior, then the match's diagnostics decide.
+/// `from` (the node and its neighbours, `config.reference_nodes`): the exact search over a
+/// window around the prior and `config.heading_half_deg` of heading, with the runner-up
+/// search, then the match's diagnostics decide.
 ///
 /// The result's `descriptor_distance` is `None`; the caller that proposed the closure by
 /// descriptor fills it in.
 ///
-/// Rejected when the search fails (nothing matches), the match is ambiguous, the optimum lies on
-/// the window's edge, too few cells match, or the correction is implausibly large.
+/// Rejected when the search fails (nothing matches), the match is ambiguous (another place in
+/// the window compares almost as well), the optimum lies on the window's edge, too few cells
+/// match, or the correction (position or heading) is implausibly large.
 pub fn verify_loop_closure(
     map: &Map,
     from: usize,
@@ -359,6 +508,33 @@ pub fn verify_loop_closure(
     localize_base: &LocalizeOptions,
     config: &LoopClosureConfig,
 ) -> Result<LoopClosure> {
+    if map.nodes.get(from).is_none() || map.nodes.get(to).is_none() {
+        return Err(Error::Invalid(format!(
+            "loop closure {from}→{to}: node not in the map ({} nodes)",
+            map.nodes.len()
+        )));
+    }
+    let place = map.nearby_in_segment(from, config.reference_radius_m, config.reference_nodes.max(1));
+    verify_loop_closure_against(map, &place, to, world_from_to_prior, sdem, localize_base, config)
+}
+
+/// [`verify_loop_closure`] against the merged nodes `place` (the closure links the first one to
+/// `to`, and the search's origin is its).
+///
+/// # Errors
+/// A node not in the map, an empty `place`, or an invalid configuration.
+pub fn verify_loop_closure_against(
+    map: &Map,
+    place: &[usize],
+    to: usize,
+    world_from_to_prior: &Pose,
+    sdem: &SdemConfig,
+    localize_base: &LocalizeOptions,
+    config: &LoopClosureConfig,
+) -> Result<LoopClosure> {
+    let from = *place.first().ok_or_else(|| {
+        Error::Invalid(format!("loop closure to {to}: no node to close it with"))
+    })?;
     let (Some(from_node), Some(to_node)) = (map.nodes.get(from), map.nodes.get(to)) else {
         return Err(Error::Invalid(format!(
             "loop closure {from}→{to}: node not in the map ({} nodes)",
@@ -366,7 +542,7 @@ pub fn verify_loop_closure(
         )));
     };
     let origin = from_node.position();
-    let reference = map.merged_reference(&[from], &origin, sdem)?;
+    let reference = map.merged_reference(place, &origin, sdem)?;
     let query = Sdem::from_points(
         &to_node.sensor_points(),
         &attitude_of(world_from_to_prior),
@@ -380,21 +556,11 @@ pub fn verify_loop_closure(
             half_range_deg: config.heading_half_deg,
             step_deg: None,
         },
+        runner_up: true,
         ..localize_base.clone()
     };
-    let mut closure = LoopClosure {
-        from,
-        to,
-        descriptor_distance: None,
-        accepted: false,
-        reason: String::new(),
-        cost: None,
-        inlier_fraction: None,
-        correction_m: None,
-        from_from_to: None,
-        covariance: None,
-    };
-    let found = match localize(&reference, &query, &localize_config) {
+    let mut closure = LoopClosure::unchecked(from, to);
+    let found = match search_coarse_to_fine(&reference, &to_node.sensor_points(), &query, &localize_config, sdem) {
         Ok(found) => found,
         Err(e) if e.is_no_match() => {
             closure.reason = e.to_string();
@@ -405,40 +571,161 @@ pub fn verify_loop_closure(
     let world_from_to = world_from_query(&origin, &found);
     let correction =
         (world_from_to.translation.vector - world_from_to_prior.translation.vector).norm();
+    let turn = crate::geometry::wrap_pi(
+        attitude_of(&world_from_to).yaw - attitude_of(world_from_to_prior).yaw,
+    )
+    .abs()
+    .to_degrees();
     closure.cost = Some(found.cost);
     closure.inlier_fraction = Some(found.diagnostics.inlier_fraction);
     closure.correction_m = Some(correction);
+    closure.heading_correction_deg = Some(turn);
+    closure.reason = rejection(&found, config, correction, turn).unwrap_or_default();
+    if closure.reason.is_empty() {
+        closure.accepted = true;
+        closure.from_from_to = Some(from_node.world_from_sensor.inverse() * world_from_to);
+        closure.covariance = (found.diagnostics.covariance).map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+    }
+    Ok(closure)
+}
+
+/// A search whose grid step is finer than this, metres, runs on this grid first
+/// ([`search_coarse_to_fine`]).
+pub const COARSE_STEP_M: f64 = 0.05;
+/// The fine search around a coarse optimum covers ± this, metres…
+const FINE_HALF_M: f64 = 0.08;
+/// … and ± this, degrees.
+const FINE_HEADING_DEG: f64 = 3.0;
+
+/// The exact search of `options` (window and heading around `query`'s levelling, runner-up
+/// search as asked) in two passes: on a [`COARSE_STEP_M`] grid without refinement, then on
+/// `options.step_m` within ±8 cm and ±3° of the coarse optimum (the query, `points_in_sensor`,
+/// levelled again at its heading) with the refinement. A coarse runner-up is searched the same
+/// way around it and stays a doubt only when it still compares almost as well (on a coarse
+/// grid each cost lies above its basin's bottom by as much as the grid misses it). With a step
+/// of [`COARSE_STEP_M`] or more, one pass.
+///
+/// # Errors
+/// As [`localize`].
+pub(crate) fn search_coarse_to_fine(
+    reference: &Sdem,
+    points_in_sensor: &[Vec3],
+    query: &Sdem,
+    options: &LocalizeOptions,
+    sdem: &SdemConfig,
+) -> Result<Localization> {
+    if options.step_m >= COARSE_STEP_M {
+        return localize(reference, query, options);
+    }
+    let coarse = localize(
+        reference,
+        query,
+        &LocalizeOptions {
+            step_m: COARSE_STEP_M,
+            refine: false,
+            ..options.clone()
+        },
+    )?;
+    let level = query.attitude();
+    let fine_at = |offset: Vec3, heading: f64| -> Result<Localization> {
+        let turned = Attitude::new(level.roll, level.pitch, level.yaw + heading);
+        let query = Sdem::from_points(points_in_sensor, &turned, sdem)?;
+        let mut found = localize(
+            reference,
+            &query,
+            &LocalizeOptions {
+                window: SearchWindow::around(&offset, [FINE_HALF_M; 3]),
+                heading: HeadingWindow {
+                    half_range_deg: FINE_HEADING_DEG,
+                    step_deg: None,
+                },
+                runner_up: false,
+                ..options.clone()
+            },
+        )?;
+        // The pose is the query's as levelled here: its heading correction is from the
+        // coarse levelling.
+        found.heading_correction += heading;
+        Ok(found)
+    };
+    let mut found = fine_at(coarse.grid_offset, coarse.grid_heading)?;
+    let d = &coarse.diagnostics;
+    if let (Some(offset), Some(heading)) = (d.runner_up_offset, d.runner_up_heading_deg) {
+        if d.runner_up_cost.is_some() {
+            match fine_at(Vec3::from(offset), heading.to_radians()) {
+                Ok(rival) => {
+                    let apart = (rival.offset - found.offset).norm();
+                    if apart > options.peak_radius_m
+                        && rival.cost < options.ambiguous_cost_ratio * found.cost
+                    {
+                        found.doubts.push(crate::doubt::Doubt::RunnerUp {
+                            distance_m: apart,
+                            cost: rival.cost,
+                            best_cost: found.cost,
+                        });
+                        found.diagnostics.ambiguous = true;
+                        found.trusted = false;
+                    }
+                }
+                Err(e) if e.is_no_match() => {}
+                Err(e) => return Err(e),
+            }
+        }
+    }
+    found.doubts.extend(
+        (coarse.doubts.into_iter()).filter(|d| matches!(d, crate::doubt::Doubt::AnotherRotation { .. })),
+    );
+    Ok(found)
+}
+
+/// Why a loop closure's match is rejected, in words; `None` when it is accepted.
+fn rejection(
+    found: &Localization,
+    config: &LoopClosureConfig,
+    correction: f64,
+    turn_deg: f64,
+) -> Option<String> {
     let d = &found.diagnostics;
-    closure.reason = if d.ambiguous {
-        let why: Vec<String> = (found.doubts.iter())
-            .filter(|d| d.is_ambiguity())
-            .map(ToString::to_string)
-            .collect();
+    // A scan that shares little with the place, but that little with confidence.
+    let shared = if d.overlap_fraction > 0.0 {
+        d.inlier_fraction / d.overlap_fraction
+    } else {
+        0.0
+    };
+    let partial = shared >= config.min_shared_inlier_fraction
+        && (shared * found.overlap as f64).round() as usize >= config.min_shared_inliers;
+    let why: Vec<String> = (found.doubts.iter())
+        .filter(|d| d.is_ambiguity())
+        .filter(|d| !(partial && matches!(d, crate::doubt::Doubt::FewInliers { .. })))
+        .map(ToString::to_string)
+        .collect();
+    Some(if !why.is_empty() {
         format!("ambiguous: {}", why.join("; "))
     } else if found.on_window_edge {
         "the best match lies on the search window's edge".into()
-    } else if d.inlier_fraction < config.min_inlier_fraction {
+    } else if d.inlier_fraction < config.min_inlier_fraction && !partial {
         format!(
-            "only {:.0} % of the cells match (need {:.0} %)",
+            "only {:.0} % of the cells match (need {:.0} %, or {:.0} % of {} cells both saw)",
             d.inlier_fraction * 100.0,
-            config.min_inlier_fraction * 100.0
+            config.min_inlier_fraction * 100.0,
+            config.min_shared_inlier_fraction * 100.0,
+            config.min_shared_inliers
         )
     } else if correction > config.max_correction_m {
         format!(
             "it would move the node {:.2} m (at most {:.2} m)",
             correction, config.max_correction_m
         )
+    } else if turn_deg > config.max_heading_correction_deg {
+        format!(
+            "it would turn the node {turn_deg:.1}° (at most {:.1}°)",
+            config.max_heading_correction_deg
+        )
     } else if d.covariance.is_none() {
         "the 6-DoF refinement failed, no covariance".into()
     } else {
-        String::new()
-    };
-    if closure.reason.is_empty() {
-        closure.accepted = true;
-        closure.from_from_to = Some(from_node.world_from_sensor.inverse() * world_from_to);
-        closure.covariance = d.covariance.map(|c| Matrix6::from_fn(|i, j| c[i][j]));
-    }
-    Ok(closure)
+        return None;
+    })
 }
 
 /// The query's `world_from_sensor` from a localization against a reference S-DEM with world axes

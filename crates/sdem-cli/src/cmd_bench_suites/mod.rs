@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod print;
+mod routes;
 
 /// Simulated pairs per suite [default], and with `--quick`.
 const SIMULATED_PAIRS: (usize, usize) = (200, 8);
@@ -61,6 +62,10 @@ pub enum Suite {
     CompassNoise,
     /// KITTI frames and simulated spinning-LiDAR scans, no guess.
     Lidar,
+    /// The stop-and-go loop on simulated routes robots really drive (long steps, a turn-around,
+    /// a kidnapped robot, a half-blocked scanner, revisits the other way, a second run),
+    /// relocalization in a saved map, and the KITTI frames beside KISS-ICP.
+    Routes,
 }
 
 impl Suite {
@@ -69,6 +74,7 @@ impl Suite {
             Suite::Unlevelled => "unlevelled",
             Suite::CompassNoise => "compass-noise",
             Suite::Lidar => "lidar",
+            Suite::Routes => "routes",
         }
     }
 }
@@ -80,10 +86,13 @@ pub struct SuiteArgs {
     /// to ±30°, any heading, steps up to 1 m; 8 with --quick), compass-noise (the same pairs
     /// with readings off by σ 2° roll/pitch and σ 20° heading), lidar (KITTI frames and 20
     /// simulated spinning-LiDAR pairs, no guess; searched on a 5 cm grid, where --step sets
-    /// the tilting scanner's). The peers run beside it when found.
+    /// the tilting scanner's), routes (the stop-and-go loop on six seeded routes without and
+    /// with odometry, relocalization at every stop of a saved map, and the KITTI frames beside
+    /// KISS-ICP; --quick: without odometry only, 8 relocalizations). The peers run beside it
+    /// when found.
     #[arg(long, value_enum, conflicts_with = "faults")]
     pub suite: Option<Suite>,
-    /// With --suite lidar: the KITTI folder (velodyne/, poses.txt, calib.txt) [default:
+    /// With --suite lidar or routes: the KITTI folder (velodyne/, poses.txt, calib.txt) [default:
     /// ../shared/data/kitti-00-first16 beside the repository, skipped, saying so, when absent].
     #[arg(long, value_name = "DIR", requires = "suite")]
     pub kitti: Option<PathBuf>,
@@ -296,12 +305,16 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
     if !(common.step.is_finite() && common.step > 0.0) {
         bail!("--step {} must be a positive number of metres", common.step);
     }
-    if args.kitti.is_some() && suite != Suite::Lidar {
-        bail!("--kitti applies to --suite lidar only");
+    if args.kitti.is_some() && !matches!(suite, Suite::Lidar | Suite::Routes) {
+        bail!("--kitti applies to --suite lidar and --suite routes only");
     }
     let peers = bench_peers::find(args.peers.as_deref())?;
+    if suite == Suite::Routes {
+        return routes::run(args.kitti.as_deref(), &peers, common, say);
+    }
     let mut parts = Vec::new();
     match suite {
+        Suite::Routes => unreachable!("the routes suite returned above"),
         Suite::Unlevelled | Suite::CompassNoise => {
             let config = if suite == Suite::Unlevelled {
                 SuiteConfig::unlevelled()

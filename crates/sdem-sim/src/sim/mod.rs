@@ -45,6 +45,7 @@ mod solids;
 mod stops;
 #[cfg(test)]
 mod tests;
+mod waypoints;
 
 pub use building::collapsed_building;
 pub use fixed_scenes::{
@@ -58,6 +59,7 @@ pub use scanner::{scan, simulate_changing_run, simulate_run, SimStop};
 pub use scene::{Scene, MIN_STANDING_GAP_M};
 pub use solids::{Ellipsoid, OrientedBox, Solid};
 pub use stops::{collapsed_building_stops, Stop, MIN_SENSOR_CLEARANCE_M};
+pub use waypoints::{route_at, route_length_m, waypoint_stops, Waypoint};
 
 use nalgebra::{Rotation3, Vector3};
 use sdem::geometry::Vec3;

@@ -1,53 +1,67 @@
 //! The stop-and-go loop (Nagatani et al. 2003, Sec. III, Fig. 2): move, sense, build the local
 //! S-DEM, compare it with the global map, localize, add it to the map, repeat — with what the
 //! paper left open: merging (the merged virtual S-DEM, [`crate::map`], and the occupancy voxel
-//! map, [`crate::voxel`]), and loop closure over a robust pose graph ([`crate::posegraph`]).
+//! map, [`crate::voxel`]), loop closure over a robust pose graph ([`crate::posegraph`]), and
+//! what a robot needs when its prediction is wrong.
 //!
 //! [`Slam::add_scan`] takes one scan at a time as plain values (points, attitude reading,
-//! odometry), so the same loop runs on a dataset folder, a saved map being resumed, or a robot.
+//! odometry), so the same loop runs on a dataset folder, a saved map being resumed or extended
+//! by a second run, or a robot.
 //!
 //! Per scan:
-//! 1. **Predict** the pose: the last node's pose times the odometry's relative motion when there
-//!    is odometry, else times the last motion (constant velocity); roll and pitch from the gyro
-//!    reading when there is one; heading from the odometry, else the compass, else the last
-//!    motion — and the search window widens with the weaker prior.
-//! 2. **Pick reference nodes** among the recent ones (the local map) by position and overlap:
-//!    how many of the new scan's cells each node's points land on.
-//! 3. **Localize** with the exact search against their merged virtual S-DEM (seen from the
-//!    origin of the node that overlaps most), then the 6-DoF refinement; the match's covariance
-//!    weighs the new pose-graph edges.
-//! 4. **Loop closure**: older nodes near the new one whose place descriptor is similar are
-//!    verified with the exact search; an accepted closure becomes an edge and the pose graph is
-//!    optimized (robust Cauchy kernel), and the fused map is rebuilt on the new poses.
-
+//! 1. **Predict** where the scan was taken, several ways (`predictions`): the odometry's
+//!    motion when there is odometry, the last motion repeated (constant velocity), no motion,
+//!    the nodes the last one is linked to; roll and pitch from the gyro reading when there is
+//!    one, the heading from the odometry, else the compass, else the motion — and each search
+//!    window as wide as its source is weak.
+//! 2. **Localize** (`recovery`): each prediction in turn against the recent nodes of the
+//!    current segment that see what the scan sees there (merged into one virtual S-DEM), with
+//!    the exact search and the 6-DoF refinement; the first match without doubt is taken. When
+//!    none is, the window grows around the best; then every heading (and the tilt, without a
+//!    gyro) is searched near the last node; then the whole map, without a prior, by place
+//!    descriptors over every heading ([`relocalize`] does the same for a saved map). The
+//!    match's covariance weighs its pose-graph edges.
+//! 3. **Or start a segment** (`segments`): a stop found nowhere with confidence is not put
+//!    into the map as if it were: it starts a new map segment in a frame of its own, and a
+//!    later confident match joins the segments.
+//! 4. **Close loops** (`closures`): older nodes that see what the new one sees are verified
+//!    with the exact search over every heading, checked for consistency with the other
+//!    closures, and the segment's pose graph is optimized (robust Cauchy kernel); the fused map
+//!    is rebuilt on the new poses.
 //!
-//! The module's files: this one holds the configuration and the loop, `relocalize` finding a scan
-//! in a saved map, `trajectory` the errors of an estimated trajectory against a reference one.
+//! Each step reports its status ([`StepStatus`]: tracked, recovered and how, relocalized, a
+//! new segment, doubtful), every search it tried ([`Attempt`]) and its doubts.
+//!
+//! The module's files: this one holds the loop, `predictions`, `recovery`, `segments` and
+//! `closures` its stages, `options` the configuration, `step` what a step reports,
+//! `relocalize` finding a scan in a saved map, `trajectory` the errors of an estimated
+//! trajectory against a reference one.
 
+mod closures;
 mod options;
+mod predictions;
+mod recovery;
 mod relocalize;
+mod segments;
 mod step;
 mod trajectory;
 
-pub use options::SlamOptions;
+pub use options::{is_spinning_lidar, RecoveryOptions, SlamOptions};
 pub use relocalize::{relocalize, Near, Relocalization};
-pub use step::{HeadingPrior, OptimizationSummary, Step, StepReport, StepStatus};
+pub use segments::Segment;
+pub use step::{
+    Attempt, HeadingPrior, OptimizationSummary, PredictionSource, Recovery, SegmentJoin, Step,
+    StepReport, StepStatus,
+};
 pub use trajectory::{trajectory_errors, TrajectoryErrors};
 
-use crate::doubt::Doubt;
 use crate::error::{Error, Result};
-use crate::geometry::{attitude_of, pose_from_parts, Attitude, Pose, Vec3};
-use crate::localize::{
-    localize, CostConfig, Diagnostics, LocalizeOptions, OffsetPrior, RefinementSummary,
-    SearchWindow,
-};
-use crate::map::{verify_loop_closure, world_from_query, Descriptor, LoopClosure, Map, Node};
-use crate::posegraph::{optimize, Edge, EdgeKind, PoseGraph};
-use crate::sdem::Sdem;
-use crate::search::HeadingWindow;
+use crate::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+use crate::map::{LoopClosure, Map, Node};
+use crate::posegraph::{Edge, EdgeKind};
 use crate::voxel::VoxelMap;
 use nalgebra::{Matrix3, Matrix6};
-use relocalize::take_prediction_along;
+use recovery::{Located, Matched};
 use std::time::Instant;
 
 /// One scan as the loop receives it.
@@ -92,8 +106,23 @@ pub struct Slam {
     pub edges: Vec<Edge>,
     /// Accepted loop closures.
     pub loop_closures: Vec<LoopClosure>,
-    /// The fused occupancy map on the current poses.
+    /// The fused occupancy map of the world's segment on the current poses.
     pub voxels: VoxelMap,
+    /// Every loop closure the match verified, accepted or not, for the consistency check.
+    closure_pool: Vec<LoopClosure>,
+    /// Segments started with no prior at all (a run begun in a saved map and found nowhere):
+    /// their frames are not even roughly the world's.
+    unplaced_segments: Vec<usize>,
+    /// Segments whose first node was placed by the odometry's motion from the last one: their
+    /// frames are the world's to within the odometry's error.
+    measured_segments: Vec<usize>,
+    /// The run the next scans belong to.
+    run: usize,
+    /// The robot's last stop, when its place in the map is known to the loop (`None` at the
+    /// start of a run into a saved map).
+    last_node: Option<usize>,
+    /// The scan index of the last scan of this run.
+    last_scan_index: Option<usize>,
     /// The odometry's reading at the last scan given to [`Slam::add`].
     last_odom_from_sensor: Option<Pose>,
     /// The index [`Slam::add`] gives the next scan.
@@ -114,12 +143,19 @@ impl Slam {
             edges: Vec::new(),
             loop_closures: Vec::new(),
             voxels,
+            closure_pool: Vec::new(),
+            unplaced_segments: Vec::new(),
+            measured_segments: Vec::new(),
+            run: 0,
+            last_node: None,
+            last_scan_index: None,
             last_odom_from_sensor: None,
             next_scan_index: 0,
         })
     }
 
-    /// Restores a loop from saved nodes and edges (a resumed run); the voxel map is rebuilt.
+    /// Restores a loop from saved nodes and edges (a resumed run): the robot stands at the last
+    /// node; the voxel map is rebuilt.
     ///
     /// # Errors
     /// An invalid configuration, or edges naming nodes that are not there.
@@ -136,11 +172,31 @@ impl Slam {
                 e.from, e.to
             )));
         }
+        if let Some(node) = (map.nodes.iter()).find(|node| node.segment > node.node_id) {
+            return Err(Error::Invalid(format!(
+                "node {} is saved in segment {}, which starts after it",
+                node.node_id, node.segment
+            )));
+        }
         let mut slam = Self::new(config)?;
         slam.map = map;
         slam.edges = edges;
+        slam.closure_pool = loop_closures.clone();
+        // Whether a saved segment's frame is near the world's is not saved: none is taken to be.
+        let world = slam.map.nodes.first().map_or(0, |n| n.segment);
+        slam.unplaced_segments = (slam.map.nodes.iter())
+            .map(|n| n.segment)
+            .filter(|&s| s != world)
+            .collect();
+        slam.unplaced_segments.sort_unstable();
+        slam.unplaced_segments.dedup();
         slam.loop_closures = loop_closures;
-        slam.next_scan_index = slam.map.nodes.last().map_or(0, |node| node.scan_index + 1);
+        if let Some(last) = slam.map.nodes.last() {
+            slam.run = last.run;
+            slam.last_node = Some(last.node_id);
+            slam.last_scan_index = Some(last.scan_index);
+            slam.next_scan_index = last.scan_index + 1;
+        }
         slam.rebuild_voxels();
         Ok(slam)
     }
@@ -148,6 +204,24 @@ impl Slam {
     /// The configuration.
     pub fn config(&self) -> &SlamOptions {
         &self.config
+    }
+
+    /// Starts a new run into the map (a robot returning the next day, a second robot of the
+    /// team): its first scan is taken with no known pose, relocalized in the whole map or, when
+    /// it is found nowhere, the start of a new segment; its scan indices count from 0 again.
+    pub fn begin_run(&mut self) {
+        if !self.map.nodes.is_empty() {
+            self.run = self.map.nodes.iter().map(|n| n.run).max().unwrap_or(0) + 1;
+        }
+        self.last_node = None;
+        self.last_scan_index = None;
+        self.last_odom_from_sensor = None;
+        self.next_scan_index = 0;
+    }
+
+    /// The run the next scans belong to.
+    pub fn run(&self) -> usize {
+        self.run
     }
 
     /// Adds the next stop's scan: predicts its pose, localizes it against the map, adds it as
@@ -165,8 +239,7 @@ impl Slam {
     /// The [`Step`]: the sensor's pose in the world, the match's status and its report.
     ///
     /// # Errors
-    /// Invalid input (see [`crate::Scan::from_points`]), or a scan that matches nothing in the
-    /// map ([`Error::is_no_match`]): the map is then unchanged.
+    /// Invalid input (see [`crate::Scan::from_points`]): the map is then unchanged.
     ///
     /// # Example
     /// ```
@@ -198,7 +271,7 @@ impl Slam {
     pub fn add(
         &mut self,
         points_in_sensor: &[nalgebra::Point3<f64>],
-        attitude: Option<Attitude>,
+        attitude: Option<crate::geometry::Attitude>,
         odom_from_sensor: Option<Pose>,
     ) -> Result<Step> {
         let points = crate::scan::checked_input(points_in_sensor, attitude.as_ref())?;
@@ -217,43 +290,38 @@ impl Slam {
             odometry,
         })?;
         self.last_odom_from_sensor = odom_from_sensor;
-        let status = if report.reference_nodes.is_empty() {
-            StepStatus::First
-        } else if report.trusted {
-            StepStatus::Tracked
-        } else {
-            StepStatus::Doubtful
-        };
         Ok(Step {
             world_from_sensor: self.map.nodes[report.node_id].world_from_sensor,
-            status,
+            status: report.status,
             report,
         })
     }
 
-    /// The pose in the world, `world_from_sensor`, of every node's sensor, in the order the
-    /// scans were added, as the last loop closure left them.
+    /// The pose `world_from_sensor` of every node's sensor, in the order the scans were added,
+    /// as the last loop closure left them. The poses of a segment other than the world's are
+    /// in that segment's own frame ([`Slam::segments`]).
     pub fn poses(&self) -> Vec<Pose> {
         self.map.nodes.iter().map(|n| n.world_from_sensor).collect()
     }
 
-    /// Rebuilds the fused voxel map from every node on the current poses.
+    /// Rebuilds the fused voxel map from every node of the world's segment on the current poses.
     pub fn rebuild_voxels(&mut self) {
         let mut voxels = VoxelMap::new(self.config.voxel)
             .expect("the voxel configuration was validated in Slam::new");
-        for node in &self.map.nodes {
+        let world = self.world_segment();
+        for node in self.map.nodes.iter().filter(|n| n.segment == world) {
             voxels.insert_scan(&node.world_from_sensor, &node.sensor_points());
         }
         self.voxels = voxels;
     }
 
-    /// The merged point cloud: every node's points in the world, kept where the fused map is
-    /// occupied now (moved rubble, seen through later, drops out), one per voxel.
+    /// The merged point cloud: every node's points of the world's segment in the world, kept
+    /// where the fused map is occupied now (moved rubble, seen through later, drops out), one
+    /// per voxel.
     pub fn merged_cloud(&self) -> Vec<Vec3> {
-        let all: Vec<Vec3> = self
-            .map
-            .nodes
-            .iter()
+        let world = self.world_segment();
+        let all: Vec<Vec3> = (self.map.nodes.iter())
+            .filter(|n| n.segment == world)
             .flat_map(|n| n.points_in_world())
             .collect();
         self.voxels.filter_occupied(&all)
@@ -262,101 +330,127 @@ impl Slam {
     /// Runs one step of the loop on `scan`.
     ///
     /// # Errors
-    /// An empty scan; a scan index that does not follow the last one; no reference node that
-    /// sees the scan; a localization that fails (nothing matches within the window) — the map is
-    /// unchanged by these. An invalid loop-closure or optimizer setting fails after the node was
-    /// added (the node stays, localized).
+    /// An empty scan, or a scan index that does not follow the last one of the run — the map
+    /// is unchanged by these. An invalid loop-closure or optimizer setting fails after the
+    /// node was added (the node stays, localized). A scan that matches nothing is no error: it
+    /// starts a new segment ([`StepStatus::NewSegment`]).
     pub fn add_scan(&mut self, scan: &ScanInput) -> Result<StepReport> {
         let start = Instant::now();
-        let node_id = self.map.nodes.len();
-        let Some(last) = self.map.nodes.last() else {
+        if self.map.nodes.is_empty() {
             return self.add_first_scan(scan, start);
+        }
+        self.check_order(scan)?;
+        let node_id = self.map.nodes.len();
+        let mut attempts = Vec::new();
+        let located = self.locate(scan, self.last_node, &mut attempts)?;
+        let (status, matched, segment, world_from_sensor) = match located {
+            Located::Found {
+                matched,
+                status,
+                segment,
+            } => {
+                let status = if matched.doubts.is_empty() {
+                    status
+                } else {
+                    StepStatus::Doubtful
+                };
+                let pose = matched.world_from_sensor;
+                (status, Some(matched), segment, pose)
+            }
+            Located::Lost {
+                guess,
+                best,
+                measured,
+            } => {
+                if self.last_node.is_none() {
+                    self.unplaced_segments.push(node_id);
+                } else if measured {
+                    self.measured_segments.push(node_id);
+                }
+                (StepStatus::NewSegment, best, node_id, guess)
+            }
         };
-        if scan.scan_index <= last.scan_index {
-            return Err(Error::Invalid(format!(
-                "scan {} comes after scan {} in the map; scans must be added in order",
-                scan.scan_index, last.scan_index
-            )));
-        }
-
-        // 1. Predict.
-        let prediction = self.predict(scan, last.world_from_sensor, node_id);
-
-        // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
-        let query = Sdem::from_points(
-            scan.points_in_sensor,
-            &prediction.attitude,
-            &self.config.sdem,
-        )?;
-        if query.known_cells() == 0 {
-            return Err(Error::Invalid(format!(
-                "scan {} has no usable point (all closer than {} m or not finite)",
-                scan.scan_index, self.config.sdem.min_range_m
-            )));
-        }
-        let references = self.reference_nodes(&query, &prediction.position, node_id);
-        let reference_ids: Vec<usize> = references.iter().map(|r| r.0).collect();
-
-        // 3. Localize, and add the node with one edge per reference node.
-        let matched = self.match_scan(scan, &query, &prediction, &reference_ids)?;
-        self.add_node(scan, node_id, &matched, &reference_ids)?;
-
-        // 4. Loop closure.
-        let (closures, optimization) = self.close_loops_and_optimize(node_id)?;
-
+        let links = match (&matched, status) {
+            (Some(m), s) if s != StepStatus::NewSegment => m.references.clone(),
+            _ => Vec::new(),
+        };
+        self.add_node(scan, node_id, world_from_sensor, segment, matched.as_ref(), &links)?;
+        let closing_start = Instant::now();
+        let mut closing = self.close_loops(node_id)?;
+        attempts.append(&mut closing.attempts);
+        let optimization = match closing.changed {
+            Some(segment) => Some(self.optimize_segment(segment)?),
+            None => None,
+        };
+        let loop_closure_ms = ms(closing_start);
         let pose = self.map.nodes[node_id].world_from_sensor;
-        let Matched {
-            cost,
-            refinement,
-            diagnostics,
-            doubts,
-            localize_ms,
-            ..
-        } = matched;
+        let doubts = matched.as_ref().map(|m| m.doubts.clone()).unwrap_or_default();
         Ok(StepReport {
             scan_index: scan.scan_index,
+            run: self.run,
             node_id,
+            status,
+            recovery: (status == StepStatus::Recovered)
+                .then(|| matched.as_ref().map(|m| m.source))
+                .flatten(),
+            segment: self.map.nodes[node_id].segment,
+            attempts,
+            joined: closing.joined,
+            withdrawn_closures: closing.withdrawn,
             time_ms: ms(start),
-            localize_ms,
+            localize_ms: matched.as_ref().map_or(0.0, |m| m.localize_ms),
+            loop_closure_ms,
             world_from_sensor: (&pose).into(),
-            predicted_world_from_sensor: (&prediction.predicted).into(),
-            heading_prior: prediction.heading_prior,
-            reference_nodes: references,
-            cost: Some(cost),
-            overlap_fraction: Some(diagnostics.overlap_fraction),
-            inlier_fraction: Some(diagnostics.inlier_fraction),
-            covariance: diagnostics.covariance,
-            trusted: doubts.is_empty(),
+            predicted_world_from_sensor: (&matched.as_ref().map_or(pose, |m| m.predicted)).into(),
+            heading_prior: matched
+                .as_ref()
+                .map_or(HeadingPrior::LastNode, |m| m.heading_prior),
+            reference_nodes: links,
+            cost: matched.as_ref().map(|m| m.cost),
+            overlap_fraction: matched.as_ref().map(|m| m.diagnostics.overlap_fraction),
+            inlier_fraction: matched.as_ref().map(|m| m.diagnostics.inlier_fraction),
+            covariance: matched.as_ref().and_then(|m| m.diagnostics.covariance),
+            trusted: matches!(
+                status,
+                StepStatus::Tracked | StepStatus::Recovered | StepStatus::Relocalized
+            ),
             doubts,
-            refinement: Some(refinement),
-            loop_closures: closures,
+            refinement: matched.as_ref().map(|m| m.refinement),
+            loop_closures: closing.checked,
             optimization,
         })
+    }
+
+    /// Refuses a scan whose index does not follow the last one of the run.
+    fn check_order(&self, scan: &ScanInput) -> Result<()> {
+        match self.last_scan_index {
+            Some(last) if scan.scan_index <= last => Err(Error::Invalid(format!(
+                "scan {} comes after scan {last} of this run in the map; scans must be added in                  order",
+                scan.scan_index
+            ))),
+            _ => Ok(()),
+        }
     }
 
     /// The first scan defines the world: origin at its sensor, axes level, heading from its
     /// compass (DESIGN.md, "Units and frames"). It becomes node 0 as it is.
     fn add_first_scan(&mut self, scan: &ScanInput, start: Instant) -> Result<StepReport> {
-        let node_id = self.map.nodes.len();
         let attitude = scan.attitude.unwrap_or_default();
-        let world_from_sensor = pose_from_parts(Vec3::zeros(), attitude);
-        let node = Node::from_scan(
-            node_id,
-            scan.scan_index,
-            world_from_sensor,
-            scan.attitude,
-            scan.points_in_sensor,
-            &self.config.sdem,
-        )?;
-        self.voxels
-            .insert_scan(&node.world_from_sensor, &node.sensor_points());
-        self.map.nodes.push(node);
-        let pose = world_from_sensor;
+        let pose = pose_from_parts(Vec3::zeros(), attitude);
+        self.add_node(scan, 0, pose, 0, None, &[])?;
         Ok(StepReport {
             scan_index: scan.scan_index,
-            node_id,
+            run: self.run,
+            node_id: 0,
+            status: StepStatus::First,
+            recovery: None,
+            segment: 0,
+            attempts: Vec::new(),
+            joined: Vec::new(),
+            withdrawn_closures: Vec::new(),
             time_ms: ms(start),
             localize_ms: 0.0,
+            loop_closure_ms: 0.0,
             world_from_sensor: (&pose).into(),
             predicted_world_from_sensor: (&pose).into(),
             heading_prior: HeadingPrior::First,
@@ -373,185 +467,20 @@ impl Slam {
         })
     }
 
-    /// Step 1: the scan's predicted pose from the last node's, `last_pose`, and the search's
-    /// window and prior around it, wider with a weaker prior.
-    fn predict(&self, scan: &ScanInput, last_pose: Pose, node_id: usize) -> Prediction {
-        let last_attitude = attitude_of(&last_pose);
-        // Without odometry the robot is assumed to repeat its last motion (a constant-velocity
-        // model, as KISS-ICP does), or to stand still after the first scan.
-        let before_last = node_id
-            .checked_sub(2)
-            .map(|i| self.map.nodes[i].world_from_sensor);
-        let (motion, motion_prior) = match (&scan.odometry, before_last) {
-            (Some(odometry), _) => (
-                Some(odometry.previous_sensor_from_sensor()),
-                HeadingPrior::Odometry,
-            ),
-            (None, Some(before)) => (
-                Some(before.inverse() * last_pose),
-                HeadingPrior::ConstantVelocity,
-            ),
-            (None, None) => (None, HeadingPrior::LastNode),
-        };
-        let predicted_motion = motion.map(|m| last_pose * m);
-        let position =
-            predicted_motion.map_or(last_pose.translation.vector, |p| p.translation.vector);
-        let (yaw, heading_prior, heading_half) = match (scan.odometry.is_some(), scan.attitude) {
-            (true, _) => (
-                predicted_motion.map_or(last_attitude.yaw, |p| attitude_of(&p).yaw),
-                HeadingPrior::Odometry,
-                self.config.heading_half_deg,
-            ),
-            (false, Some(a)) => (
-                a.yaw,
-                HeadingPrior::Compass,
-                self.config.heading_half_compass_deg,
-            ),
-            (false, None) => (
-                predicted_motion.map_or(last_attitude.yaw, |p| attitude_of(&p).yaw),
-                motion_prior,
-                self.config.heading_half_no_prior_deg,
-            ),
-        };
-        let (roll, pitch) = match scan.attitude {
-            Some(a) => (a.roll, a.pitch),
-            None => (last_attitude.roll, last_attitude.pitch),
-        };
-        let attitude = Attitude::new(roll, pitch, yaw);
-        let predicted = pose_from_parts(position, attitude);
-        let (window_half, prior_sigma_m) = if scan.odometry.is_some() {
-            (self.config.window_half_m, self.config.prior_sigma_m)
-        } else {
-            (
-                self.config.window_half_no_odometry_m,
-                self.config.prior_sigma_no_odometry_m,
-            )
-        };
-        Prediction {
-            has_motion: motion.is_some(),
-            position,
-            attitude,
-            predicted,
-            heading_prior,
-            heading_half,
-            window_half,
-            prior_sigma_m,
-        }
-    }
-
-    /// Step 2: the recent nodes near `position` that overlap `query` enough, most overlap first,
-    /// with the cells they overlap; the last node when none does (the search then says why).
-    fn reference_nodes(
-        &self,
-        query: &Sdem,
-        position: &Vec3,
-        node_id: usize,
-    ) -> Vec<(usize, usize)> {
-        let recent_from = node_id.saturating_sub(self.config.loop_closure.min_node_separation);
-        let mut references: Vec<(usize, usize)> = self
-            .map
-            .overlaps(query, position, self.config.reference_radius_m, 0.2)
-            .into_iter()
-            .filter(|&(id, cells)| {
-                id >= recent_from && cells >= self.config.min_reference_overlap_cells
-            })
-            .take(self.config.max_reference_nodes)
-            .collect();
-        if references.is_empty() {
-            // The last node always takes part: with no overlap the search says why.
-            references.push((node_id - 1, 0));
-        }
-        references
-    }
-
-    /// Step 3: localizes `query` against the merged virtual S-DEM of `reference_ids`, seen from
-    /// the origin of the node that overlaps most: its own points keep their full density there,
-    /// and the other nodes fill in what it did not see. (Seen from the predicted origin instead,
-    /// a node's points spread apart and leave holes: on the 3DTK scans, 1.6 m apart, a quarter
-    /// of the query's cells found a reference cell instead of all of them.)
-    fn match_scan(
-        &self,
-        scan: &ScanInput,
-        query: &Sdem,
-        prediction: &Prediction,
-        reference_ids: &[usize],
-    ) -> Result<Matched> {
-        let position = prediction.position;
-        let origin = self.map.nodes[reference_ids[0]].position();
-        let reference = self
-            .map
-            .merged_reference(reference_ids, &origin, &self.config.sdem)?;
-        let localize_config = LocalizeOptions {
-            window: SearchWindow::around(&(position - origin), prediction.window_half),
-            heading: HeadingWindow {
-                half_range_deg: prediction.heading_half,
-                step_deg: None,
-            },
-            cost: CostConfig {
-                prior: Some(OffsetPrior {
-                    offset: (position - origin).into(),
-                    sigma_m: prediction.prior_sigma_m,
-                }),
-                ..self.config.localize.cost.clone()
-            },
-            ..self.config.localize.clone()
-        };
-        let localize_start = Instant::now();
-        let found = localize(&reference, query, &localize_config).map_err(|e| {
-            if e.is_no_match() {
-                Error::AtScan {
-                    scan_index: scan.scan_index,
-                    nodes: reference_ids.to_vec(),
-                    source: Box::new(e),
-                }
-            } else {
-                e
-            }
-        })?;
-        let localize_ms = ms(localize_start);
-        let mut world_from_sensor = world_from_query(&origin, &found);
-        let refinement = RefinementSummary::new(found.refined, found.refinement.as_ref());
-        let mut diagnostics = found.diagnostics;
-        let mut doubts = found.doubts;
-        // Along a direction the scans leave free (a ditch's or a corridor's axis), the match's
-        // position is the scans' sampling pattern, not the scene: it pulls towards the
-        // reference's own origin (a forward-looking scan in a straight corridor came out 20 %
-        // short at every step). There the prediction decides, and the edge carries the
-        // prediction's uncertainty.
-        if prediction.has_motion {
-            take_prediction_along(
-                &mut world_from_sensor,
-                &mut diagnostics,
-                &mut doubts,
-                &position,
-                prediction.prior_sigma_m,
-            );
-        }
-        Ok(Matched {
-            world_from_sensor,
-            cost: found.cost,
-            refinement,
-            diagnostics,
-            doubts,
-            localize_ms,
-        })
-    }
-
-    /// Adds the matched scan as node `node_id`, with one edge from each reference node (together
-    /// they carry the match's information once), and fuses its points into the voxel map.
+    /// Adds the scan as node `node_id` of `segment` at `world_from_sensor`, with one edge from
+    /// each of `links` (together they carry the match's information once), fuses its points
+    /// into the voxel map when it is in the world's segment, and makes it the robot's last
+    /// stop.
     fn add_node(
         &mut self,
         scan: &ScanInput,
         node_id: usize,
-        matched: &Matched,
-        reference_ids: &[usize],
+        world_from_sensor: Pose,
+        segment: usize,
+        matched: Option<&Matched>,
+        links: &[(usize, usize)],
     ) -> Result<()> {
-        let world_from_sensor = matched.world_from_sensor;
-        let covariance = matched
-            .diagnostics
-            .covariance
-            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
-        let node = Node::from_scan(
+        let mut node = Node::from_scan(
             node_id,
             scan.scan_index,
             world_from_sensor,
@@ -559,9 +488,13 @@ impl Slam {
             scan.points_in_sensor,
             &self.config.sdem,
         )?;
-        // One edge per reference node; together they carry the match's information once.
-        let share = 1.0 / reference_ids.len() as f64;
-        for &r in reference_ids {
+        node.segment = segment;
+        node.run = self.run;
+        let covariance = matched
+            .and_then(|m| m.diagnostics.covariance)
+            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+        let share = 1.0 / links.len().max(1) as f64;
+        for &(r, _) in links {
             let world_from_r = self.map.nodes[r].world_from_sensor;
             self.edges.push(Edge {
                 from: r,
@@ -571,68 +504,14 @@ impl Slam {
                 kind: EdgeKind::Odometry,
             });
         }
-        self.voxels
-            .insert_scan(&node.world_from_sensor, &node.sensor_points());
+        if segment == self.world_segment() || self.map.nodes.is_empty() {
+            self.voxels
+                .insert_scan(&node.world_from_sensor, &node.sensor_points());
+        }
         self.map.nodes.push(node);
+        self.last_node = Some(node_id);
+        self.last_scan_index = Some(scan.scan_index);
         Ok(())
-    }
-
-    /// Step 4, when loop closure is enabled: closes loops to node `node_id` and, when one was
-    /// accepted, optimizes the pose graph.
-    fn close_loops_and_optimize(
-        &mut self,
-        node_id: usize,
-    ) -> Result<(Vec<LoopClosure>, Option<OptimizationSummary>)> {
-        let mut closures = Vec::new();
-        let mut optimization = None;
-        if self.config.loop_closure.enabled {
-            closures = self.close_loops(node_id)?;
-            if closures.iter().any(|c| c.accepted) {
-                optimization = Some(self.optimize_graph()?);
-            }
-        }
-        Ok((closures, optimization))
-    }
-
-    /// Proposes revisits of older places for node `to` and verifies them; accepted ones become
-    /// pose-graph edges.
-    fn close_loops(&mut self, to: usize) -> Result<Vec<LoopClosure>> {
-        let config = &self.config.loop_closure;
-        let to_node = &self.map.nodes[to];
-        let to_descriptor = Descriptor::from_levelled(&to_node.points_levelled());
-        let mut candidates: Vec<(usize, f64)> = self
-            .map
-            .nodes
-            .iter()
-            .filter(|n| n.node_id + config.min_node_separation <= to)
-            .filter(|n| (n.position() - to_node.position()).norm() <= config.search_radius_m)
-            .filter_map(|n| {
-                let d =
-                    Descriptor::from_levelled(&n.points_levelled()).distance(&to_descriptor, 1)?;
-                (d <= config.max_descriptor_distance).then_some((n.node_id, d))
-            })
-            .collect();
-        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
-        candidates.truncate(config.max_candidates);
-        let mut checked = Vec::new();
-        for (from, distance) in candidates {
-            let prior = self.map.nodes[to].world_from_sensor;
-            let mut closure = verify_loop_closure(
-                &self.map,
-                from,
-                to,
-                &prior,
-                &self.config.sdem,
-                &self.config.localize,
-                &self.config.loop_closure,
-            )?;
-            closure.descriptor_distance = Some(distance);
-            if closure.accepted {
-                self.add_loop_closure_edge(&closure);
-            }
-            checked.push(closure);
-        }
-        Ok(checked)
     }
 
     /// Adds an accepted loop closure as a pose-graph edge.
@@ -651,30 +530,30 @@ impl Slam {
         self.loop_closures.push(closure.clone());
     }
 
-    /// Optimizes the pose graph (node 0 held), moves the nodes and rebuilds the fused map.
+    /// Optimizes the pose graph of every segment (each with its first node held), moves the
+    /// nodes and rebuilds the fused map. Returns the summary of all: iterations and costs
+    /// added up, the largest move.
     ///
     /// # Errors
     /// The optimizer's errors (invalid edges).
     pub fn optimize_graph(&mut self) -> Result<OptimizationSummary> {
         let start = Instant::now();
-        let graph = PoseGraph {
-            world_from_node: self.poses(),
-            edges: self.edges.clone(),
+        let mut total = OptimizationSummary {
+            iterations: 0,
+            initial_cost: 0.0,
+            final_cost: 0.0,
+            time_ms: 0.0,
+            max_node_shift_m: 0.0,
         };
-        let (poses, report) = optimize(&graph, 0, &self.config.optimize)?;
-        let mut max_shift: f64 = 0.0;
-        for (node, pose) in self.map.nodes.iter_mut().zip(poses) {
-            max_shift = max_shift.max((node.position() - pose.translation.vector).norm());
-            node.world_from_sensor = pose;
+        for segment in self.segments() {
+            let s = self.optimize_segment(segment.id)?;
+            total.iterations += s.iterations;
+            total.initial_cost += s.initial_cost;
+            total.final_cost += s.final_cost;
+            total.max_node_shift_m = total.max_node_shift_m.max(s.max_node_shift_m);
         }
-        self.rebuild_voxels();
-        Ok(OptimizationSummary {
-            iterations: report.iterations,
-            initial_cost: report.initial_cost,
-            final_cost: report.final_cost,
-            time_ms: ms(start),
-            max_node_shift_m: max_shift,
-        })
+        total.time_ms = ms(start);
+        Ok(total)
     }
 
     /// The information matrix of an edge ending at `world_from_to`, in the pose graph's residual
@@ -721,38 +600,6 @@ impl Slam {
         let information = 0.5 * (information + information.transpose());
         std::array::from_fn(|i| std::array::from_fn(|j| information[(i, j)]))
     }
-}
-
-/// Where a scan is expected before it is matched (step 1 of [`Slam::add_scan`]), and the
-/// search's window and prior around it.
-struct Prediction {
-    /// Whether the prediction moved the last pose (odometry or the last motion): then the
-    /// prediction decides along a direction the match leaves free.
-    has_motion: bool,
-    /// The predicted position, world frame.
-    position: Vec3,
-    /// The predicted attitude, and the pose of both.
-    attitude: Attitude,
-    predicted: Pose,
-    /// Where the heading came from, and the heading window's half-width, degrees.
-    heading_prior: HeadingPrior,
-    heading_half: f64,
-    /// The translation window's half-size and the prior's σ, metres.
-    window_half: [f64; 3],
-    prior_sigma_m: f64,
-}
-
-/// A scan's match against its reference nodes (step 3 of [`Slam::add_scan`]).
-struct Matched {
-    /// The sensor's pose in the world (the prediction's position along a free direction).
-    world_from_sensor: Pose,
-    /// The match's cost, refinement, diagnostics and doubts, for the report.
-    cost: f64,
-    refinement: RefinementSummary,
-    diagnostics: Diagnostics,
-    doubts: Vec<Doubt>,
-    /// Wall time of the localization, ms.
-    localize_ms: f64,
 }
 
 fn ms(start: Instant) -> f64 {

@@ -39,11 +39,20 @@ pub struct SlamOptions {
     pub max_reference_nodes: usize,
     /// A node is a reference only when at least this many of the new scan's cells see it.
     pub min_reference_overlap_cells: usize,
+    /// A match from a prediction against the recent nodes is taken at once only when at least
+    /// this fraction of the scan's points match: that search looks for no runner-up, and a
+    /// wrong optimum inside a small window (the robot drove beyond it) matched 34 % on a
+    /// simulated 1 m step where right ones match 50–90 %. Below, the scan is searched again,
+    /// wider and against more nodes, with the runner-up search.
+    pub min_tracking_inlier_fraction: f64,
     /// Floor on the standard deviation of an edge's translation, metres: the matcher's
     /// covariance assumes independent residuals and is optimistic.
     pub edge_sigma_floor_m: f64,
     /// Floor on the standard deviation of an edge's rotation, degrees.
     pub edge_sigma_floor_deg: f64,
+    /// What the loop does when its predictions fail: wider windows, every heading, the whole
+    /// map.
+    pub recovery: RecoveryOptions,
     /// Loop closure.
     pub loop_closure: LoopClosureConfig,
     /// The pose-graph optimizer.
@@ -73,8 +82,10 @@ impl Default for SlamOptions {
             reference_radius_m: 4.0,
             max_reference_nodes: 3,
             min_reference_overlap_cells: 300,
+            min_tracking_inlier_fraction: 0.5,
             edge_sigma_floor_m: 0.005,
             edge_sigma_floor_deg: 0.1,
+            recovery: RecoveryOptions::default(),
             loop_closure: LoopClosureConfig::default(),
             optimize: OptimizeConfig::default(),
             voxel: VoxelConfig::default(),
@@ -82,12 +93,219 @@ impl Default for SlamOptions {
     }
 }
 
+/// What the loop does when no prediction leads to a trusted match ([`crate::slam`]'s
+/// recovery): the window grows, then every heading is searched near the last node, then the
+/// whole map; a scan found nowhere starts a new map segment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RecoveryOptions {
+    /// When no prediction leads to a trusted match, the best one is searched again in a window
+    /// this large, metres (a robot that drove 2 m between stops, or 30 cm up or down)…
+    pub max_window_half_m: [f64; 3],
+    /// … and this many degrees of heading either way; without a compass, every heading is
+    /// searched next.
+    pub max_heading_half_deg: f64,
+    /// The search over every heading (and over tilt when the scan has no attitude reading)
+    /// merges up to this many nodes of the current segment, nearest the last one, and searches
+    /// `max_window_half_m` around the prediction.
+    pub every_heading_nodes: usize,
+    /// Without a prior (a robot lost, kidnapped or starting a run in a saved map), at most
+    /// this many nodes are tried, those whose place descriptors look most like the scan's
+    /// first, each searched over every heading.
+    pub relocalize_candidates: usize,
+    /// … within this half-size around each node, metres.
+    pub relocalize_window_half_m: [f64; 3],
+    /// … and a node's place is the node and up to this many nodes of its segment within
+    /// `relocalize_radius_m`, merged.
+    pub relocalize_place_nodes: usize,
+    /// See `relocalize_place_nodes`, metres.
+    pub relocalize_radius_m: f64,
+    /// The nodes of the segment whose origins lie within this of a prediction are candidates
+    /// when the recent ones do not see what the scan sees, metres (the scanner's reach).
+    pub other_nodes_radius_m: f64,
+    /// A match that shares little with the map (a robot turned round sees new ground) is
+    /// taken when the part it shares is confident: at least this share of the cells both
+    /// scans saw match within the truncation…
+    pub min_shared_inlier_fraction: f64,
+    /// … and at least this many cells match (twice as many without a prior), with no other
+    /// doubt (the runner-up searched).
+    pub min_shared_inliers: usize,
+}
+
+impl Default for RecoveryOptions {
+    fn default() -> Self {
+        Self {
+            max_window_half_m: [2.2, 2.2, 0.3],
+            max_heading_half_deg: 60.0,
+            every_heading_nodes: 3,
+            relocalize_candidates: 6,
+            relocalize_window_half_m: [1.0, 1.0, 0.3],
+            relocalize_place_nodes: 3,
+            relocalize_radius_m: 1.5,
+            other_nodes_radius_m: 6.0,
+            min_shared_inlier_fraction: 0.75,
+            min_shared_inliers: 150,
+        }
+    }
+}
+
+impl RecoveryOptions {
+    /// Checks every value.
+    pub fn validate(&self) -> Result<()> {
+        let halves = self
+            .max_window_half_m
+            .iter()
+            .chain(&self.relocalize_window_half_m);
+        if let Some(h) = halves.copied().find(|h| !(h.is_finite() && *h >= 0.0)) {
+            return Err(Error::Invalid(format!(
+                "recovery: window half-size {h} m must be a finite number >= 0"
+            )));
+        }
+        if !(self.max_heading_half_deg.is_finite()
+            && (0.0..=180.0).contains(&self.max_heading_half_deg))
+        {
+            return Err(Error::Invalid(format!(
+                "recovery.max_heading_half_deg = {} must lie in 0..=180 degrees",
+                self.max_heading_half_deg
+            )));
+        }
+        if self.every_heading_nodes == 0 || self.relocalize_place_nodes == 0 {
+            return Err(Error::Invalid(
+                "recovery.every_heading_nodes and relocalize_place_nodes must be at least 1"
+                    .into(),
+            ));
+        }
+        for (name, v) in [
+            ("relocalize_radius_m", self.relocalize_radius_m),
+            ("other_nodes_radius_m", self.other_nodes_radius_m),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(Error::Invalid(format!(
+                    "recovery.{name} = {v} must be a distance >= 0"
+                )));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.min_shared_inlier_fraction) {
+            return Err(Error::Invalid(format!(
+                "recovery.min_shared_inlier_fraction = {} must lie in 0..=1",
+                self.min_shared_inlier_fraction
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The fused map of a spinning LiDAR takes rays up to this far, metres.
+const LIDAR_VOXEL_RANGE_M: f64 = 20.0;
+
+/// Whether `points_in_sensor` look like one turn of a spinning multi-beam LiDAR: their
+/// directions cover at least [`LIDAR_MIN_AZIMUTH_DEG`] of azimuth (in 1° bins) within at most
+/// [`LIDAR_MAX_ELEVATION_DEG`] of elevation (the 1st to 99th percentile). A tilting laser
+/// sweeps half the azimuth and 85° of elevation; a rotating 3D laser scanner the whole sphere.
+pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
+    let mut azimuth_bins = vec![false; 360];
+    let mut elevations: Vec<f64> = Vec::with_capacity(points_in_sensor.len());
+    for p in points_in_sensor {
+        let r = p.norm();
+        if !(r.is_finite() && r > 0.1) {
+            continue;
+        }
+        let azimuth = p.y.atan2(p.x).to_degrees().rem_euclid(360.0);
+        azimuth_bins[(azimuth as usize).min(359)] = true;
+        elevations.push((p.z / r).asin().to_degrees());
+    }
+    if elevations.len() < 1000 {
+        return false;
+    }
+    elevations.sort_by(f64::total_cmp);
+    let at = |q: f64| elevations[((elevations.len() - 1) as f64 * q) as usize];
+    let covered = azimuth_bins.iter().filter(|&&b| b).count() as f64;
+    covered >= LIDAR_MIN_AZIMUTH_DEG && at(0.99) - at(0.01) <= LIDAR_MAX_ELEVATION_DEG
+}
+
+/// A scanner is a spinning multi-beam LiDAR ([`SlamOptions::for_scan`]) when its scan covers at
+/// least this much of the azimuth, degrees…
+pub const LIDAR_MIN_AZIMUTH_DEG: f64 = 300.0;
+/// … within at most this band of elevation, degrees (a tilting laser sweeps 85° or more).
+pub const LIDAR_MAX_ELEVATION_DEG: f64 = 60.0;
+
 impl SlamOptions {
+    /// The loop's options for the scanner that took `points_in_sensor`, as `sdem slam` chooses
+    /// them for a dataset without a `sensor.toml`:
+    ///
+    /// * **a spinning multi-beam LiDAR** ([`is_spinning_lidar`]: every azimuth seen, within a
+    ///   band of elevation), on a vehicle that moves continuously: the S-DEM grid derived from
+    ///   the scan's own angular sampling ([`SdemConfig::for_points`]), the search's step,
+    ///   truncation and refinement from its ranges ([`LocalizeOptions::for_scan`]), loop
+    ///   closure and the fused map on that step (voxels as large as the step, rays up to
+    ///   20 m); the windows and the recovery stay the defaults (a vehicle's motion is
+    ///   predicted by its last one);
+    /// * **any other scanner**: [`SlamOptions::default`], the tilting laser's.
+    ///
+    /// # Example
+    /// ```
+    /// use sdem::geometry::Vec3;
+    /// use sdem::slam::SlamOptions;
+    /// // Walls 10 m around, seen by 32 lasers 1° apart over every azimuth.
+    /// let points: Vec<Vec3> = (0..32)
+    ///     .flat_map(|laser| (0..1800).map(move |k| (laser, k)))
+    ///     .map(|(laser, k)| {
+    ///         let (el, az) = (((laser as f64) - 20.0).to_radians(), (k as f64 * 0.2).to_radians());
+    ///         let r = 10.0 / el.cos();
+    ///         Vec3::new(r * el.cos() * az.cos(), r * el.cos() * az.sin(), r * el.sin())
+    ///     })
+    ///     .collect();
+    /// let lidar = SlamOptions::for_scan(&points);
+    /// assert!(lidar.localize.step_m > SlamOptions::default().localize.step_m);
+    /// // The tilting laser's front half: the defaults.
+    /// let front: Vec<Vec3> = points.iter().filter(|p| p.x > 0.0).copied().collect();
+    /// assert_eq!(SlamOptions::for_scan(&front), SlamOptions::default());
+    /// ```
+    pub fn for_scan(points_in_sensor: &[crate::geometry::Vec3]) -> Self {
+        let default = Self::default();
+        if !is_spinning_lidar(points_in_sensor) {
+            return default;
+        }
+        let sdem = SdemConfig::for_points(points_in_sensor);
+        let Ok(scan) = crate::sdem::Sdem::from_points(
+            points_in_sensor,
+            &crate::geometry::Attitude::default(),
+            &sdem,
+        ) else {
+            return default;
+        };
+        let localize = LocalizeOptions {
+            runner_up: false,
+            ..LocalizeOptions::for_scan(&scan)
+        };
+        let step = localize.step_m;
+        Self {
+            sdem,
+            loop_closure: LoopClosureConfig {
+                step_m: step,
+                window_half_m: [
+                    default.loop_closure.window_half_m[0].max(3.0 * step),
+                    default.loop_closure.window_half_m[1].max(3.0 * step),
+                    default.loop_closure.window_half_m[2].max(step),
+                ],
+                ..default.loop_closure.clone()
+            },
+            voxel: VoxelConfig {
+                voxel_m: default.voxel.voxel_m.max(step),
+                max_range_m: LIDAR_VOXEL_RANGE_M,
+                ..default.voxel
+            },
+            localize,
+            ..default
+        }
+    }
+
     /// Checks the values the loop itself uses (the search, S-DEM and voxel settings check
     /// themselves when used).
     pub fn validate(&self) -> Result<()> {
         self.sdem.validate()?;
         self.voxel.validate()?;
+        self.recovery.validate()?;
         let halves = self
             .window_half_m
             .iter()
@@ -125,6 +343,12 @@ impl SlamOptions {
             return Err(Error::Invalid(format!(
                 "reference_radius_m = {} must be a positive distance",
                 self.reference_radius_m
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.min_tracking_inlier_fraction) {
+            return Err(Error::Invalid(format!(
+                "min_tracking_inlier_fraction = {} must lie in 0..=1",
+                self.min_tracking_inlier_fraction
             )));
         }
         if self.max_reference_nodes == 0 {

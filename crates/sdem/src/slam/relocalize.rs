@@ -1,14 +1,16 @@
 //! Relocalization: finding where a scan was taken in a saved map, and the fusion of a match with
 //! a prediction along the direction the scans leave free.
 
-use super::{ms, SlamOptions};
+use super::recovery::{Located, MapSearch};
+use super::step::Attempt;
+use super::{ms, ScanInput, SlamOptions};
 use crate::doubt::Doubt;
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Pose, Vec3};
 use crate::localize::{
     localize, CostConfig, Diagnostics, LocalizeOptions, OffsetPrior, SearchWindow,
 };
-use crate::map::{world_from_query, Descriptor, Map};
+use crate::map::{world_from_query, Map};
 use crate::sdem::Sdem;
 use crate::search::HeadingWindow;
 use serde::Serialize;
@@ -17,12 +19,17 @@ use std::time::Instant;
 /// A scan relocalized in a saved map ([`relocalize`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct Relocalization {
-    /// The scan's estimated pose in the map's world frame.
+    /// The scan's estimated pose in the map's world frame (in its node's segment's frame when
+    /// that is not the world's).
     pub world_from_sensor: crate::geometry::PoseRecord,
     /// The node it was matched against.
     pub node_id: usize,
-    /// The nodes tried, in order, with the reason each one failed (empty when it matched).
+    /// The segment of that node (0: the world's).
+    pub segment: usize,
+    /// The nodes tried that did not match, in order, with the reason each one failed.
     pub tried: Vec<(usize, String)>,
+    /// Without a position: every search tried, with its figures.
+    pub candidates: Vec<Attempt>,
     /// Eq. (1) at the best grid candidate, m².
     pub cost: f64,
     /// The match's diagnostics.
@@ -49,14 +56,23 @@ pub struct Near {
     pub sigma_m: Option<f64>,
 }
 
-/// Finds where a scan was taken in a saved map: near `near` when given, else at the nodes whose
-/// place descriptors look most like the scan's, trying up to `max_nodes` nodes with the exact
-/// search (a window of [`SlamOptions::window_half_no_odometry_m`] around the node, or around
-/// `near`), nearest or most alike first, until one clears the inlier threshold of loop closure.
+/// Finds where a scan was taken in a saved map.
+///
+/// * **Near a position** (`near`): the `max_nodes` nodes nearest it, in turn, with the exact
+///   search over a window of [`SlamOptions::window_half_no_odometry_m`] around it and the
+///   heading the reading allows, until one clears the inlier threshold of loop closure.
+/// * **Without a prior**: the `max_nodes` nodes whose places (each node with its neighbours,
+///   [`crate::map::Map::place_descriptor`]) look most like the scan, whichever way it faced,
+///   each searched over every heading ([`crate::localize`](crate::scan::localize) with the
+///   heading unknown; the tilt too without an attitude reading) within
+///   [`super::RecoveryOptions::relocalize_window_half_m`] around it. The best match that has
+///   no doubt and matches as many cells as a loop closure must is the answer — unless a match
+///   at another place compares almost as well (the ambiguity ratio): then the scan is not
+///   found, rather than found in the wrong place.
 ///
 /// # Errors
-/// An empty map or scan, a `near` that is not finite or whose σ is not a positive length, or no
-/// node that matches.
+/// An empty map or scan, a `near` that is not finite or whose σ is not a positive length, or
+/// ([`Error::NotFound`]) no node that matches with confidence, each tried node with its reason.
 pub fn relocalize(
     map: &Map,
     config: &SlamOptions,
@@ -71,16 +87,77 @@ pub fn relocalize(
             "the map has no node to relocalize in".into(),
         ));
     }
-    if let Some(n) = &near {
-        n.validate()?;
+    match near {
+        Some(near) => relocalize_near(map, config, points_in_sensor, attitude, near, max_nodes),
+        None => relocalize_anywhere(map, config, points_in_sensor, attitude, max_nodes),
     }
-    let near_position = near.map(|n| n.position);
+    .map(|mut found| {
+        found.time_ms = ms(start);
+        found
+    })
+}
+
+/// [`relocalize`] without a prior.
+fn relocalize_anywhere(
+    map: &Map,
+    config: &SlamOptions,
+    points_in_sensor: &[Vec3],
+    attitude: Option<Attitude>,
+    max_nodes: usize,
+) -> Result<Relocalization> {
+    let config = SlamOptions {
+        recovery: super::RecoveryOptions {
+            relocalize_candidates: max_nodes.max(1),
+            ..config.recovery.clone()
+        },
+        ..config.clone()
+    };
+    let search = MapSearch { map, config: &config };
+    let scan = ScanInput {
+        scan_index: 0,
+        points_in_sensor,
+        attitude,
+        odometry: None,
+    };
+    let mut attempts = Vec::new();
+    let found = search.find_in_map(&scan, |_| true, None, &mut attempts)?;
+    let tried: Vec<(usize, String)> = (attempts.iter())
+        .filter(|a| !a.accepted || !a.reason.is_empty())
+        .map(|a| (a.nodes.first().copied().unwrap_or(0), a.reason.clone()))
+        .collect();
+    let Some(Located::Found { matched, segment, .. }) = found else {
+        return Err(Error::NotFound { tried });
+    };
+    Ok(Relocalization {
+        world_from_sensor: (&matched.world_from_sensor).into(),
+        node_id: matched.references[0].0,
+        segment,
+        tried,
+        candidates: attempts,
+        cost: matched.cost,
+        trusted: matched.doubts.is_empty(),
+        diagnostics: matched.diagnostics,
+        doubts: matched.doubts,
+        time_ms: 0.0,
+    })
+}
+
+/// [`relocalize`] near a position.
+fn relocalize_near(
+    map: &Map,
+    config: &SlamOptions,
+    points_in_sensor: &[Vec3],
+    attitude: Option<Attitude>,
+    near: Near,
+    max_nodes: usize,
+) -> Result<Relocalization> {
+    near.validate()?;
     let level = attitude.unwrap_or_default();
     let query = Sdem::from_points(points_in_sensor, &level, &config.sdem)?;
     if query.known_cells() == 0 {
         return Err(Error::Invalid("the scan has no usable point".into()));
     }
-    let candidates = candidate_nodes(map, &query, near_position, max_nodes);
+    let candidates = nearest_nodes(map, &near.position, max_nodes);
     let heading = if attitude.is_some() {
         config.heading_half_compass_deg
     } else {
@@ -88,17 +165,17 @@ pub fn relocalize(
     };
     let mut tried = Vec::new();
     let mut best = None;
-    for &(node_id, _) in &candidates {
+    for node_id in candidates {
         let origin = map.nodes[node_id].position();
         let reference = map.merged_reference(&[node_id], &origin, &config.sdem)?;
-        let centre = near_position.map_or(Vec3::zeros(), |p| p - origin);
-        let localize_config = search_options(config, centre, near, heading);
+        let centre = near.position - origin;
+        let localize_config = search_options(config, centre, Some(near), heading);
         match localize(&reference, &query, &localize_config) {
             Ok(found)
                 if found.diagnostics.inlier_fraction >= config.loop_closure.min_inlier_fraction =>
             {
-                // The nearest (or most alike) node that matches well is the answer; the others
-                // are tried only when it does not.
+                // The nearest node that matches well is the answer; the others are tried only
+                // when it does not.
                 best = Some((node_id, found, origin));
                 break;
             }
@@ -119,22 +196,20 @@ pub fn relocalize(
     let mut pose = world_from_query(&origin, &found);
     let mut diagnostics = found.diagnostics;
     let mut doubts = found.doubts;
-    if let Some(Near {
-        position,
-        sigma_m: Some(sigma_m),
-    }) = near
-    {
-        take_prediction_along(&mut pose, &mut diagnostics, &mut doubts, &position, sigma_m);
+    if let Some(sigma_m) = near.sigma_m {
+        take_prediction_along(&mut pose, &mut diagnostics, &mut doubts, &near.position, sigma_m);
     }
     Ok(Relocalization {
         world_from_sensor: (&pose).into(),
         node_id,
+        segment: map.nodes[node_id].segment,
         tried,
+        candidates: Vec::new(),
         cost: found.cost,
         diagnostics,
         trusted: doubts.is_empty(),
         doubts,
-        time_ms: ms(start),
+        time_ms: 0.0,
     })
 }
 
@@ -158,36 +233,14 @@ impl Near {
     }
 }
 
-/// The nodes to try, with how near each lies to `near_position` or, without one, how unlike its
-/// place descriptor is the scan's; nearest or most alike first, at most `max_nodes` (at least
-/// one).
-fn candidate_nodes(
-    map: &Map,
-    query: &Sdem,
-    near_position: Option<Vec3>,
-    max_nodes: usize,
-) -> Vec<(usize, f64)> {
-    let mut candidates: Vec<(usize, f64)> = match near_position {
-        Some(p) => map
-            .nodes
-            .iter()
-            .map(|n| (n.node_id, (n.position() - p).norm()))
-            .collect(),
-        None => {
-            let descriptor = Descriptor::from_levelled(query.points());
-            map.nodes
-                .iter()
-                .filter_map(|n| {
-                    let d =
-                        Descriptor::from_levelled(&n.points_levelled()).distance(&descriptor, 1)?;
-                    Some((n.node_id, d))
-                })
-                .collect()
-        }
-    };
-    candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
-    candidates.truncate(max_nodes.max(1));
-    candidates
+/// The `max_nodes` nodes nearest `position` (at least one), nearest first.
+fn nearest_nodes(map: &Map, position: &Vec3, max_nodes: usize) -> Vec<usize> {
+    let mut by_distance: Vec<(usize, f64)> = (map.nodes.iter())
+        .map(|n| (n.node_id, (n.position() - position).norm()))
+        .collect();
+    by_distance.sort_by(|a, b| a.1.total_cmp(&b.1));
+    by_distance.truncate(max_nodes.max(1));
+    by_distance.into_iter().map(|(id, _)| id).collect()
 }
 
 /// The search at one node: a window of [`SlamOptions::window_half_no_odometry_m`] around

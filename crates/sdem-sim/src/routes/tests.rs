@@ -1,0 +1,92 @@
+use super::*;
+
+/// A coarse sweep keeps the tests quick; the routes do not depend on it.
+fn coarse() -> RouteConfig {
+    let mut config = RouteConfig::default();
+    config.sensor.tilt_step_deg = 4.0;
+    config.sensor.pan_step_deg = 4.0;
+    config
+}
+
+fn steps(run: &RouteRun) -> Vec<f64> {
+    (run.waypoints.windows(2))
+        .map(|w| (w[1].along_m - w[0].along_m).abs())
+        .collect()
+}
+
+#[test]
+fn a_seed_gives_the_same_route_and_another_seed_another() {
+    for kind in RouteKind::ALL {
+        let a = route(kind, 5, &coarse()).unwrap();
+        let b = route(kind, 5, &coarse()).unwrap();
+        assert_eq!(a.run.truth(), b.run.truth(), "{}", kind.name());
+        assert_eq!(a.run.odometry, b.run.odometry, "{}", kind.name());
+        let c = route(kind, 6, &coarse()).unwrap();
+        assert_ne!(a.run.truth(), c.run.truth(), "{}", kind.name());
+        assert_eq!(a.run.stops.len(), a.run.events.len());
+        assert_eq!(a.run.events[0], StopEvent::Start);
+    }
+}
+
+#[test]
+fn long_steps_are_one_to_two_metres_where_the_route_runs_straight() {
+    let r = route(RouteKind::LongSteps, 2, &coarse()).unwrap();
+    let steps = steps(&r.run);
+    assert!(steps.iter().all(|&d| d <= 2.0 + 1e-9), "{steps:?}");
+    assert!(steps.iter().filter(|&&d| d >= 1.0).count() >= 2, "{steps:?}");
+    for (e, d) in r.run.events[1..].iter().zip(&steps) {
+        assert_eq!(*e == StopEvent::LongStep, *d >= 1.0);
+    }
+}
+
+#[test]
+fn a_turn_around_faces_back_the_way_it_came() {
+    let r = route(RouteKind::TurnAround, 2, &coarse()).unwrap();
+    let turn = r.run.events.iter().position(|e| *e == StopEvent::TurnedAround).unwrap();
+    let yaw = |i: usize| sdem::geometry::attitude_of(&r.run.stops[i].world_from_sensor).yaw;
+    let turned = crate::sim::wrap_angle(yaw(turn) - yaw(turn - 1)).abs();
+    assert!(turned > 150f64.to_radians(), "{}°", turned.to_degrees());
+    // It ends back at the start.
+    assert!(r.run.waypoints.last().unwrap().along_m < 0.05);
+}
+
+#[test]
+fn a_kidnapped_robot_is_carried_five_metres_and_its_odometry_feels_nothing() {
+    let config = coarse();
+    let r = route(RouteKind::Kidnapped, 2, &config).unwrap();
+    let k = r.run.events.iter().position(|e| *e == StopEvent::Carried).unwrap();
+    let carried = r.run.waypoints[k - 1].along_m - r.run.waypoints[k].along_m;
+    assert!((carried - config.carried_m).abs() < 1e-9, "{carried}");
+    let felt = r.run.odometry[k - 1].inverse() * r.run.odometry[k];
+    assert!(felt.translation.vector.norm() < 1e-12 && felt.rotation.angle() < 1e-9);
+    let truth = r.run.truth();
+    assert!((truth[k].translation.vector - truth[k - 1].translation.vector).norm() > 2.0);
+}
+
+#[test]
+fn a_board_hides_half_the_view_of_a_blocked_stop() {
+    let config = coarse();
+    let r = route(RouteKind::HalfBlocked, 2, &config).unwrap();
+    let blocked: Vec<usize> = (r.run.events.iter().enumerate())
+        .filter(|(_, e)| **e == StopEvent::HalfBlocked)
+        .map(|(i, _)| i)
+        .collect();
+    assert!(!blocked.is_empty());
+    for i in blocked {
+        // A quarter of the returns or more come from within 45 cm: the board.
+        let points = r.run.stops[i].sweep.points_in_sensor();
+        let near = points.iter().filter(|p| p.norm() < 0.45).count();
+        assert!(near * 4 >= points.len(), "stop {i}: {near} of {}", points.len());
+    }
+}
+
+#[test]
+fn a_second_run_starts_inside_the_first_runs_map() {
+    let r = route(RouteKind::SecondRun, 2, &coarse()).unwrap();
+    let map_run = r.map_run.as_ref().unwrap();
+    let mapped = map_run.waypoints.last().unwrap().along_m;
+    let start = r.run.waypoints[0].along_m;
+    assert!(start >= 1.0 && start <= mapped - 1.0, "{start} of {mapped}");
+    assert_eq!(r.run.events[0], StopEvent::Start);
+    assert!(r.run.stops[0].world_from_sensor.translation.vector.norm() > 0.5);
+}

@@ -1,0 +1,383 @@
+//! Loop closure in any direction, checked against the other closures; and the joining of
+//! segments.
+//!
+//! **Proposal.** Within a segment, where poses are known, the older nodes near the new one are
+//! scored by how many of its scan's cells their points explain at the current estimates
+//! ([`crate::map::Map::overlaps_among`]): that counts what both saw, whichever way each scan
+//! faced, so a robot coming back the other way (its scanner seeing only its front half) is
+//! matched with the nodes that looked where it looks now. Across segments, whose relative place
+//! is unknown, nodes are proposed by their place descriptors over every heading.
+//!
+//! **Verification.** The exact search over every heading, with the runner-up search, against
+//! the candidate and its neighbours merged ([`crate::map::verify_loop_closure`]).
+//!
+//! **Consistency** (after Mangelson et al.'s pairwise consistency maximization, ICRA 2018).
+//! Two closures `a` (i→j) and `b` (k→l) of one segment form a loop with the graph's relative
+//! poses j→l and k→i; if both are right, the loop returns to where it began, within the
+//! closures' covariances and the drift the graph may hold between the nodes (1 cm and 0.5° per
+//! metre apart, plus 1 cm). A verified closure that agrees with every accepted one is
+//! accepted. One that disagrees with some is accepted only when more verified closures agree
+//! with it than with any of those, which are then withdrawn from the graph; otherwise it is
+//! rejected, saying with which closures it disagrees.
+
+use super::predictions::Prediction;
+use super::recovery::{Located, Matched};
+use super::step::{Attempt, HeadingPrior, PredictionSource, SegmentJoin};
+use super::{ScanInput, Slam};
+use crate::error::Result;
+use crate::geometry::{attitude_of, Attitude};
+use crate::map::{verify_loop_closure_against, LoopClosure};
+use crate::posegraph::{Edge, EdgeKind};
+use crate::sdem::Sdem;
+use nalgebra::Matrix6;
+
+/// Nodes of other segments tried per stop for a join.
+const JOIN_CANDIDATES: usize = 3;
+
+/// Drift the graph may hold between two nodes: translation, metres per metre apart.
+const DRIFT_PER_M: f64 = 0.01;
+/// … and at no distance, metres.
+const DRIFT_FLOOR_M: f64 = 0.01;
+/// … rotation, degrees per metre apart.
+const DRIFT_DEG_PER_M: f64 = 0.5;
+/// … and at no distance, degrees.
+const DRIFT_FLOOR_DEG: f64 = 0.3;
+
+/// What loop closure did at one node.
+#[derive(Debug, Default)]
+pub(super) struct Closing {
+    /// The closures checked, accepted or not.
+    pub checked: Vec<LoopClosure>,
+    /// Accepted closures withdrawn, as (from, to).
+    pub withdrawn: Vec<(usize, usize)>,
+    /// Segments joined.
+    pub joined: Vec<SegmentJoin>,
+    /// The searches tried to join segments.
+    pub attempts: Vec<Attempt>,
+    /// The graph of this segment changed and needs optimizing.
+    pub changed: Option<usize>,
+}
+
+impl Slam {
+    /// Step 4: the loop closures of node `to` within its segment, checked against the others,
+    /// and, when the map has other segments, a join with one of them.
+    pub(super) fn close_loops(&mut self, to: usize) -> Result<Closing> {
+        let mut closing = Closing::default();
+        if !self.config.loop_closure.enabled {
+            return Ok(closing);
+        }
+        for place in self.loop_candidates(to)? {
+            let prior = self.map.nodes[to].world_from_sensor;
+            let mut closure = verify_loop_closure_against(
+                &self.map,
+                &place,
+                to,
+                &prior,
+                &self.config.sdem,
+                &self.config.localize,
+                &self.config.loop_closure,
+            )?;
+            if closure.accepted {
+                self.admit(&mut closure, &mut closing);
+            }
+            closing.checked.push(closure);
+        }
+        if self.segments().len() > 1 {
+            self.join_elsewhere(to, &mut closing)?;
+        }
+        Ok(closing)
+    }
+
+    /// The places to close a loop with at node `to`: the older nodes of its segment near it
+    /// (not among its recent nodes) that explain enough of its scan's cells at the current
+    /// estimates, most first; each place is such a node with the others of them within
+    /// `reference_radius_m` of it (at most `reference_nodes`), and no two places start within
+    /// that radius of each other; at most `max_candidates` places.
+    fn loop_candidates(&self, to: usize) -> Result<Vec<Vec<usize>>> {
+        let config = &self.config.loop_closure;
+        let node = &self.map.nodes[to];
+        let recent = self.recent_nodes(node.segment, to);
+        let near: Vec<usize> = (self.map.nodes.iter())
+            .filter(|n| n.segment == node.segment && n.node_id < to)
+            .filter(|n| !recent.contains(&n.node_id))
+            .filter(|n| (n.position() - node.position()).norm() <= config.search_radius_m)
+            .map(|n| n.node_id)
+            .collect();
+        if near.is_empty() {
+            return Ok(Vec::new());
+        }
+        let query = Sdem::from_points(
+            &node.sensor_points(),
+            &attitude_of(&node.world_from_sensor),
+            &self.config.sdem,
+        )?;
+        let seeing: Vec<usize> = (self.map)
+            .overlaps_among(&near, &query, &node.position(), 0.2)
+            .into_iter()
+            .filter(|&(_, cells)| cells >= config.min_overlap_cells)
+            .map(|(id, _)| id)
+            .collect();
+        let apart = |a: usize, b: usize| {
+            (self.map.nodes[a].position() - self.map.nodes[b].position()).norm()
+        };
+        let mut places: Vec<Vec<usize>> = Vec::new();
+        for &first in &seeing {
+            if places.len() >= config.max_candidates {
+                break;
+            }
+            if places.iter().any(|p| apart(p[0], first) <= config.reference_radius_m) {
+                continue;
+            }
+            let place: Vec<usize> = (seeing.iter().copied())
+                .filter(|&n| n == first || apart(n, first) <= config.reference_radius_m)
+                .take(config.reference_nodes.max(1))
+                .collect();
+            places.push(place);
+        }
+        Ok(places)
+    }
+
+    /// A closure the match verified, checked against the other closures of its segment:
+    /// accepted (its edge added, the closures it outweighs withdrawn) or rejected.
+    fn admit(&mut self, closure: &mut LoopClosure, closing: &mut Closing) {
+        let segment = self.map.nodes[closure.to].segment;
+        let pool: Vec<LoopClosure> = (self.closure_pool.iter())
+            .filter(|c| self.map.nodes[c.to].segment == segment)
+            .cloned()
+            .collect();
+        let conflicts: Vec<&LoopClosure> = (pool.iter())
+            .filter(|c| c.accepted && self.loop_error_sigmas(closure, c) > self.max_loop_sigmas())
+            .collect();
+        let support = |c: &LoopClosure| {
+            (pool.iter().chain(std::iter::once(&*closure)))
+                .filter(|o| (o.from, o.to) != (c.from, c.to))
+                .filter(|o| self.loop_error_sigmas(c, o) <= self.max_loop_sigmas())
+                .count()
+        };
+        let own = support(closure);
+        let strongest = conflicts.iter().map(|c| support(c)).max();
+        if let Some(strongest) = strongest.filter(|&s| s >= own) {
+            let names: Vec<String> = (conflicts.iter())
+                .map(|c| format!("{}→{}", c.from, c.to))
+                .collect();
+            closure.accepted = false;
+            closure.reason = format!(
+                "inconsistent with the accepted loop closures {} ({} verified closures agree \
+                 with them, {own} with this one)",
+                names.join(", "),
+                strongest
+            );
+            self.closure_pool.push(closure.clone());
+            return;
+        }
+        for c in &conflicts {
+            self.withdraw(c.from, c.to);
+            closing.withdrawn.push((c.from, c.to));
+        }
+        self.add_loop_closure_edge(closure);
+        self.closure_pool.push(closure.clone());
+        closing.changed = Some(segment);
+    }
+
+    /// The allowed loop error of two closures, in standard deviations.
+    fn max_loop_sigmas(&self) -> f64 {
+        self.config.loop_closure.max_loop_sigmas
+    }
+
+    /// How far the loop of closures `a` and `b` (with the graph's relative poses between their
+    /// ends) is from returning to where it began, in standard deviations (0 for the same
+    /// closure).
+    fn loop_error_sigmas(&self, a: &LoopClosure, b: &LoopClosure) -> f64 {
+        let (Some(ta), Some(tb)) = (a.from_from_to, b.from_from_to) else {
+            return f64::INFINITY;
+        };
+        if (a.from, a.to) == (b.from, b.to) {
+            return 0.0;
+        }
+        let pose = |n: usize| self.map.nodes[n].world_from_sensor;
+        let between = |x: usize, y: usize| pose(x).inverse() * pose(y);
+        let error = ta * between(a.to, b.to) * tb.inverse() * between(b.from, a.from);
+        let apart = (pose(a.to).translation.vector - pose(b.to).translation.vector).norm()
+            + (pose(a.from).translation.vector - pose(b.from).translation.vector).norm();
+        let floor = self.config.edge_sigma_floor_m;
+        let sigma_t = (self.closure_variance_t(a)
+            + self.closure_variance_t(b)
+            + 2.0 * floor * floor
+            + (DRIFT_FLOOR_M + DRIFT_PER_M * apart).powi(2))
+        .sqrt();
+        let sigma_r = (DRIFT_FLOOR_DEG + DRIFT_DEG_PER_M * apart).to_radians();
+        let e_t = error.translation.vector.norm() / sigma_t;
+        let e_r = error.rotation.angle() / sigma_r;
+        (e_t * e_t + e_r * e_r).sqrt()
+    }
+
+    /// The largest translational variance of a closure's match, m².
+    fn closure_variance_t(&self, c: &LoopClosure) -> f64 {
+        c.covariance.as_ref().map_or(0.0, |m: &Matrix6<f64>| {
+            m.fixed_view::<3, 3>(0, 0).symmetric_eigenvalues().max()
+        })
+    }
+
+    /// Removes the accepted closure `from`→`to` from the graph (its edge and the list).
+    fn withdraw(&mut self, from: usize, to: usize) {
+        self.edges
+            .retain(|e| !(e.kind == EdgeKind::LoopClosure && e.from == from && e.to == to));
+        self.loop_closures.retain(|c| !(c.from == from && c.to == to));
+        for c in self.closure_pool.iter_mut() {
+            if c.from == from && c.to == to {
+                c.accepted = false;
+                c.reason = "withdrawn: later closures agree with one another, not with it".into();
+            }
+        }
+    }
+
+    /// Node `to` against the nodes of the other segments: first those near where its segment
+    /// believes it is (a segment started where a match failed is placed where the loop last
+    /// believed the robot was, so the two frames are nearly one), searched in the widest window
+    /// with the runner-up search; then, without a prior, those whose places look alike. A
+    /// confident match joins the two segments.
+    fn join_elsewhere(&mut self, to: usize, closing: &mut Closing) -> Result<()> {
+        let near = self.join_near(to, &mut closing.attempts)?;
+        let found = match near {
+            Some(m) => Some(m),
+            None => self.join_by_place(to, &mut closing.attempts)?,
+        };
+        let Some(matched) = found else {
+            return Ok(());
+        };
+        let link = matched.references[0].0;
+        let world_from_to = matched.world_from_sensor;
+        let covariance = matched
+            .diagnostics
+            .covariance
+            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+        let edge = Edge {
+            from: link,
+            to,
+            from_from_to: self.map.nodes[link].world_from_sensor.inverse() * world_from_to,
+            information: self.edge_information(covariance.as_ref(), &world_from_to, 1.0),
+            kind: EdgeKind::LoopClosure,
+        };
+        let mut closure = LoopClosure::unchecked(link, to);
+        closure.accepted = true;
+        closure.cost = Some(matched.cost);
+        closure.inlier_fraction = Some(matched.diagnostics.inlier_fraction);
+        closure.from_from_to = Some(edge.from_from_to);
+        closure.covariance = covariance;
+        let join = self.join_segments(edge, &world_from_to);
+        closure.correction_m = Some(join.moved_m);
+        self.unplaced_segments.retain(|&s| s != join.absorbed);
+        self.measured_segments.retain(|&s| s != join.absorbed);
+        self.loop_closures.push(closure.clone());
+        self.closure_pool.push(closure.clone());
+        closing.changed = Some(join.into);
+        closing.checked.push(closure);
+        closing.joined.push(join);
+        Ok(())
+    }
+
+    /// [`Self::join_elsewhere`]'s search near the node's believed place; `None` when its
+    /// segment was started with no prior at all, or nothing there matches with confidence.
+    fn join_near(&self, to: usize, attempts: &mut Vec<Attempt>) -> Result<Option<Matched>> {
+        let node = &self.map.nodes[to];
+        let segment = node.segment;
+        let recovery = &self.config.recovery;
+        let others = |id: usize| {
+            let n = &self.map.nodes[id];
+            n.segment != segment
+                && !self.unplaced_segments.contains(&n.segment)
+                && (n.position() - node.position()).norm() <= recovery.other_nodes_radius_m
+        };
+        if self.unplaced_segments.contains(&segment) {
+            return Ok(None);
+        }
+        let near: Vec<usize> = (0..self.map.nodes.len()).filter(|&id| others(id)).collect();
+        if near.is_empty() {
+            return Ok(None);
+        }
+        let points = node.sensor_points();
+        let scan = self.scan_of(to, &points);
+        // A segment placed by the odometry is searched for in the window a prediction without
+        // odometry gets, where a match may share little with the map; another, in the widest.
+        let measured = self.measured_segments.contains(&segment);
+        let (window_half, heading_half, gate) = if measured {
+            let c = &self.config;
+            (c.window_half_no_odometry_m, c.heading_half_compass_deg, 0.0)
+        } else {
+            (recovery.max_window_half_m, recovery.max_heading_half_deg, 0.3)
+        };
+        let prediction = Prediction {
+            source: PredictionSource::WiderWindow,
+            position: node.position(),
+            attitude: attitude_of(&node.world_from_sensor),
+            heading_prior: HeadingPrior::LastNode,
+            heading_half,
+            window_half,
+            prior_sigma_m: f64::INFINITY,
+            measured: false,
+        };
+        let query = Sdem::from_points(&points, &prediction.attitude, &self.config.sdem)?;
+        let tolerance = 0.2 + prediction.window_half[0].max(prediction.window_half[1]);
+        let scored = (self.map).overlaps_among(&near, &query, &prediction.position, tolerance);
+        let Some(&(first, cells)) = scored.first() else {
+            return Ok(None);
+        };
+        if cells < self.config.min_reference_overlap_cells {
+            return Ok(None);
+        }
+        let other = self.map.nodes[first].segment;
+        let references: Vec<(usize, usize)> = (scored.into_iter())
+            .filter(|&(id, c)| {
+                self.map.nodes[id].segment == other && c >= self.config.min_reference_overlap_cells
+            })
+            .take(2 * self.config.max_reference_nodes)
+            .collect();
+        let search = self.search();
+        let start = std::time::Instant::now();
+        let mut attempt = Attempt::new(&prediction, &references);
+        let found = search.match_prediction(&scan, &query, &prediction, references, true, gate);
+        let outcome = match found {
+            Ok(mut matched) => {
+                let reason = search.verdict(&mut matched, false, true, false);
+                attempt.record(&matched, reason);
+                attempt.accepted.then_some(matched)
+            }
+            Err(e) if e.is_no_match() => {
+                attempt.reason = e.to_string();
+                None
+            }
+            Err(e) => return Err(e),
+        };
+        attempt.time_ms = start.elapsed().as_secs_f64() * 1e3;
+        attempts.push(attempt);
+        Ok(outcome)
+    }
+
+    /// [`Self::join_elsewhere`]'s search without a prior, by place descriptor.
+    fn join_by_place(&self, to: usize, attempts: &mut Vec<Attempt>) -> Result<Option<Matched>> {
+        let segment = self.map.nodes[to].segment;
+        let points = self.map.nodes[to].sensor_points();
+        let scan = self.scan_of(to, &points);
+        let keep = |id: usize| self.map.nodes[id].segment != segment;
+        let found = self
+            .search()
+            .find_in_map(&scan, keep, Some(JOIN_CANDIDATES), attempts)?;
+        Ok(match found {
+            Some(Located::Found { matched, .. }) => Some(matched),
+            _ => None,
+        })
+    }
+
+    /// Node `node`'s scan (its boundary points, `points`) as the loop takes a scan: its roll
+    /// and pitch as its segment's estimate has them, with its reading's σ.
+    fn scan_of<'p>(&self, node: usize, points: &'p [crate::geometry::Vec3]) -> ScanInput<'p> {
+        let n = &self.map.nodes[node];
+        let a = attitude_of(&n.world_from_sensor);
+        ScanInput {
+            scan_index: n.scan_index,
+            points_in_sensor: points,
+            attitude: Some(n.attitude_reading.map_or(a, |r| Attitude { sigma: r.sigma, ..a })),
+            odometry: None,
+        }
+    }
+}

@@ -1,0 +1,200 @@
+//! Where a stop's scan may have been taken, before it is matched: one hypothesis per source
+//! (the odometry, the last motion repeated, no motion, the nodes the last node is linked to),
+//! each with the search window and heading window its source allows.
+//!
+//! A continuously moving LiDAR needs the constant-velocity guess; a stop-and-go robot whose
+//! tracks slipped, or that was carried, is better served by "it did not move" or by the place
+//! it came from. The loop tries them in order and takes the first trusted match
+//! ([`super::Slam::add_scan`]); the window grows around the best one when none is trusted.
+
+use super::step::{HeadingPrior, PredictionSource};
+use super::{ScanInput, Slam};
+use crate::geometry::{attitude_of, pose_from_parts, wrap_pi, Attitude, Pose, Vec3};
+
+/// Where a scan is expected before it is matched, and the search's window and prior around it.
+#[derive(Debug, Clone)]
+pub(super) struct Prediction {
+    /// Where the hypothesis comes from.
+    pub source: PredictionSource,
+    /// The predicted position, world frame.
+    pub position: Vec3,
+    /// The predicted attitude (roll and pitch from the reading, or the last node's).
+    pub attitude: Attitude,
+    /// Where the heading came from.
+    pub heading_prior: HeadingPrior,
+    /// The heading window's half-width, degrees.
+    pub heading_half: f64,
+    /// The translation window's half-size, metres.
+    pub window_half: [f64; 3],
+    /// The prediction's σ, metres, weighed into the cost.
+    pub prior_sigma_m: f64,
+    /// The prediction measures the motion (odometry): along a direction the scans leave free,
+    /// its position is taken, with its uncertainty.
+    pub measured: bool,
+}
+
+impl Prediction {
+    /// The predicted pose.
+    pub fn pose(&self) -> Pose {
+        pose_from_parts(self.position, self.attitude)
+    }
+
+    /// This prediction with its window grown to `max_half` and its heading window to
+    /// `max_heading_deg` (neither shrinks).
+    pub fn grown(&self, max_half: &[f64; 3], max_heading_deg: f64) -> Self {
+        let mut window_half = self.window_half;
+        for (h, max) in window_half.iter_mut().zip(max_half) {
+            *h = h.max(*max);
+        }
+        Self {
+            source: PredictionSource::WiderWindow,
+            window_half,
+            heading_half: self.heading_half.max(max_heading_deg),
+            measured: false,
+            ..self.clone()
+        }
+    }
+
+    /// This prediction from another source.
+    pub fn from_source(&self, source: PredictionSource) -> Self {
+        Self {
+            source,
+            ..self.clone()
+        }
+    }
+
+    /// Whether `other`'s search lies inside this one's: its position within a quarter of this
+    /// window, the same heading, and no wider windows.
+    fn covers(&self, other: &Prediction) -> bool {
+        let d = other.position - self.position;
+        let inside = (0..3).all(|i| d[i].abs() <= 0.25 * self.window_half[i]);
+        let narrower = (0..3).all(|i| other.window_half[i] <= self.window_half[i]);
+        let turn = wrap_pi(other.attitude.yaw - self.attitude.yaw).abs().to_degrees();
+        inside && narrower && turn + other.heading_half <= self.heading_half + 0.5
+    }
+}
+
+impl Slam {
+    /// The hypotheses for `scan` after node `last` (the robot's last stop), in the order they
+    /// are tried: the odometry's motion; the last motion repeated; no motion; the nodes linked
+    /// to `last`. A hypothesis whose search lies inside an earlier one's is left out.
+    pub(super) fn predictions(&self, scan: &ScanInput, last: usize) -> Vec<Prediction> {
+        let last_node = &self.map.nodes[last];
+        let last_pose = last_node.world_from_sensor;
+        let last_attitude = attitude_of(&last_pose);
+        let (roll, pitch) = scan
+            .attitude
+            .map_or((last_attitude.roll, last_attitude.pitch), |a| (a.roll, a.pitch));
+        let compass = self.compass(scan);
+        let config = &self.config;
+        // Without odometry: the compass's heading, else the motion's.
+        let unmeasured = |source, pose: &Pose, prior: HeadingPrior| {
+            let (yaw, heading_prior, heading_half) = match compass {
+                Some((yaw, half)) => (yaw, HeadingPrior::Compass, half),
+                None => (
+                    attitude_of(pose).yaw,
+                    prior,
+                    config.heading_half_no_prior_deg,
+                ),
+            };
+            Prediction {
+                source,
+                position: pose.translation.vector,
+                attitude: Attitude::new(roll, pitch, yaw),
+                heading_prior,
+                heading_half,
+                window_half: config.window_half_no_odometry_m,
+                prior_sigma_m: config.prior_sigma_no_odometry_m,
+                measured: false,
+            }
+        };
+        let mut all = Vec::new();
+        if let Some(odometry) = &scan.odometry {
+            let pose = last_pose * odometry.previous_sensor_from_sensor();
+            all.push(Prediction {
+                source: PredictionSource::Odometry,
+                position: pose.translation.vector,
+                attitude: Attitude::new(roll, pitch, attitude_of(&pose).yaw),
+                heading_prior: HeadingPrior::Odometry,
+                heading_half: config.heading_half_deg,
+                window_half: config.window_half_m,
+                prior_sigma_m: config.prior_sigma_m,
+                measured: true,
+            });
+        }
+        if let Some(before) = self.stop_before(last) {
+            let motion = self.map.nodes[before].world_from_sensor.inverse() * last_pose;
+            let pose = last_pose * motion;
+            all.push(unmeasured(
+                PredictionSource::ConstantVelocity,
+                &pose,
+                HeadingPrior::ConstantVelocity,
+            ));
+        }
+        all.push(unmeasured(
+            PredictionSource::NoMotion,
+            &last_pose,
+            HeadingPrior::LastNode,
+        ));
+        for neighbour in self.linked_nodes(last).into_iter().take(2) {
+            let pose = self.map.nodes[neighbour].world_from_sensor;
+            all.push(unmeasured(
+                PredictionSource::Neighbour,
+                &pose,
+                HeadingPrior::LastNode,
+            ));
+        }
+        let mut kept: Vec<Prediction> = Vec::new();
+        for p in all {
+            if !kept.iter().any(|k| k.covers(&p)) {
+                kept.push(p);
+            }
+        }
+        kept
+    }
+
+    /// The compass reading of `scan` and the heading window it allows, degrees: the configured
+    /// half-width, or three σ of the reading when that is wider; `None` without a reading or
+    /// with one too uncertain to say anything (3σ of a quarter turn or more).
+    pub(super) fn compass(&self, scan: &ScanInput) -> Option<(f64, f64)> {
+        let a = scan.attitude?;
+        let three_sigma: f64 = 3.0 * a.sigma.yaw.to_degrees();
+        (three_sigma < 90.0).then(|| {
+            (
+                a.yaw,
+                three_sigma.max(self.config.heading_half_compass_deg),
+            )
+        })
+    }
+
+    /// The stop before node `last` on the robot's way, when it is in the same segment and run
+    /// (the last motion is known).
+    fn stop_before(&self, last: usize) -> Option<usize> {
+        let before = last.checked_sub(1)?;
+        let (a, b) = (&self.map.nodes[before], &self.map.nodes[last]);
+        (a.segment == b.segment && a.run == b.run).then_some(before)
+    }
+
+    /// The nodes linked to `node` by an edge of the pose graph, other than the stop just
+    /// before it, farthest from it first (the places the robot came from or closed a loop
+    /// with, where it may have gone back to).
+    fn linked_nodes(&self, node: usize) -> Vec<usize> {
+        let before = self.stop_before(node);
+        let here = self.map.nodes[node].position();
+        let mut linked: Vec<usize> = (self.edges.iter())
+            .filter_map(|e| match (e.from == node, e.to == node) {
+                (true, false) => Some(e.to),
+                (false, true) => Some(e.from),
+                _ => None,
+            })
+            .filter(|&n| Some(n) != before)
+            .collect();
+        linked.sort_unstable();
+        linked.dedup();
+        linked.sort_by(|&a, &b| {
+            let d = |n: usize| (self.map.nodes[n].position() - here).norm();
+            d(b).total_cmp(&d(a))
+        });
+        linked
+    }
+}

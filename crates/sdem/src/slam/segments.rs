@@ -1,0 +1,146 @@
+//! Map segments: pieces of the map each in a frame of its own, as trajectories are in
+//! Cartographer.
+//!
+//! A stop found nowhere with confidence does not bend the map: it starts a new segment, whose
+//! nodes are placed relative to one another by their matches while the segment's place in the
+//! world is unknown (its poses are a guess, reported as such). When a later match links a node
+//! of one segment to a node of another with confidence (a loop closure, a relocalization), the
+//! younger segment's nodes are moved into the older one's frame by that match, the match
+//! becomes a pose-graph edge, and the joined graph is optimized. Segment 0, which holds the
+//! first node, is the world.
+//!
+//! A segment is identified by its first node's id; its pose graph is optimized alone, its
+//! first node held.
+
+use super::step::{OptimizationSummary, SegmentJoin};
+use super::{ms, Slam};
+use crate::error::Result;
+use crate::geometry::Pose;
+use crate::posegraph::{optimize, Edge, PoseGraph};
+use serde::Serialize;
+use std::time::Instant;
+
+/// One segment of the map ([`Slam::segments`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Segment {
+    /// Its id: the id of its first node.
+    pub id: usize,
+    /// How many nodes it holds.
+    pub nodes: usize,
+    /// It is the world's segment (it holds node 0): its poses are in the world frame. Another
+    /// segment's place in the world is not known.
+    pub in_world: bool,
+    /// The runs its nodes come from.
+    pub runs: Vec<usize>,
+}
+
+impl Slam {
+    /// The map's segments, the world's first.
+    pub fn segments(&self) -> Vec<Segment> {
+        let mut segments: Vec<Segment> = Vec::new();
+        for node in &self.map.nodes {
+            match segments.iter_mut().find(|s| s.id == node.segment) {
+                Some(s) => {
+                    s.nodes += 1;
+                    if !s.runs.contains(&node.run) {
+                        s.runs.push(node.run);
+                    }
+                }
+                None => segments.push(Segment {
+                    id: node.segment,
+                    nodes: 1,
+                    in_world: node.segment == self.world_segment(),
+                    runs: vec![node.run],
+                }),
+            }
+        }
+        segments.sort_by_key(|s| s.id);
+        segments
+    }
+
+    /// The segment that holds node 0: the world.
+    pub(super) fn world_segment(&self) -> usize {
+        self.map.nodes.first().map_or(0, |n| n.segment)
+    }
+
+    /// The nodes of `segment`, in order.
+    pub(super) fn segment_nodes(&self, segment: usize) -> Vec<usize> {
+        (self.map.nodes.iter())
+            .filter(|n| n.segment == segment)
+            .map(|n| n.node_id)
+            .collect()
+    }
+
+    /// Joins the segments of nodes `a` and `b`, linked by `edge` (from `a`'s node to `b`'s, the
+    /// match measured in `a`'s segment's frame as `world_from_b`): the younger segment's nodes
+    /// are moved rigidly so that `b` stands at `world_from_b` in the older one's frame (or `a`
+    /// where `b` says), relabelled, and the edge added. Returns the join.
+    pub(super) fn join_segments(&mut self, edge: Edge, world_from_b: &Pose) -> SegmentJoin {
+        let (a, b) = (edge.from, edge.to);
+        let (segment_a, segment_b) = (self.map.nodes[a].segment, self.map.nodes[b].segment);
+        let b_now = self.map.nodes[b].world_from_sensor;
+        // The transform that carries frame B into frame A, and the one back.
+        let a_from_b = world_from_b * b_now.inverse();
+        let (into, absorbed, into_from_absorbed) = if segment_a <= segment_b {
+            (segment_a, segment_b, a_from_b)
+        } else {
+            (segment_b, segment_a, a_from_b.inverse())
+        };
+        let first = self.map.nodes[absorbed].position();
+        for node in self.map.nodes.iter_mut().filter(|n| n.segment == absorbed) {
+            node.world_from_sensor = into_from_absorbed * node.world_from_sensor;
+            node.segment = into;
+        }
+        let moved_m = (self.map.nodes[absorbed].position() - first).norm();
+        self.edges.push(edge);
+        SegmentJoin {
+            into,
+            absorbed,
+            link: (a, b),
+            moved_m,
+        }
+    }
+
+    /// Optimizes the pose graph of `segment` alone (its first node held), moves its nodes and,
+    /// for the world's segment, rebuilds the fused map.
+    ///
+    /// # Errors
+    /// The optimizer's errors (invalid edges).
+    pub(super) fn optimize_segment(&mut self, segment: usize) -> Result<OptimizationSummary> {
+        let start = Instant::now();
+        let ids = self.segment_nodes(segment);
+        let mut index = vec![usize::MAX; self.map.nodes.len()];
+        for (k, &id) in ids.iter().enumerate() {
+            index[id] = k;
+        }
+        let edges: Vec<Edge> = (self.edges.iter())
+            .filter(|e| index[e.from] != usize::MAX && index[e.to] != usize::MAX)
+            .map(|e| Edge {
+                from: index[e.from],
+                to: index[e.to],
+                ..e.clone()
+            })
+            .collect();
+        let graph = PoseGraph {
+            world_from_node: ids.iter().map(|&id| self.map.nodes[id].world_from_sensor).collect(),
+            edges,
+        };
+        let (poses, report) = optimize(&graph, 0, &self.config.optimize)?;
+        let mut max_shift: f64 = 0.0;
+        for (&id, pose) in ids.iter().zip(poses) {
+            let node = &mut self.map.nodes[id];
+            max_shift = max_shift.max((node.position() - pose.translation.vector).norm());
+            node.world_from_sensor = pose;
+        }
+        if segment == self.world_segment() {
+            self.rebuild_voxels();
+        }
+        Ok(OptimizationSummary {
+            iterations: report.iterations,
+            initial_cost: report.initial_cost,
+            final_cost: report.final_cost,
+            time_ms: ms(start),
+            max_node_shift_m: max_shift,
+        })
+    }
+}

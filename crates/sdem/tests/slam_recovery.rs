@@ -1,0 +1,221 @@
+//! The loop when its prediction is wrong: a step beyond the window, a scan from nowhere, a
+//! segment joined again, a robot relocalized with no prior, a second run into a saved map.
+//! Scans of the simulated collapsed building (`sdem_sim::sim::waypoint_stops`), with truth.
+
+use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+use sdem::map::{Descriptor, Map};
+use sdem::sensor::SensorConfig;
+use sdem::slam::*;
+use sdem::Error;
+use sdem_sim::sim::{self, SimStop, Waypoint};
+
+const SEED: u64 = 1;
+
+/// The scans of the building of `SEED` at `along` metres along its route, facing along it.
+fn stops(along: &[f64]) -> Vec<SimStop> {
+    let scene = sim::collapsed_building(SEED);
+    let sensor = SensorConfig::default();
+    let waypoints: Vec<Waypoint> = along.iter().map(|&s| Waypoint::forward(s)).collect();
+    let stops = sim::waypoint_stops(&scene, SEED, &waypoints, &sensor.lift).unwrap();
+    sim::simulate_run(&scene, &stops, &sensor, SEED).unwrap()
+}
+
+/// Adds `stop` as scan `index` with its reading, no odometry.
+fn add(slam: &mut Slam, stop: &SimStop, index: usize) -> StepReport {
+    slam.add_scan(&ScanInput {
+        scan_index: index,
+        points_in_sensor: &stop.sweep.points_in_sensor(),
+        attitude: Some(stop.sweep.mean_attitude()),
+        odometry: None,
+    })
+    .unwrap()
+}
+
+fn error_m(estimate: &Pose, truth: &Pose) -> f64 {
+    (estimate.translation.vector - truth.translation.vector).norm()
+}
+
+#[test]
+fn a_step_beyond_the_window_is_found_again_in_a_wider_one() {
+    // 1.2 m between the stops, in the room: beyond the ±0.5 m of a prediction without
+    // odometry.
+    let run = stops(&[0.0, 0.35, 1.55]);
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
+    for (i, stop) in run.iter().enumerate() {
+        let report = add(&mut slam, stop, i);
+        if i == 2 {
+            assert_eq!(report.status, StepStatus::Recovered, "{:?}", report.attempts);
+            assert!(report.trusted && report.doubts.is_empty());
+            let how = report.recovery.expect("a recovered step says how");
+            assert_ne!(how, PredictionSource::ConstantVelocity, "{how:?}");
+            // The searches before it are in the report, with why they were not taken.
+            let first = &report.attempts[0];
+            assert!(!first.accepted && !first.reason.is_empty(), "{first:?}");
+        }
+    }
+    for (pose, stop) in slam.poses().iter().zip(&run) {
+        let e = error_m(pose, &stop.world_from_sensor);
+        assert!(e < 0.02, "{e} m off");
+    }
+    assert_eq!(slam.segments().len(), 1);
+}
+
+#[test]
+fn a_scan_found_nowhere_starts_a_new_segment_and_leaves_the_map_alone() {
+    let run = stops(&[0.0, 0.35]);
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
+    add(&mut slam, &run[0], 0);
+    let before = slam.poses();
+    // The second stop's scan seen 2.5 m higher up: no place of the map looks like it.
+    let lifted: Vec<Vec3> = (run[1].sweep.points_in_sensor().iter())
+        .map(|p| p - Vec3::new(0.0, 0.0, 2.5))
+        .collect();
+    let report = slam
+        .add_scan(&ScanInput {
+            scan_index: 1,
+            points_in_sensor: &lifted,
+            attitude: Some(run[1].sweep.mean_attitude()),
+            odometry: None,
+        })
+        .unwrap();
+    assert_eq!(report.status, StepStatus::NewSegment, "{:?}", report.attempts);
+    assert!(!report.trusted);
+    assert_eq!(report.segment, 1);
+    // Every search was tried and refused, down to the whole map without a prior.
+    assert!(report.attempts.iter().all(|a| !a.accepted), "{:?}", report.attempts);
+    assert!((report.attempts.iter()).any(|a| a.source == PredictionSource::Relocalization));
+    // No edge ties the new segment to the world's, whose poses did not move.
+    assert!(slam.edges.iter().all(|e| e.to != 1 && e.from != 1));
+    assert_eq!(slam.poses()[0], before[0]);
+    let segments = slam.segments();
+    assert_eq!(segments.len(), 2);
+    assert!(segments[0].in_world && !segments[1].in_world);
+}
+
+#[test]
+fn a_segment_is_joined_to_the_world_when_a_later_scan_matches_it() {
+    let run = stops(&[0.0, 0.35, 0.7, 1.05]);
+    let config = SlamOptions::default();
+    // Nodes 0 and 1 in the world; node 2 in a segment of its own whose frame is 1 m off.
+    let offset = Pose::translation(1.0, -0.4, 0.0);
+    let nodes = (0..3)
+        .map(|i| {
+            let (pose, segment) = if i < 2 {
+                (run[i].world_from_sensor, 0)
+            } else {
+                (offset * run[i].world_from_sensor, 2)
+            };
+            let points = run[i].sweep.points_in_sensor();
+            let mut node =
+                sdem::map::Node::from_scan(i, i, pose, None, &points, &config.sdem).unwrap();
+            node.segment = segment;
+            node
+        })
+        .collect();
+    let edges = vec![sdem::posegraph::Edge {
+        from: 0,
+        to: 1,
+        from_from_to: run[0].world_from_sensor.inverse() * run[1].world_from_sensor,
+        information: sdem::posegraph::diagonal_information(0.005, 0.002),
+        kind: sdem::posegraph::EdgeKind::Odometry,
+    }];
+    let mut slam = Slam::restore(config, Map { nodes }, edges, Vec::new()).unwrap();
+    assert_eq!(slam.segments().len(), 2);
+    // The next stop is tracked in node 2's segment, and matches the world's nodes too.
+    let report = add(&mut slam, &run[3], 3);
+    assert_eq!(report.joined.len(), 1, "{:?}", report.attempts);
+    let join = &report.joined[0];
+    assert_eq!((join.into, join.absorbed), (0, 2));
+    assert_eq!(slam.segments().len(), 1);
+    for (pose, stop) in slam.poses().iter().zip(&run) {
+        let e = error_m(pose, &stop.world_from_sensor);
+        assert!(e < 0.02, "{e} m off after the join");
+    }
+}
+
+/// A map of six stops, 35 cm apart, mapped with their readings.
+fn six_stop_map() -> (Slam, Vec<SimStop>) {
+    let run = stops(&[0.0, 0.35, 0.7, 1.05, 1.4, 1.75]);
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
+    for (i, stop) in run.iter().enumerate() {
+        add(&mut slam, stop, i);
+    }
+    (slam, run)
+}
+
+#[test]
+fn a_scan_is_relocalized_in_a_saved_map_without_a_prior_or_reported_not_found() {
+    let (slam, _) = six_stop_map();
+    // A fresh sweep between two stops, facing along the route: no pose given, the heading
+    // searched over a full turn.
+    let fresh = stops(&[1.2]).remove(0);
+    let points = fresh.sweep.points_in_sensor();
+    let found = relocalize(
+        &slam.map,
+        slam.config(),
+        &points,
+        Some(fresh.sweep.mean_attitude()),
+        None,
+        slam.config().recovery.relocalize_candidates,
+    )
+    .unwrap();
+    assert!(found.trusted, "{found:?}");
+    let e = error_m(&Pose::from(&found.world_from_sensor), &fresh.world_from_sensor);
+    assert!(e < 0.02, "{e} m off");
+    assert!(!found.candidates.is_empty());
+    // A scan of no place in the map is not found, with the nodes tried.
+    let lifted: Vec<Vec3> = points.iter().map(|p| p - Vec3::new(0.0, 0.0, 2.5)).collect();
+    match relocalize(&slam.map, slam.config(), &lifted, None, None, 3) {
+        Err(Error::NotFound { tried }) => assert!(!tried.is_empty()),
+        other => panic!("a scan from nowhere came out as {other:?}"),
+    }
+}
+
+#[test]
+fn a_second_run_starts_with_no_pose_and_is_relocalized_into_the_map() {
+    let (mut slam, _) = six_stop_map();
+    slam.begin_run();
+    assert_eq!(slam.run(), 1);
+    let second = stops(&[1.25, 1.6, 1.95]);
+    for (i, stop) in second.iter().enumerate() {
+        // Indices count within the run again.
+        let report = add(&mut slam, stop, i);
+        assert_eq!(report.run, 1);
+        if i == 0 {
+            assert_eq!(report.status, StepStatus::Relocalized, "{:?}", report.attempts);
+        }
+        assert_eq!(report.segment, 0, "{:?}", report.attempts);
+    }
+    let poses = slam.poses();
+    for (pose, stop) in poses[6..].iter().zip(&second) {
+        let e = error_m(pose, &stop.world_from_sensor);
+        assert!(e < 0.02, "a second-run stop {e} m from the truth in the first run's frame");
+    }
+    assert!(slam.map.nodes[6..].iter().all(|n| n.run == 1));
+}
+
+#[test]
+fn a_place_descriptor_recognises_a_place_whichever_way_the_robot_faced() {
+    let scan = stops(&[0.35]).remove(0);
+    let points: Vec<[f32; 3]> = (scan.sweep.points_in_sensor().iter())
+        .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let turned = |deg: f64| -> Vec<[f32; 3]> {
+        let r = pose_from_parts(Vec3::zeros(), Attitude::from_degrees(0.0, 0.0, deg));
+        (points.iter())
+            .map(|p| {
+                let q = r * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                [q.x as f32, q.y as f32, q.z as f32]
+            })
+            .collect()
+    };
+    let here = Descriptor::from_levelled(&points);
+    let facing_back = Descriptor::from_levelled(&turned(180.0));
+    // Compared as the compass had it, the turned scan looks like another place …
+    let as_read = here.distance(&facing_back, 1);
+    // … compared over every heading, like the same one, turned half a circle.
+    let (distance, heading) = facing_back.distance_any_heading(&here).unwrap();
+    assert!(distance < 1e-6, "{distance}");
+    assert!((heading.abs() - std::f64::consts::PI).abs() < 1e-9, "{heading}");
+    assert!(as_read.is_none_or(|d| d > 0.1), "{as_read:?}");
+}
