@@ -212,12 +212,17 @@ fn kiss_icp(peers: &Peers, kitti: &Kitti) -> Result<(PeerOdometry, Option<Trajec
     let dir = std::env::temp_dir().join(format!("sdem-bench-routes-{}", std::process::id()));
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let result = (|| -> Result<(PeerOdometry, Option<TrajectoryErrors>)> {
+        // The script reads every cloud-like file of its folder (text ones too): the truth
+        // lies beside the clouds' folder, not in it.
+        let clouds = dir.join("clouds");
+        std::fs::create_dir_all(&clouds)
+            .with_context(|| format!("cannot create {}", clouds.display()))?;
         for (number, points) in kitti.numbers.iter().zip(&kitti.frames) {
-            bench_peers::write_cloud(&dir.join(format!("{number:06}.ply")), points)?;
+            bench_peers::write_cloud(&clouds.join(format!("{number:06}.ply")), points)?;
         }
         let truth = dir.join("truth.txt");
         sdem_io::write_kitti_poses(&truth, &kitti.world_from_velodyne)?;
-        let odometry = peers.run_odometry(&dir, &truth, KITTI_MAX_RANGE_M);
+        let odometry = peers.run_odometry(&clouds, &truth, KITTI_MAX_RANGE_M);
         let errors = match &odometry.poses_file {
             Some(file) => {
                 let poses = sdem_io::read_kitti_poses(file)?;
