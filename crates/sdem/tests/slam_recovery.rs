@@ -2,7 +2,7 @@
 //! segment joined again, a robot relocalized with no prior, a second run into a saved map.
 //! Scans of the simulated collapsed building (`sdem_sim::sim::waypoint_stops`), with truth.
 
-use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
+use sdem::geometry::{Pose, Vec3};
 use sdem::map::{Descriptor, Map};
 use sdem::sensor::SensorConfig;
 use sdem::slam::*;
@@ -81,9 +81,9 @@ fn a_scan_found_nowhere_starts_a_new_segment_and_leaves_the_map_alone() {
     assert_eq!(report.status, StepStatus::NewSegment, "{:?}", report.attempts);
     assert!(!report.trusted);
     assert_eq!(report.segment, 1);
-    // Every search was tried and refused, down to the whole map without a prior.
+    // Every search was tried and refused, the widest window too.
     assert!(report.attempts.iter().all(|a| !a.accepted), "{:?}", report.attempts);
-    assert!((report.attempts.iter()).any(|a| a.source == PredictionSource::Relocalization));
+    assert!((report.attempts.iter()).any(|a| a.source == PredictionSource::WiderWindow));
     // No edge ties the new segment to the world's, whose poses did not move.
     assert!(slam.edges.iter().all(|e| e.to != 1 && e.from != 1));
     assert_eq!(slam.poses()[0], before[0]);
@@ -200,22 +200,16 @@ fn a_place_descriptor_recognises_a_place_whichever_way_the_robot_faced() {
     let points: Vec<[f32; 3]> = (scan.sweep.points_in_sensor().iter())
         .map(|p| [p.x as f32, p.y as f32, p.z as f32])
         .collect();
-    let turned = |deg: f64| -> Vec<[f32; 3]> {
-        let r = pose_from_parts(Vec3::zeros(), Attitude::from_degrees(0.0, 0.0, deg));
-        (points.iter())
-            .map(|p| {
-                let q = r * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                [q.x as f32, q.y as f32, q.z as f32]
-            })
-            .collect()
-    };
+    // Half a turn, exactly (x and y negated: no rounding moves a point across a sector).
+    let turned: Vec<[f32; 3]> = points.iter().map(|p| [-p[0], -p[1], p[2]]).collect();
     let here = Descriptor::from_levelled(&points);
-    let facing_back = Descriptor::from_levelled(&turned(180.0));
+    let facing_back = Descriptor::from_levelled(&turned);
     // Compared as the compass had it, the turned scan looks like another place …
     let as_read = here.distance(&facing_back, 1);
     // … compared over every heading, like the same one, turned half a circle.
     let (distance, heading) = facing_back.distance_any_heading(&here).unwrap();
-    assert!(distance < 1e-6, "{distance}");
+    // (Not exactly 0: a point on the ±180° edge of a sector may fall on either side of it.)
+    assert!(distance < 1e-3, "{distance}");
     assert!((heading.abs() - std::f64::consts::PI).abs() < 1e-9, "{heading}");
     assert!(as_read.is_none_or(|d| d > 0.1), "{as_read:?}");
 }
