@@ -20,7 +20,7 @@ fn main() {
         println!("stop {i}: {:.2} m {:+.0}° {:?}", w.along_m, w.heading_offset.to_degrees(), e);
     }
     if let Some(k) = args.get(5).and_then(|s| s.parse::<usize>().ok()) {
-        for ids in [vec![k - 1, k - 2, k - 3], (0..k).rev().collect::<Vec<_>>(), vec![k - 1], vec![0, 1, 2]] {
+        for ids in [(0..k).rev().take(3).collect::<Vec<_>>(), (0..k).rev().collect::<Vec<_>>(), vec![k - 1]] {
             truth_check(&r, k, &ids);
         }
         return;

@@ -25,6 +25,11 @@ pub struct SlamOptions {
     /// [`crate::cost::OffsetPrior`] (it decides only what the scans leave open, such as the
     /// position along a featureless ditch).
     pub prior_sigma_m: f64,
+    /// The odometry's error grows with the distance it measured: its window's horizontal
+    /// half-size is at least 2.5 times this share of the distance driven since the last stop,
+    /// and its σ at least this share (a crawler's tracks slip by 10–15 % on rubble, and a step
+    /// of 1.5 m is 20 cm off then).
+    pub odometry_error_per_m: f64,
     /// Standard deviation of the prediction without odometry (the last motion repeated), metres.
     pub prior_sigma_no_odometry_m: f64,
     /// Heading searched around an odometry prediction, ± degrees.
@@ -75,6 +80,7 @@ impl Default for SlamOptions {
             window_half_m: [0.15, 0.15, 0.08],
             window_half_no_odometry_m: [0.5, 0.5, 0.15],
             prior_sigma_m: 0.05,
+            odometry_error_per_m: 0.15,
             prior_sigma_no_odometry_m: 0.2,
             heading_half_deg: 3.0,
             heading_half_compass_deg: 8.0,
@@ -321,6 +327,7 @@ impl SlamOptions {
         for (name, v) in [
             ("prior_sigma_m", self.prior_sigma_m),
             ("prior_sigma_no_odometry_m", self.prior_sigma_no_odometry_m),
+            ("odometry_error_per_m", self.odometry_error_per_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(Error::Invalid(format!(

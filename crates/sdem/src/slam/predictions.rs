@@ -110,15 +110,24 @@ impl Slam {
         };
         let mut all = Vec::new();
         if let Some(odometry) = &scan.odometry {
-            let pose = last_pose * odometry.previous_sensor_from_sensor();
+            let motion = odometry.previous_sensor_from_sensor();
+            let pose = last_pose * motion;
+            // The odometry's error grows with the distance it measured.
+            let sigma = config.prior_sigma_m.max(
+                config.odometry_error_per_m * motion.translation.vector.norm(),
+            );
+            let mut window_half = config.window_half_m;
+            for h in &mut window_half[..2] {
+                *h = h.max(2.5 * sigma);
+            }
             all.push(Prediction {
                 source: PredictionSource::Odometry,
                 position: pose.translation.vector,
                 attitude: Attitude::new(roll, pitch, attitude_of(&pose).yaw),
                 heading_prior: HeadingPrior::Odometry,
                 heading_half: config.heading_half_deg,
-                window_half: config.window_half_m,
-                prior_sigma_m: config.prior_sigma_m,
+                window_half,
+                prior_sigma_m: sigma,
                 measured: true,
             });
         }

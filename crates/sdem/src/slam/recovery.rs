@@ -74,13 +74,20 @@ const WIDE_HALF_M: f64 = 0.6;
 const WIDE_HEADING_DEG: f64 = 25.0;
 /// The wide search prunes candidates with fewer inliers than this: a match it takes must be
 /// told from its runner-up.
-const WIDE_MIN_INLIERS: f64 = 0.3;
+const WIDE_MIN_INLIERS: f64 = 0.15;
 /// The coarse grid of a wide search, metres (its heading step follows it).
 const COARSE_STEP_M: f64 = 0.05;
+/// The coarse grid's truncation, metres: twice its step, so that the grid point nearest the
+/// optimum (up to half a step and half a heading step off) still finds its cells within it;
+/// the fine search then scores with the configured truncation.
+const COARSE_TRUNCATION_M: f64 = 0.1;
 /// The fine search around a coarse optimum: ± this, metres…
 const FINE_HALF_M: f64 = 0.08;
 /// … and ± this, degrees.
 const FINE_HEADING_DEG: f64 = 3.0;
+/// A fine search whose optimum lies on its window's edge is searched again around it at most
+/// this many times.
+const FINE_RECENTRES: usize = 2;
 
 /// A search without a prior prunes candidates with fewer inliers than this share of what a
 /// loop closure needs (the coarse grid's cost lies above the basin's bottom).
@@ -427,6 +434,11 @@ impl MapSearch<'_> {
                     sigma_m: prediction.prior_sigma_m,
                 }),
                 min_inlier_fraction: base.cost.min_inlier_fraction.max(gate),
+                truncation_m: if wide {
+                    base.cost.truncation_m.max(COARSE_TRUNCATION_M)
+                } else {
+                    base.cost.truncation_m
+                },
                 ..base.cost.clone()
             },
             refine: base.refine && !wide,
@@ -514,7 +526,9 @@ impl MapSearch<'_> {
         Ok(matched)
     }
 
-    /// The fine search of [`Self::fine`] around `at`.
+    /// The fine search of [`Self::fine`] around `at`; when its optimum lies on the fine
+    /// window's edge (the coarse grid's optimum was off the basin's bottom by more than the
+    /// fine window), searched again around that optimum, up to [`FINE_RECENTRES`] times.
     fn fine_at(
         &self,
         scan: &ScanInput,
@@ -522,18 +536,30 @@ impl MapSearch<'_> {
         coarse: &Matched,
         at: &Pose,
     ) -> Result<Matched> {
-        let a = crate::geometry::attitude_of(at);
-        let fine = Prediction {
-            position: at.translation.vector,
-            attitude: Attitude::new(prediction.attitude.roll, prediction.attitude.pitch, a.yaw),
-            window_half: [FINE_HALF_M; 3],
-            heading_half: FINE_HEADING_DEG,
-            prior_sigma_m: f64::INFINITY,
-            measured: false,
-            ..prediction.clone()
-        };
-        let query = Sdem::from_points(scan.points_in_sensor, &fine.attitude, &self.config.sdem)?;
-        self.match_prediction(scan, &query, &fine, coarse.references.clone(), false, 0.0)
+        let mut at = *at;
+        let mut recentres = 0;
+        loop {
+            let a = crate::geometry::attitude_of(&at);
+            let fine = Prediction {
+                position: at.translation.vector,
+                attitude: Attitude::new(prediction.attitude.roll, prediction.attitude.pitch, a.yaw),
+                window_half: [FINE_HALF_M; 3],
+                heading_half: FINE_HEADING_DEG,
+                prior_sigma_m: f64::INFINITY,
+                measured: false,
+                ..prediction.clone()
+            };
+            let query =
+                Sdem::from_points(scan.points_in_sensor, &fine.attitude, &self.config.sdem)?;
+            let matched =
+                self.match_prediction(scan, &query, &fine, coarse.references.clone(), false, 0.0)?;
+            let on_edge = (matched.doubts.iter()).any(|d| matches!(d, Doubt::OnWindowEdge));
+            if !on_edge || recentres >= FINE_RECENTRES {
+                return Ok(matched);
+            }
+            recentres += 1;
+            at = matched.world_from_sensor;
+        }
     }
 
     /// Why a match is not taken, in words; `None` when it is. `checked`: the runner-up was
@@ -681,6 +707,7 @@ impl MapSearch<'_> {
                     .cost
                     .min_inlier_fraction
                     .max(NO_PRIOR_SEARCH_SHARE * self.config.loop_closure.min_inlier_fraction),
+                truncation_m: base.cost.truncation_m.max(COARSE_TRUNCATION_M),
                 ..base.cost.clone()
             },
             ..base.clone()
