@@ -732,7 +732,7 @@ fn status_name(word: &str) -> Option<&'static str> {
 fn print_text(args: &Args, report: &Report) {
     println!(
         "mapped {} scans in {:.1} s (median {:.0} ms per scan); {} loop closures accepted, {} rejected",
-        report.nodes,
+        report.nodes - report.extends.as_ref().map_or(0, |e| e.nodes),
         report.time_ms / 1e3,
         report.step_time_ms_median,
         report.loop_closures_accepted,

@@ -1,0 +1,156 @@
+//! A saved map used again: `sdem localize --map DIR SCAN` with no prior, and `sdem slam DATASET
+//! --map EXISTING --out DIR`, a second run started at an unknown place of the first run's map.
+//! Every test runs the real binary in its own temporary folder.
+
+mod common;
+
+use common::{fails, run_json, run_ok};
+use serde_json::Value;
+use std::path::Path;
+use tempfile::TempDir;
+
+/// A simulated run of `stops` stops in `dir/data`, mapped into `dir/first`.
+fn first_run(dir: &Path, stops: usize) {
+    run_ok(
+        dir,
+        &[
+            "simulate",
+            "--out",
+            "data",
+            "--stops",
+            &stops.to_string(),
+            "--compass-noise-deg",
+            "2",
+        ],
+    );
+    run_ok(dir, &["slam", "data", "--out", "first", "--no-pictures"]);
+}
+
+/// The lines `from..` of a text file (a header line kept when `header`).
+fn lines_from(path: &Path, from: usize, header: bool) -> String {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    let mut out = String::new();
+    if header {
+        out.push_str(lines.remove(0));
+        out.push('\n');
+    }
+    for line in &lines[from..] {
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+/// `dir/second`: the stops of `dir/data` from `from` on, as a dataset of their own (scans
+/// numbered from 0, the attitude readings and the truth in the first run's frame, no
+/// odometry): the robot starts again somewhere in the mapped route.
+fn second_dataset(dir: &Path, from: usize, stops: usize) {
+    let (data, second) = (dir.join("data"), dir.join("second"));
+    std::fs::create_dir_all(second.join("scans")).unwrap();
+    std::fs::copy(data.join("sensor.toml"), second.join("sensor.toml")).unwrap();
+    for i in from..stops {
+        std::fs::copy(
+            data.join(format!("scans/{i:06}.ply")),
+            second.join(format!("scans/{:06}.ply", i - from)),
+        )
+        .unwrap();
+    }
+    let attitude = lines_from(&data.join("attitude.csv"), from, true);
+    let renumbered: String = (attitude.lines().enumerate())
+        .map(|(k, line)| match k {
+            0 => format!("{line}\n"),
+            _ => {
+                let rest = line.split_once(',').unwrap().1;
+                format!("{},{rest}\n", k - 1)
+            }
+        })
+        .collect();
+    std::fs::write(second.join("attitude.csv"), renumbered).unwrap();
+    let truth = lines_from(&data.join("poses_truth.txt"), from, false);
+    std::fs::write(second.join("poses_truth.txt"), truth).unwrap();
+}
+
+/// Row `i` of a KITTI pose file: its position.
+fn position(path: &Path, i: usize) -> [f64; 3] {
+    let text = std::fs::read_to_string(path).unwrap();
+    let v: Vec<f64> = (text.lines().nth(i).unwrap().split_whitespace())
+        .map(|t| t.parse().unwrap())
+        .collect();
+    [v[3], v[7], v[11]]
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+#[test]
+fn localize_without_a_prior_finds_a_scan_in_a_saved_map_or_says_it_is_not_there() {
+    let dir = TempDir::new().unwrap();
+    first_run(dir.path(), 5);
+    // A scan of the mapped route, no pose given: found, within 5 cm of the truth.
+    let found = run_json(
+        dir.path(),
+        &["localize", "--map", "first", "data/scans/000003.ply", "--json"],
+    );
+    assert_eq!(found["trusted"], true, "{found}");
+    let pose = &found["world_from_sensor"];
+    let estimate = ["x", "y", "z"].map(|k| pose[k].as_f64().unwrap());
+    let truth = position(&dir.path().join("data/poses_truth.txt"), 3);
+    assert!(distance(estimate, truth) < 0.05, "{estimate:?} against {truth:?}");
+    // A scan of another building: not found (exit status 1), with the candidates tried.
+    run_ok(
+        dir.path(),
+        &["simulate", "--out", "elsewhere", "--stops", "1", "--seed", "7"],
+    );
+    let why = fails(
+        dir.path(),
+        &["localize", "--map", "first", "elsewhere/scans/000000.ply"],
+    );
+    assert!(why.contains("is not found in the map"), "{why}");
+    assert!(why.contains("tried node"), "{why}");
+}
+
+#[test]
+fn a_second_run_is_relocalized_in_the_saved_map_and_both_runs_are_saved() {
+    let dir = TempDir::new().unwrap();
+    first_run(dir.path(), 6);
+    let manifest = dir.path().join("first/map").join(sdem_io::MAP_MANIFEST);
+    let saved_before = std::fs::read(&manifest).unwrap();
+    second_dataset(dir.path(), 3, 6);
+    let report = run_json(
+        dir.path(),
+        &["slam", "second", "--map", "first", "--out", "both", "--json"],
+    );
+    // Its first stop is found in the map with no pose; the others are tracked from there.
+    assert_eq!(report["run"], 1, "{report}");
+    assert_eq!(report["extends"]["nodes"], 6);
+    assert_eq!(report["nodes"], 9);
+    assert_eq!(report["statuses"]["relocalized"], 1, "{}", report["statuses"]);
+    let segments = report["segments"].as_array().unwrap();
+    assert_eq!(segments.len(), 1, "{segments:?}");
+    // Its poses are in the first run's frame: where the first run put the same stops (the
+    // same scans), within 5 mm — the map's own drift (a few mm a stop) is not the second
+    // run's to undo.
+    let first = dir.path().join("first/poses.txt");
+    let poses = dir.path().join("both/poses.txt");
+    for i in 0..3 {
+        let e = distance(position(&poses, i), position(&first, i + 3));
+        assert!(e < 0.005, "stop {i} of the second run is {e} m from the map's");
+    }
+    // The saved map is left as it was; the new one holds both runs.
+    assert_eq!(std::fs::read(&manifest).unwrap(), saved_before);
+    let saved: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("both/report.json")).unwrap(),
+    )
+    .unwrap();
+    let steps = saved["steps"].as_array().unwrap();
+    assert_eq!(steps[0]["status"], "relocalized", "{}", steps[0]);
+    // The text output names each stop's status.
+    let text = run_ok(
+        dir.path(),
+        &["slam", "second", "--map", "first", "--out", "again", "--no-pictures"],
+    );
+    assert!(text.contains("relocalized"), "{text}");
+    assert!(text.contains("steps: 1 relocalized, 2 tracked"), "{text}");
+}
