@@ -381,3 +381,88 @@ impl Slam {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{pose_from_parts, Pose, Vec3};
+    use crate::map::Node;
+    use crate::slam::SlamOptions;
+
+    /// A map of six nodes 1 m apart along x, each with a box room's walls as its scan.
+    fn straight_map() -> Slam {
+        let mut slam = Slam::new(SlamOptions::default()).unwrap();
+        let mut points = Vec::new();
+        for i in -20..=20 {
+            for j in -10..=10 {
+                let (u, v) = (i as f64 * 0.1, j as f64 * 0.1);
+                points.extend([Vec3::new(2.0, u, v), Vec3::new(u, 2.0, v), Vec3::new(u, -2.0, v)]);
+            }
+        }
+        for id in 0..6 {
+            let pose = pose_from_parts(Vec3::new(id as f64, 0.0, 0.0), Attitude::default());
+            let sdem = &slam.config.sdem;
+            let node = Node::from_scan(id, id, pose, None, &points, sdem).unwrap();
+            slam.map.nodes.push(node);
+        }
+        slam
+    }
+
+    /// A verified closure `from`→`to` that measures `from_from_to`.
+    fn closure(from: usize, to: usize, from_from_to: Pose) -> LoopClosure {
+        LoopClosure {
+            accepted: true,
+            from_from_to: Some(from_from_to),
+            ..LoopClosure::unchecked(from, to)
+        }
+    }
+
+    /// What the graph says `from`→`to` is, moved by `off` metres along y.
+    fn measured(slam: &Slam, from: usize, to: usize, off: f64) -> Pose {
+        let pose = |n: usize| slam.map.nodes[n].world_from_sensor;
+        nalgebra::Translation3::new(0.0, off, 0.0) * (pose(from).inverse() * pose(to))
+    }
+
+    #[test]
+    fn a_closure_that_disagrees_with_the_accepted_ones_is_rejected_naming_them() {
+        let mut slam = straight_map();
+        let mut closing = Closing::default();
+        for (from, to) in [(0, 4), (1, 5)] {
+            let mut c = closure(from, to, measured(&slam, from, to, 0.0));
+            slam.admit(&mut c, &mut closing);
+            assert!(c.accepted, "{}", c.reason);
+        }
+        // 30 cm off what both agree on: a wrong closure (a place that looks alike).
+        let mut wrong = closure(0, 5, measured(&slam, 0, 5, 0.3));
+        slam.admit(&mut wrong, &mut closing);
+        assert!(!wrong.accepted);
+        assert!(wrong.reason.contains("0→4") && wrong.reason.contains("1→5"), "{}", wrong.reason);
+        assert_eq!(slam.loop_closures.len(), 2);
+        assert!(closing.withdrawn.is_empty());
+        // 5 mm off is within the closures' and the graph's uncertainty: accepted.
+        let mut right = closure(0, 5, measured(&slam, 0, 5, 0.005));
+        slam.admit(&mut right, &mut closing);
+        assert!(right.accepted, "{}", right.reason);
+        assert_eq!(slam.loop_closures.len(), 3);
+    }
+
+    #[test]
+    fn a_wrong_closure_accepted_first_is_withdrawn_when_more_closures_disagree_with_it() {
+        let mut slam = straight_map();
+        let mut closing = Closing::default();
+        let mut wrong = closure(0, 4, measured(&slam, 0, 4, 0.4));
+        slam.admit(&mut wrong, &mut closing);
+        assert!(wrong.accepted, "alone, nothing contradicts it");
+        for (from, to) in [(1, 5), (0, 5)] {
+            let mut c = closure(from, to, measured(&slam, from, to, 0.0));
+            slam.admit(&mut c, &mut closing);
+            if (from, to) == (0, 5) {
+                // Two right closures agree with each other, against the one wrong one.
+                assert!(c.accepted, "{}", c.reason);
+            }
+        }
+        assert_eq!(closing.withdrawn, vec![(0, 4)]);
+        assert!(slam.loop_closures.iter().all(|c| (c.from, c.to) != (0, 4)));
+        assert!(!(slam.edges.iter()).any(|e| e.kind == EdgeKind::LoopClosure && e.to == 4));
+    }
+}
