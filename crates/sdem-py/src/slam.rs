@@ -29,7 +29,8 @@ use std::path::{Path, PathBuf};
 ///         window and heading are set per scan from the fields below; 2 cm steps, no runner-up
 ///         search), ``window_half_m`` ([0.15, 0.15, 0.08]: around an odometry prediction),
 ///         ``window_half_no_odometry_m`` ([0.5, 0.5, 0.15]), ``prior_sigma_m`` (0.05),
-///         ``prior_sigma_no_odometry_m`` (0.2), ``heading_half_deg`` (3.0),
+///         ``odometry_error_per_m`` (0.15: the odometry's σ and window grow with the distance
+///         it measured), ``prior_sigma_no_odometry_m`` (0.2), ``heading_half_deg`` (3.0),
 ///         ``heading_half_compass_deg`` (8.0), ``heading_half_no_prior_deg`` (15.0),
 ///         ``reference_radius_m`` (4.0), ``max_reference_nodes`` (3),
 ///         ``min_reference_overlap_cells`` (300), ``min_tracking_inlier_fraction`` (0.5: a
