@@ -252,8 +252,9 @@ pub use attitude::{
     ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG,
 };
 pub use dataset::{
-    clear_dataset, write_dataset, Dataset, SigmaSource, ATTITUDE_FILE, DATASET_ENTRIES,
-    ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
+    clear_dataset, write_dataset, write_dataset_streamed, Dataset, DatasetPlan, SigmaSource,
+    StreamedScan, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE,
+    SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
 };
 pub use import::{
     import_3dtk, import_dataset, import_e57, import_kitti, kitti_velodyne_poses,
