@@ -15,12 +15,13 @@ use anyhow::{bail, Context, Result};
 use sdem::geometry::Pose;
 use sdem::sensor::SensorConfig;
 use sdem::slam::{trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport};
-use sdem_io::NodeFiles;
+use sdem_io::MapFolder;
 use sdem_sim::benchmark::{summarize, Stats};
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim::{long_run, LongRoute, LongRun};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 mod print;
@@ -76,8 +77,16 @@ pub struct SizeReport {
     window: [usize; 2],
     time_per_stop_ms: Stats,
     localize_ms: Stats,
-    /// Loop closure at the stops that checked any, up to this size, ms.
+    /// Loop closure (the candidates' verification and the graph solve) at the stops that
+    /// checked any, up to this size, ms.
     loop_closure_ms: Stats,
+    /// The map's upkeep per stop (moved nodes fused again, far nodes parked), over the window,
+    /// ms.
+    map_update_ms: Stats,
+    /// Nodes the solves were free to move, up to this size: median and largest.
+    solve_free_nodes: Stats,
+    /// Nodes holding their points in memory (the others are in the saved map's files).
+    resident_nodes: usize,
     /// Graph solves up to this size, ms.
     solve_ms: Stats,
     /// The process's peak resident memory since the route began, MiB (`None` off Linux).
@@ -203,7 +212,8 @@ fn map_route(
     let stops = run.stops.len();
     crate::memory::reset_peak();
     let mut slam = Slam::new(SlamOptions::default())?;
-    let mut node_files = NodeFiles::default();
+    let folder = Arc::new(MapFolder::create(map_dir)?);
+    slam.set_node_store(folder.clone());
     let mut records: Vec<StopRecord> = Vec::with_capacity(stops);
     // The stop each node was mapped from, and the last stop mapped.
     let mut mapped: Vec<usize> = Vec::new();
@@ -245,7 +255,7 @@ fn map_route(
                     truth,
                     mapped: &mapped,
                 };
-                let figures = size.report(map_dir, &mut node_files)?;
+                let figures = size.report(&folder)?;
                 bar.suspend(|| say(&size_line(run.route, &figures)));
                 sizes.push(figures);
             }
@@ -264,7 +274,7 @@ struct SizeInput<'a> {
 }
 
 impl SizeInput<'_> {
-    fn report(&self, map_dir: &Path, node_files: &mut NodeFiles) -> Result<SizeReport> {
+    fn report(&self, folder: &MapFolder) -> Result<SizeReport> {
         let n = self.records.len();
         let from = n - WINDOW_STOPS.min(n / 2).max(1).min(n);
         let window = &self.records[from..];
@@ -281,19 +291,26 @@ impl SizeInput<'_> {
             .collect();
         let closures: Vec<f64> = reports()
             .filter(|r| !r.loop_closures.is_empty())
-            .map(closure_ms)
+            .map(|r| r.loop_closure_ms)
             .collect();
         let solves: Vec<f64> = reports()
             .filter_map(|r| r.optimization.as_ref())
             .map(|o| o.time_ms)
             .collect();
+        let free: Vec<f64> = reports()
+            .filter_map(|r| r.optimization.as_ref())
+            .map(|o| o.free_nodes as f64)
+            .collect();
+        let upkeep: Vec<f64> = window
+            .iter()
+            .filter_map(|r| r.report.as_ref())
+            .map(|r| r.map_update_ms)
+            .collect();
         let truth: Vec<Pose> = self.mapped.iter().map(|&i| self.truth[i]).collect();
         let errors = trajectory_errors(&truth, &self.slam.poses())?;
         let save_start = Instant::now();
         let slam = self.slam;
-        sdem_io::save_map(
-            map_dir,
-            node_files,
+        folder.save(
             slam.config(),
             &slam.map,
             &slam.edges,
@@ -307,21 +324,18 @@ impl SizeInput<'_> {
             time_per_stop_ms: summarize(&times),
             localize_ms: summarize(&localize),
             loop_closure_ms: summarize(&closures),
+            map_update_ms: summarize(&upkeep),
+            solve_free_nodes: summarize(&free),
+            resident_nodes: slam.resident_nodes(),
             solve_ms: summarize(&solves),
             peak_memory_mib: crate::memory::peak_mib(),
             resident_memory_mib: crate::memory::resident_mib(),
-            map_on_disk_mib: folder_bytes(map_dir) as f64 / (1024.0 * 1024.0),
+            map_on_disk_mib: folder_bytes(folder.path()) as f64 / (1024.0 * 1024.0),
             save_ms,
             ate_rmse_m: errors.ate_rmse_m,
             ate_max_m: errors.ate_max_m,
         })
     }
-}
-
-/// The time a step spent on loop closure, ms: all but the match and the graph solve.
-fn closure_ms(report: &StepReport) -> f64 {
-    let solve = report.optimization.as_ref().map_or(0.0, |o| o.time_ms);
-    (report.time_ms - report.localize_ms - solve).max(0.0)
 }
 
 /// The bytes of every file under `dir`.

@@ -235,6 +235,7 @@ mod e57;
 mod error;
 mod import;
 mod las;
+mod map_store;
 mod mapfile;
 mod mcap_out;
 mod pcd;
@@ -262,6 +263,7 @@ pub use import::{
     uos_matrix_to_world_from_sensor, uos_pose_to_world_from_sensor, ImportFormat, ImportOptions,
     ImportSummary, UOS_MAX_RANGE_M, UOS_MIN_RANGE_M,
 };
+pub use map_store::MapFolder;
 pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
 pub use mcap_out::{
     point_cloud2_message, write_map_mcap, MapScene, McapSummary, MAP_FRAME, ROBOT_FRAME,
