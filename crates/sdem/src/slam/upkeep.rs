@@ -51,8 +51,8 @@ impl Default for GrowthOptions {
     fn default() -> Self {
         Self {
             resident_nodes: 300,
-            refuse_tolerance_m: 0.01,
-            refuse_tolerance_deg: 0.1,
+            refuse_tolerance_m: 0.02,
+            refuse_tolerance_deg: 0.2,
             refuse_per_stop: 2,
             closure_interval: 4,
             solve_margin_nodes: 10,

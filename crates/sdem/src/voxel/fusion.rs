@@ -7,10 +7,12 @@
 //! [`VoxelConfig`], clamped to its bounds when read). [`VoxelMap`] clamps after every update
 //! instead, as OctoMap does, which depends on the order of the scans and cannot be undone; the
 //! counts do not depend on it, so the map is the same whatever order nodes were added or moved
-//! in. Within one scan a voxel counts once, a hit over a miss, as in [`VoxelMap::insert_scan`].
+//! in. Within one scan a voxel counts once, a hit over a miss, as in [`VoxelMap::insert_scan`];
+//! the misses come from one ray to the centre of each voxel the scan's rays end in (OctoMap's
+//! discretized insertion), a third fewer rays than the scan's points.
 
 use super::keys::{split_key, Key, KeyMap};
-use super::{for_each_update, VoxelConfig, VoxelKey, VoxelMap};
+use super::{for_each_voxel_ray, VoxelConfig, VoxelKey, VoxelMap};
 use crate::error::{Error, Result};
 use crate::geometry::{Pose, Vec3};
 
@@ -221,7 +223,7 @@ impl VoxelFusion {
         let (blocks, block_index, known) =
             (&mut self.blocks, &mut self.block_index, &mut self.known);
         let mut last_block: Option<(VoxelKey, usize)> = None;
-        for_each_update(
+        for_each_voxel_ray(
             &self.config,
             world_from_sensor,
             points_in_sensor,
@@ -350,18 +352,64 @@ mod tests {
     }
 
     #[test]
-    fn one_scan_counts_as_the_voxel_map_fuses_it() {
+    fn one_scan_hits_its_end_voxels_and_clears_what_its_rays_cross() {
         let config = VoxelConfig::default();
         let pose = pose_from_parts(
             Vec3::new(0.02, 0.01, 0.3),
             Attitude::from_degrees(1.0, 2.0, 30.0),
         );
-        let mut map = VoxelMap::new(config).unwrap();
-        map.insert_scan(&pose, &scan());
         let mut fusion = VoxelFusion::new(config).unwrap();
         fusion.add(0, &pose, &scan()).unwrap();
         assert!(fusion.add(0, &pose, &scan()).is_err());
-        assert_eq!(as_sorted(&fusion.to_voxel_map()), as_sorted(&map));
-        assert_eq!(fusion.to_voxel_map().counts(), map.counts());
+        let fused = fusion.to_voxel_map();
+        // Occupied: exactly the voxels the rays end in, fewer than the rays.
+        let mut ends: Vec<VoxelKey> = scan()
+            .iter()
+            .map(|p| {
+                fused
+                    .key_of(&(pose * nalgebra::Point3::from(*p)).coords)
+                    .unwrap()
+            })
+            .collect();
+        ends.sort_unstable();
+        ends.dedup();
+        assert!(ends.len() < scan().len(), "{} voxels", ends.len());
+        let occupied = |map: &VoxelMap| -> Vec<VoxelKey> {
+            let mut keys: Vec<VoxelKey> = map
+                .iter()
+                .filter(|(_, l)| *l > 0.0)
+                .map(|(k, _)| k)
+                .collect();
+            keys.sort_unstable();
+            keys
+        };
+        assert_eq!(occupied(&fused), ends);
+        // Free: what the rays to every point cross, give or take a voxel sideways: a ray to a
+        // voxel's centre and one to a point in it are less than a voxel apart.
+        let mut exact = VoxelMap::new(config).unwrap();
+        exact.insert_scan(&pose, &scan());
+        assert_eq!(occupied(&exact), ends);
+        let free = |map: &VoxelMap| -> std::collections::HashSet<VoxelKey> {
+            map.iter()
+                .filter(|(_, l)| *l <= 0.0)
+                .map(|(k, _)| k)
+                .collect()
+        };
+        let (a, b) = (free(&fused), free(&exact));
+        let both: std::collections::HashSet<&VoxelKey> = a.intersection(&b).collect();
+        let next_to_both = |k: &VoxelKey| {
+            (-1..=1).any(|dx| {
+                (-1..=1)
+                    .any(|dy| (-1..=1).any(|dz| both.contains(&[k[0] + dx, k[1] + dy, k[2] + dz])))
+            })
+        };
+        let differing: Vec<&VoxelKey> = a.symmetric_difference(&b).collect();
+        assert!(
+            differing.len() * 10 <= b.len(),
+            "{} of {}",
+            differing.len(),
+            b.len()
+        );
+        assert!(differing.iter().all(|k| next_to_both(k)));
     }
 }

@@ -445,13 +445,80 @@ pub(crate) fn for_each_update(
     mut update: impl FnMut(VoxelKey, bool),
 ) {
     let inv_s = 1.0 / config.voxel_m;
-    let max_range = config.max_range_m;
-    let origin = world_from_sensor.translation.vector;
-    let Some(origin_key) = key_of(&origin, inv_s) else {
+    let Some((origin, origin_key, rays)) = scan_rays(config, world_from_sensor, points_in_sensor)
+    else {
         return;
     };
-    // Rays as (end point, whether it is a hit); hits are applied first, so that a voxel hit
-    // anywhere in this scan is stamped before any ray could mark it free.
+    for (end, is_hit) in &rays {
+        if *is_hit {
+            if let Some(key) = key_of(end, inv_s) {
+                update(key, true);
+            }
+        }
+    }
+    for (end, _) in &rays {
+        traverse(&origin, origin_key, end, inv_s, |key| update(key, false));
+    }
+}
+
+/// [`for_each_update`] with the rays' ends taken a voxel at a time, as OctoMap's
+/// `insertPointCloud(…, discretize = true)` does: one hit for each voxel some ray ends in, and
+/// one ray from the sensor to the centre of each such voxel (or of the voxel where a ray longer
+/// than `max_range_m` is cut) for the misses. Surfaces near the sensor put several returns in one
+/// voxel, and the rays to them cross nearly the same voxels: on the simulated floor a node's
+/// 9,800 points end in 5,400–6,900 voxels. The same updates for the same pose and points, in the
+/// same order, every time.
+pub(crate) fn for_each_voxel_ray(
+    config: &VoxelConfig,
+    world_from_sensor: &Pose,
+    points_in_sensor: &[Vec3],
+    mut update: impl FnMut(VoxelKey, bool),
+) {
+    let inv_s = 1.0 / config.voxel_m;
+    let Some((origin, origin_key, rays)) = scan_rays(config, world_from_sensor, points_in_sensor)
+    else {
+        return;
+    };
+    // Each end voxel once, in the order of its first ray; a hit where any ray ends in it.
+    let mut slots: KeyMap<usize> = KeyMap::default();
+    let mut ends: Vec<(VoxelKey, bool)> = Vec::with_capacity(rays.len());
+    for (end, is_hit) in &rays {
+        let Some(key) = key_of(end, inv_s) else {
+            continue;
+        };
+        let slot = *slots.entry(Key(key)).or_insert_with(|| {
+            ends.push((key, false));
+            ends.len() - 1
+        });
+        ends[slot].1 |= *is_hit;
+    }
+    for &(key, is_hit) in &ends {
+        if is_hit {
+            update(key, true);
+        }
+    }
+    let s = config.voxel_m;
+    for &(key, _) in &ends {
+        let centre = Vec3::new(
+            (f64::from(key[0]) + 0.5) * s,
+            (f64::from(key[1]) + 0.5) * s,
+            (f64::from(key[2]) + 0.5) * s,
+        );
+        traverse(&origin, origin_key, &centre, inv_s, |k| update(k, false));
+    }
+}
+
+/// The sensor's origin, its voxel, and each ray of a scan as `(end, is_hit)`: the point, or the
+/// point cut at `max_range_m` (not a hit); `None` when the origin has no voxel key.
+fn scan_rays(
+    config: &VoxelConfig,
+    world_from_sensor: &Pose,
+    points_in_sensor: &[Vec3],
+) -> Option<(Vec3, VoxelKey, Vec<(Vec3, bool)>)> {
+    let inv_s = 1.0 / config.voxel_m;
+    let max_range = config.max_range_m;
+    let origin = world_from_sensor.translation.vector;
+    let origin_key = key_of(&origin, inv_s)?;
     let mut rays: Vec<(Vec3, bool)> = Vec::with_capacity(points_in_sensor.len());
     for point_in_sensor in points_in_sensor {
         let range = point_in_sensor.norm();
@@ -473,16 +540,7 @@ pub(crate) fn for_each_update(
             rays.push(ray);
         }
     }
-    for (end, is_hit) in &rays {
-        if *is_hit {
-            if let Some(key) = key_of(end, inv_s) {
-                update(key, true);
-            }
-        }
-    }
-    for (end, _) in &rays {
-        traverse(&origin, origin_key, end, inv_s, |key| update(key, false));
-    }
+    Some((origin, origin_key, rays))
 }
 
 /// The centroid of the points in each occupied voxel, gathered a batch at a time (see
