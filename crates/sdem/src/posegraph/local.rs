@@ -185,3 +185,75 @@ fn solve_part(
         },
     )))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::posegraph::{diagonal_information, Edge, EdgeKind};
+    use nalgebra::Isometry3;
+
+    /// `n` nodes 1 m apart along x whose odometry says `odometry_m` a step, and a closure from
+    /// node `from` to the last one measuring the truth.
+    fn chain(n: usize, odometry_m: f64, from: usize) -> PoseGraph {
+        let step = |m: f64| Isometry3::translation(m, 0.0, 0.0);
+        let mut graph = PoseGraph::default();
+        for k in 0..n {
+            graph.world_from_node.push(step(odometry_m * k as f64));
+            if k > 0 {
+                graph.edges.push(Edge {
+                    from: k - 1,
+                    to: k,
+                    from_from_to: step(odometry_m),
+                    information: diagonal_information(0.05, 0.01),
+                    kind: EdgeKind::Odometry,
+                });
+            }
+        }
+        graph.edges.push(Edge {
+            from,
+            to: n - 1,
+            from_from_to: step((n - 1 - from) as f64),
+            information: diagonal_information(0.005, 0.001),
+            kind: EdgeKind::LoopClosure,
+        });
+        graph
+    }
+
+    #[test]
+    fn a_correction_the_recent_part_cannot_absorb_grows_it_to_the_whole_graph() {
+        // 39 steps 10 cm long each against a closure to the first node: 3.9 m that five free
+        // nodes (or ten, or twenty) cannot take up without straining the edges to the held ones
+        // beyond the robust kernel's width.
+        let graph = chain(40, 1.1, 0);
+        let config = OptimizeConfig::default();
+        let (poses, solve) = optimize_local(&graph, 35, 0, &config, 0.5).unwrap();
+        assert!(solve.whole && solve.attempts >= 2, "{solve:?}");
+        let (whole, _) = optimize(&graph, 0, &config).unwrap();
+        assert_eq!(poses, whole);
+        let span = poses[39].translation.x - poses[0].translation.x;
+        assert!((span - 39.0).abs() < 0.01, "{span}");
+    }
+
+    #[test]
+    fn a_closure_within_the_recent_part_leaves_the_older_nodes_as_they_were() {
+        let graph = chain(40, 1.01, 34);
+        let (poses, solve) =
+            optimize_local(&graph, 32, 0, &OptimizeConfig::default(), 0.5).unwrap();
+        assert!(
+            !solve.whole && solve.first_free == 32 && solve.attempts == 1,
+            "{solve:?}"
+        );
+        assert_eq!(solve.free_nodes, 8);
+        assert_eq!(&poses[..32], &graph.world_from_node[..32]);
+        let span = poses[39].translation.x - poses[34].translation.x;
+        assert!((span - 5.0).abs() < 0.01, "{span}");
+    }
+
+    #[test]
+    fn a_gauge_outside_the_graph_or_a_share_outside_0_to_1_is_refused() {
+        let graph = chain(5, 1.0, 0);
+        let config = OptimizeConfig::default();
+        assert!(optimize_local(&graph, 2, 5, &config, 0.5).is_err());
+        assert!(optimize_local(&graph, 2, 0, &config, 1.5).is_err());
+    }
+}
