@@ -4,7 +4,7 @@
 //! stop flat as the map grows to thousands of nodes.
 
 use crate::geometry::Vec3;
-use crate::map::Descriptor;
+use crate::map::{Descriptor, LoopClosureConfig};
 use std::collections::HashMap;
 
 /// Edge of the cubes nodes are hashed into, metres.
@@ -123,18 +123,18 @@ impl NodeIndex {
     }
 
     /// Loop-closure candidates for a node at `position` with `descriptor`: the nodes with ids up
-    /// to `newest_id` within `radius_m` whose descriptors lie within `max_distance` (compared
-    /// over azimuth shifts of up to `max_shift` sectors), most similar first, at most `max`.
+    /// to `newest_id` within `config.search_radius_m` whose descriptors lie within
+    /// `config.max_descriptor_distance` (compared over azimuth shifts of up to `max_shift`
+    /// sectors), most similar first, at most `config.max_candidates`.
     pub fn similar_near(
         &self,
         position: &Vec3,
         descriptor: &Descriptor,
         newest_id: usize,
-        radius_m: f64,
-        max_distance: f64,
+        config: &LoopClosureConfig,
         max_shift: usize,
-        max: usize,
     ) -> Vec<(usize, f64)> {
+        let (radius_m, max_distance) = (config.search_radius_m, config.max_descriptor_distance);
         let mut candidates: Vec<(usize, f64)> = self
             .within(position, radius_m)
             .into_iter()
@@ -146,7 +146,7 @@ impl NodeIndex {
             })
             .collect();
         candidates.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-        candidates.truncate(max);
+        candidates.truncate(config.max_candidates);
         candidates
     }
 }
@@ -212,7 +212,18 @@ mod tests {
         {
             index.insert(id, Vec3::new(x, 0.0, 0.0), descriptor(scale), 0.0);
         }
-        let found = index.similar_near(&Vec3::zeros(), &descriptor(1.0), 3, 1.5, 0.2, 1, 2);
+        let found = index.similar_near(
+            &Vec3::zeros(),
+            &descriptor(1.0),
+            3,
+            &LoopClosureConfig {
+                search_radius_m: 1.5,
+                max_descriptor_distance: 0.2,
+                max_candidates: 2,
+                ..Default::default()
+            },
+            1,
+        );
         // Node 3 is far, node 4 is too new, node 1 too different: 0 then 2.
         assert_eq!(found.iter().map(|c| c.0).collect::<Vec<_>>(), vec![0, 2]);
         assert!(found[0].1 < found[1].1);

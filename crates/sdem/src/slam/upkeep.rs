@@ -182,15 +182,8 @@ impl Upkeep {
         let Some((descriptor, _)) = self.index.descriptor(to) else {
             return Vec::new();
         };
-        self.index.similar_near(
-            &map.nodes[to].position(),
-            descriptor,
-            newest,
-            config.search_radius_m,
-            config.max_descriptor_distance,
-            1,
-            config.max_candidates,
-        )
+        self.index
+            .similar_near(&map.nodes[to].position(), descriptor, newest, config, 1)
     }
 
     /// The newest node at which a loop closure was accepted, if any.

@@ -445,7 +445,11 @@ pub(crate) fn for_each_update(
     mut update: impl FnMut(VoxelKey, bool),
 ) {
     let inv_s = 1.0 / config.voxel_m;
-    let Some((origin, origin_key, rays)) = scan_rays(config, world_from_sensor, points_in_sensor)
+    let Some(ScanRays {
+        origin,
+        origin_key,
+        rays,
+    }) = scan_rays(config, world_from_sensor, points_in_sensor)
     else {
         return;
     };
@@ -475,7 +479,11 @@ pub(crate) fn for_each_voxel_ray(
     mut update: impl FnMut(VoxelKey, bool),
 ) {
     let inv_s = 1.0 / config.voxel_m;
-    let Some((origin, origin_key, rays)) = scan_rays(config, world_from_sensor, points_in_sensor)
+    let Some(ScanRays {
+        origin,
+        origin_key,
+        rays,
+    }) = scan_rays(config, world_from_sensor, points_in_sensor)
     else {
         return;
     };
@@ -508,13 +516,22 @@ pub(crate) fn for_each_voxel_ray(
     }
 }
 
-/// The sensor's origin, its voxel, and each ray of a scan as `(end, is_hit)`: the point, or the
-/// point cut at `max_range_m` (not a hit); `None` when the origin has no voxel key.
+/// A scan's rays in the world: where they start, and where each ends.
+struct ScanRays {
+    /// The sensor's origin.
+    origin: Vec3,
+    /// The origin's voxel.
+    origin_key: VoxelKey,
+    /// Each ray as `(end, is_hit)`: the point, or the point cut at `max_range_m` (not a hit).
+    rays: Vec<(Vec3, bool)>,
+}
+
+/// A scan's [`ScanRays`]; `None` when the origin has no voxel key.
 fn scan_rays(
     config: &VoxelConfig,
     world_from_sensor: &Pose,
     points_in_sensor: &[Vec3],
-) -> Option<(Vec3, VoxelKey, Vec<(Vec3, bool)>)> {
+) -> Option<ScanRays> {
     let inv_s = 1.0 / config.voxel_m;
     let max_range = config.max_range_m;
     let origin = world_from_sensor.translation.vector;
@@ -540,7 +557,11 @@ fn scan_rays(
             rays.push(ray);
         }
     }
-    Some((origin, origin_key, rays))
+    Some(ScanRays {
+        origin,
+        origin_key,
+        rays,
+    })
 }
 
 /// The centroid of the points in each occupied voxel, gathered a batch at a time (see
