@@ -10,6 +10,7 @@ mod bench_peers;
 mod bench_tally;
 mod cmd_bench;
 mod cmd_bench_faults;
+mod cmd_bench_scale;
 mod cmd_bench_suites;
 mod cmd_demo;
 mod cmd_export;
@@ -22,6 +23,7 @@ mod cmd_slam;
 mod cmd_view;
 mod export_e57;
 mod export_mcap;
+mod memory;
 mod output;
 mod progress;
 

@@ -17,13 +17,14 @@ def points(pairs):
 
 def test_every_exception_is_an_sdem_error_and_the_natural_builtin():
     classes = [getattr(sdem, name) for name in sdem.__all__ if name.endswith("Error")]
-    assert len(classes) == 13
+    assert len(classes) == 14
     for cls in classes:
         assert issubclass(cls, sdem.Error), cls
         assert cls.__doc__, cls
     for cls in (sdem.InvalidError, sdem.InvalidInputError, sdem.TooFewPointsError, sdem.ParseError):
         assert issubclass(cls, ValueError)
     assert issubclass(sdem.FileError, OSError)
+    assert issubclass(sdem.NodeStoreError, OSError)
     for cls in (sdem.NoOverlapError, sdem.NoMatchError, sdem.NoSurfacesError,
                 sdem.RefinementFailedError, sdem.NotFoundError):
         assert issubclass(cls, sdem.MatchError) and cls.is_no_match
@@ -136,7 +137,7 @@ def test_file_errors_are_os_errors_and_parse_errors_name_the_line(tmp_path):
     assert info.value.line == 2 and info.value.path == str(bad)
     assert str(info.value).startswith(f"{bad}:2:")
     with pytest.raises(sdem.ParseError, match="not a point-cloud format"):
-        sdem.read_points(tmp_path / "scan.las")
+        sdem.read_points(tmp_path / "scan.abc")
 
 
 def test_a_folder_without_a_map_or_with_a_damaged_one_is_refused(tmp_path, run):

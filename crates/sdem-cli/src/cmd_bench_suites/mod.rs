@@ -66,6 +66,8 @@ pub enum Suite {
     /// a kidnapped robot, a half-blocked scanner, revisits the other way, a second run),
     /// relocalization in a saved map, and the KITTI frames beside KISS-ICP.
     Routes,
+    /// The stop-and-go loop on long routes, as the map grows (see `cmd_bench_scale`).
+    Scale,
 }
 
 impl Suite {
@@ -75,6 +77,7 @@ impl Suite {
             Suite::CompassNoise => "compass-noise",
             Suite::Lidar => "lidar",
             Suite::Routes => "routes",
+            Suite::Scale => "scale",
         }
     }
 }
@@ -84,11 +87,12 @@ impl Suite {
 pub struct SuiteArgs {
     /// Run a suite instead: unlevelled (200 simulated pairs without attitude: roll/pitch up
     /// to ±30°, any heading, steps up to 1 m; 8 with --quick), compass-noise (the same pairs
-    /// with readings off by σ 2° roll/pitch and σ 20° heading), lidar (KITTI frames and 20
-    /// simulated spinning-LiDAR pairs, no guess; searched on a 5 cm grid, where --step sets
-    /// the tilting scanner's), routes (the stop-and-go loop on six seeded routes without and
-    /// with odometry, relocalization at every stop of a saved map, and the KITTI frames beside
-    /// KISS-ICP; --quick: without odometry only, 8 relocalizations). The peers run beside it
+    /// with readings off by σ 2° roll/pitch and σ 20° heading), lidar (KITTI frames, 20
+    /// simulated spinning-LiDAR and 20 solid-state (70° field of view) pairs, no guess; on the
+    /// grid and scale derived from each scan), routes (the stop-and-go loop on six seeded
+    /// routes without and with odometry, relocalization at every stop of a saved map, and the
+    /// KITTI frames beside KISS-ICP; --quick: without odometry only, 8 relocalizations), scale
+    /// (the loop on long routes as the map grows: --sizes, --routes). The peers run beside it
     /// when found.
     #[arg(long, value_enum, conflicts_with = "faults")]
     pub suite: Option<Suite>,
@@ -105,6 +109,27 @@ pub struct SuiteArgs {
     /// of the simulated pairs, 4 with --quick; every KITTI pair].
     #[arg(long, value_name = "N", requires = "suite")]
     pub peer_pairs: Option<usize>,
+    /// With --suite scale: the map sizes measured, nodes, increasing; each route runs up to
+    /// the largest [default: 100,300,1000; 100 with --quick; the full set is 100,300,1000,3000].
+    #[arg(
+        long,
+        value_name = "N,N,...",
+        value_delimiter = ',',
+        requires = "suite"
+    )]
+    pub sizes: Vec<usize>,
+    /// With --suite scale: the routes (repeat or separate by commas) [default: room-laps,
+    /// floor, wings; room-laps with --quick].
+    #[arg(
+        long = "route",
+        value_name = "ROUTE",
+        value_delimiter = ',',
+        requires = "suite"
+    )]
+    pub routes: Vec<String>,
+    /// With --suite scale: where the plot of time per stop against stop number goes.
+    #[arg(long, value_name = "FILE.png", default_value = crate::cmd_bench_scale::DEFAULT_PLOT, requires = "suite")]
+    pub plot: PathBuf,
 }
 
 /// The flags `sdem bench` shares with its suites.
@@ -296,9 +321,43 @@ struct PartSpec<'a> {
     make: Box<dyn FnMut(Range<usize>) -> Result<Vec<Case>> + 'a>,
 }
 
+/// The scale suite's arguments from the flags, with its defaults.
+fn scale_args(args: &SuiteArgs, common: &Common) -> Result<crate::cmd_bench_scale::ScaleArgs> {
+    let (full, quick) = crate::cmd_bench_scale::DEFAULT_SIZES;
+    let sizes = if args.sizes.is_empty() {
+        (if common.quick { quick } else { full }).to_vec()
+    } else {
+        args.sizes.clone()
+    };
+    let routes = if args.routes.is_empty() {
+        if common.quick {
+            vec![sdem_sim::sim::LongRoute::RoomLaps]
+        } else {
+            sdem_sim::sim::LongRoute::ALL.to_vec()
+        }
+    } else {
+        (args.routes.iter())
+            .map(|r| r.parse().with_context(|| format!("--route {r}")))
+            .collect::<Result<_>>()?
+    };
+    Ok(crate::cmd_bench_scale::ScaleArgs {
+        sizes,
+        routes,
+        plot: args.plot.clone(),
+        seed: common.seed,
+        json: common.json,
+    })
+}
+
 /// Runs `sdem bench --suite`.
 pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> {
     let suite = args.suite.context("no --suite given")?;
+    if suite == Suite::Scale {
+        return crate::cmd_bench_scale::run(&scale_args(args, common)?, say);
+    }
+    if !args.sizes.is_empty() || !args.routes.is_empty() {
+        bail!("--sizes and --route apply to --suite scale only");
+    }
     if common.pairs == Some(0) {
         bail!("--pairs must be at least 1");
     }
@@ -351,7 +410,15 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
                 common,
             )?;
             parts.push(run_part(spec, &peers, common.json, say)?);
+            let spec = simulated_spec(
+                "simulated-solid-state",
+                SuiteConfig::solid_state_lidar(),
+                args,
+                common,
+            )?;
+            parts.push(run_part(spec, &peers, common.json, say)?);
         }
+        Suite::Scale => unreachable!("the scale suite runs on its own, above"),
     }
     let report = Report {
         suite: suite.name(),
@@ -537,11 +604,17 @@ fn describe(config: &SuiteConfig, count: usize, seed: u64) -> String {
             s.range_noise_m * 1e3
         ),
         SuiteSensor::Spinning(l) => format!(
-            "a spinning LiDAR ({} rings {}°..{}°, {}° azimuth step, {} m, {} mm range noise)",
+            "a {} LiDAR ({} rings {}°..{}°, {}° azimuth step over {}°, {} m, {} mm range noise)",
+            if l.azimuth_fov_deg >= 360.0 {
+                "spinning"
+            } else {
+                "solid-state"
+            },
             l.rings,
             l.elevation_min_deg,
             l.elevation_max_deg,
             l.azimuth_step_deg,
+            l.azimuth_fov_deg,
             l.max_range_m,
             l.range_noise_m * 1e3
         ),

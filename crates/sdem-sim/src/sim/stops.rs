@@ -204,7 +204,12 @@ pub(super) fn place_stop(
     })
 }
 
-pub(super) fn check_clearance(scene: &Scene, lift: &LiftConfig, stop: &Stop, index: usize) -> Result<()> {
+pub(super) fn check_clearance(
+    scene: &Scene,
+    lift: &LiftConfig,
+    stop: &Stop,
+    index: usize,
+) -> Result<()> {
     let sensor = stop.world_from_sensor(lift)?.translation.vector;
     let clearance = scene.clearance(&sensor, CLEARANCE_DIRECTIONS);
     if clearance < MIN_SENSOR_CLEARANCE_M {

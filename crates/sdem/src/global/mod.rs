@@ -91,8 +91,10 @@ pub fn rotation_prior(
 /// At most this many heading hypotheses are searched.
 const MAX_HEADINGS: usize = 6;
 /// Each heading hypothesis is searched over ± this, degrees: the correlation's peaks lie
-/// within ±0.5° of the truth on the scenes measured; the rest is the margin for a blunt peak.
-pub const HYPOTHESIS_HEADING_DEG: f64 = 2.0;
+/// within ±0.5° of the truth on the scenes measured; the rest is the margin for a blunt peak
+/// (an optimum on this window's edge is searched again centred on it). ±2° found the same 25
+/// of 40 `unlevelled` pairs in 1.3–1.5 times the time.
+pub const HYPOTHESIS_HEADING_DEG: f64 = 1.2;
 /// Two headings farther apart than this are different answers, for the doubt
 /// [`Doubt::AnotherRotation`].
 const OTHER_ROTATION: f64 = 5.0 * PI / 180.0;

@@ -56,17 +56,33 @@ pub(super) struct Closing {
     pub attempts: Vec<Attempt>,
     /// The graph of this segment changed and needs optimizing.
     pub changed: Option<usize>,
+    /// The newest node that accepted a loop closure before this step (the solve frees what
+    /// drifted since).
+    pub anchored: Option<usize>,
 }
 
 impl Slam {
     /// Step 4: the loop closures of node `to` within its segment, checked against the others,
     /// and, when the map has other segments, a join with one of them.
     pub(super) fn close_loops(&mut self, to: usize) -> Result<Closing> {
-        let mut closing = Closing::default();
+        let mut closing = Closing {
+            anchored: self.upkeep.last_closure(),
+            ..Closing::default()
+        };
         if !self.config.loop_closure.enabled {
             return Ok(closing);
         }
-        for place in self.loop_candidates(to)? {
+        // Within a few stops of an accepted closure none is looked for (on a route that
+        // retraces itself every stop could close one; one in a few keeps the map as well).
+        let places = match self.upkeep.closure_paused(to) {
+            true => Vec::new(),
+            false => {
+                let near = self.nodes_near(to, self.config.loop_closure.search_radius_m);
+                self.upkeep.bring(&mut self.map, &near)?;
+                self.loop_candidates(to)?
+            }
+        };
+        for place in places {
             let prior = self.map.nodes[to].world_from_sensor;
             let mut closure = verify_loop_closure_against(
                 &self.map,
@@ -79,6 +95,9 @@ impl Slam {
             )?;
             if closure.accepted {
                 self.admit(&mut closure, &mut closing);
+                if closure.accepted {
+                    self.upkeep.closure_accepted(to);
+                }
             }
             closing.checked.push(closure);
         }
@@ -112,7 +131,7 @@ impl Slam {
             &self.config.sdem,
         )?;
         let seeing: Vec<usize> = (self.map)
-            .overlaps_among(&near, &query, &node.position(), 0.2)
+            .overlaps_among(near.iter().copied(), &query, &node.position(), f64::INFINITY, 0.2)
             .into_iter()
             .filter(|&(_, cells)| cells >= config.min_overlap_cells)
             .map(|(id, _)| id)
@@ -264,7 +283,7 @@ impl Slam {
         closure.inlier_fraction = Some(matched.diagnostics.inlier_fraction);
         closure.from_from_to = Some(edge.from_from_to);
         closure.covariance = covariance;
-        let join = self.join_segments(edge, &world_from_to);
+        let join = self.join_segments(edge, &world_from_to)?;
         closure.correction_m = Some(join.moved_m);
         self.unplaced_segments.retain(|&s| s != join.absorbed);
         self.measured_segments.retain(|&s| s != join.absorbed);
@@ -318,7 +337,13 @@ impl Slam {
         };
         let query = Sdem::from_points(&points, &prediction.attitude, &self.config.sdem)?;
         let tolerance = 0.2 + prediction.window_half[0].max(prediction.window_half[1]);
-        let scored = (self.map).overlaps_among(&near, &query, &prediction.position, tolerance);
+        let scored = (self.map).overlaps_among(
+            near.iter().copied(),
+            &query,
+            &prediction.position,
+            f64::INFINITY,
+            tolerance,
+        );
         let Some(&(first, cells)) = scored.first() else {
             return Ok(None);
         };

@@ -26,8 +26,14 @@
 //!    later confident match joins the segments.
 //! 4. **Close loops** (`closures`): older nodes that see what the new one sees are verified
 //!    with the exact search over every heading, checked for consistency with the other
-//!    closures, and the segment's pose graph is optimized (robust Cauchy kernel); the fused map
-//!    is rebuilt on the new poses.
+//!    closures, and the pose graph is optimized (robust Cauchy kernel): over the part of it
+//!    the closure touches when the map is one segment, else the closure's segment alone; the
+//!    nodes that moved are fused again into the voxel map, a few per stop.
+//!
+//! As the map grows the work per stop stays bounded (`upkeep`): the fused map takes a moved
+//! node's scan out and puts it back instead of fusing every scan again, the graph is solved
+//! over the part a closure touches, and with a node store attached, the nodes far from the
+//! robot keep their points there.
 //!
 //! Each step reports its status ([`StepStatus`]: tracked, recovered and how, relocalized, a
 //! new segment, doubtful), every search it tried ([`Attempt`]) and its doubts.
@@ -35,7 +41,8 @@
 //! The module's files: this one holds the loop, `predictions`, `recovery`, `segments` and
 //! `closures` its stages, `options` the configuration, `step` what a step reports,
 //! `relocalize` finding a scan in a saved map, `trajectory` the errors of an estimated
-//! trajectory against a reference one.
+//! trajectory against a reference one, `upkeep` what keeps the work per stop and the memory
+//! bounded as the map grows.
 
 mod closures;
 mod options;
@@ -45,6 +52,7 @@ mod relocalize;
 mod segments;
 mod step;
 mod trajectory;
+mod upkeep;
 
 pub use options::{is_spinning_lidar, RecoveryOptions, SlamOptions};
 pub use relocalize::{relocalize, Near, Relocalization};
@@ -54,15 +62,19 @@ pub use step::{
     StepReport, StepStatus,
 };
 pub use trajectory::{trajectory_errors, TrajectoryErrors};
+pub use upkeep::GrowthOptions;
 
 use crate::error::{Error, Result};
 use crate::geometry::{pose_from_parts, Attitude, Pose, Vec3};
 use crate::map::{LoopClosure, Map, Node};
 use crate::posegraph::{Edge, EdgeKind};
+use crate::store::NodeStore;
 use crate::voxel::VoxelMap;
 use nalgebra::{Matrix3, Matrix6};
 use recovery::{Located, Matched};
+use std::sync::Arc;
 use std::time::Instant;
+use upkeep::Upkeep;
 
 /// One scan as the loop receives it.
 #[derive(Debug, Clone)]
@@ -100,14 +112,17 @@ impl Odometry {
 #[derive(Debug, Clone)]
 pub struct Slam {
     config: SlamOptions,
-    /// The nodes.
+    /// The nodes. With a node store attached ([`Slam::set_node_store`]), the points of nodes
+    /// far from the robot are in the store and their `points_in_sensor` is empty: read them
+    /// through [`Slam::node_points`].
     pub map: Map,
     /// The pose graph's edges (matches to reference nodes and loop closures).
     pub edges: Vec<Edge>,
     /// Accepted loop closures.
     pub loop_closures: Vec<LoopClosure>,
-    /// The fused occupancy map of the world's segment on the current poses.
-    pub voxels: VoxelMap,
+    /// The node index, the fused occupancy map (of the world's segment) and the nodes'
+    /// residency.
+    upkeep: Upkeep,
     /// Every loop closure the match verified, accepted or not, for the consistency check.
     closure_pool: Vec<LoopClosure>,
     /// Segments started with no prior at all (a run begun in a saved map and found nowhere):
@@ -136,13 +151,13 @@ impl Slam {
     /// An invalid configuration.
     pub fn new(config: SlamOptions) -> Result<Self> {
         config.validate()?;
-        let voxels = VoxelMap::new(config.voxel)?;
+        let upkeep = Upkeep::new(&config.growth, config.voxel)?;
         Ok(Self {
             config,
             map: Map::default(),
             edges: Vec::new(),
             loop_closures: Vec::new(),
-            voxels,
+            upkeep,
             closure_pool: Vec::new(),
             unplaced_segments: Vec::new(),
             measured_segments: Vec::new(),
@@ -197,7 +212,7 @@ impl Slam {
             slam.last_scan_index = Some(last.scan_index);
             slam.next_scan_index = last.scan_index + 1;
         }
-        slam.rebuild_voxels();
+        slam.rebuild_voxels()?;
         Ok(slam)
     }
 
@@ -304,27 +319,89 @@ impl Slam {
         self.map.nodes.iter().map(|n| n.world_from_sensor).collect()
     }
 
-    /// Rebuilds the fused voxel map from every node of the world's segment on the current poses.
-    pub fn rebuild_voxels(&mut self) {
-        let mut voxels = VoxelMap::new(self.config.voxel)
-            .expect("the voxel configuration was validated in Slam::new");
-        let world = self.world_segment();
-        for node in self.map.nodes.iter().filter(|n| n.segment == world) {
-            voxels.insert_scan(&node.world_from_sensor, &node.sensor_points());
+    /// Indexes every node afresh and fuses those of the world's segment, on the current poses.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back.
+    pub fn rebuild_voxels(&mut self) -> Result<()> {
+        self.upkeep.rebuild(&mut self.map)
+    }
+
+    /// The fused occupancy map of the world's segment: every node's scan, each at the pose it
+    /// was fused at, which lies within [`GrowthOptions::refuse_tolerance_m`] and
+    /// `refuse_tolerance_deg` of its current one once [`Slam::settle_map`] has run (after a
+    /// loop closure, the moved nodes are fused again a few per stop).
+    pub fn voxels(&self) -> VoxelMap {
+        self.upkeep.fusion.to_voxel_map()
+    }
+
+    /// Fuses again every node a solve moved beyond the tolerances, so that [`Slam::voxels`]
+    /// and [`Slam::merged_cloud`] show the map on the current poses.
+    ///
+    /// # Returns
+    /// The nodes fused again.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back.
+    pub fn settle_map(&mut self) -> Result<usize> {
+        let keep = self.config.loop_closure.min_node_separation + 1;
+        self.upkeep.after_step(&mut self.map, keep, true)
+    }
+
+    /// Keeps the points of nodes far from the robot in `store`: from now on at most
+    /// [`GrowthOptions::resident_nodes`] nodes hold their points in memory, the most recently
+    /// used; the others' come back from the store when a step needs them (a loop closure to an
+    /// old place, a moved node fused again). A parked node is no candidate of a search of the
+    /// whole map without a prior (relocalization, a segment's join by place).
+    pub fn set_node_store(&mut self, store: Arc<dyn NodeStore>) {
+        self.upkeep.set_store(store);
+    }
+
+    /// Node `node_id`'s points, sensor frame: from memory, or read back from the node store
+    /// for this use when the node is parked.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back; [`Error::Invalid`]
+    /// for a node not in the map.
+    pub fn node_points(&self, node_id: usize) -> Result<std::borrow::Cow<'_, [[f32; 3]]>> {
+        if node_id >= self.map.nodes.len() {
+            return Err(Error::Invalid(format!(
+                "node {node_id} is not in the map ({} nodes)",
+                self.map.nodes.len()
+            )));
         }
-        self.voxels = voxels;
+        self.upkeep.residency.points_of(&self.map, node_id)
+    }
+
+    /// The number of node `node_id`'s points, parked or not (0 for a node not in the map).
+    pub fn node_point_count(&self, node_id: usize) -> usize {
+        self.upkeep.residency.point_count(&self.map, node_id)
+    }
+
+    /// Nodes whose points are in memory (all of them without a node store).
+    pub fn resident_nodes(&self) -> usize {
+        self.upkeep.residency.resident(&self.map)
     }
 
     /// The merged point cloud: every node's points of the world's segment in the world, kept
     /// where the fused map is occupied now (moved rubble, seen through later, drops out), one
-    /// per voxel.
-    pub fn merged_cloud(&self) -> Vec<Vec3> {
+    /// per voxel. Parked nodes are read back one at a time.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back.
+    pub fn merged_cloud(&self) -> Result<Vec<Vec3>> {
+        let voxels = self.voxels();
+        let mut merged = voxels.occupied_centroids();
         let world = self.world_segment();
-        let all: Vec<Vec3> = (self.map.nodes.iter())
-            .filter(|n| n.segment == world)
-            .flat_map(|n| n.points_in_world())
-            .collect();
-        self.voxels.filter_occupied(&all)
+        for node in self.map.nodes.iter().filter(|n| n.segment == world) {
+            let points = self.node_points(node.node_id)?;
+            merged.add(points.iter().map(|p| {
+                (node.world_from_sensor
+                    * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                .coords
+            }));
+        }
+        Ok(merged.finish())
     }
 
     /// Runs one step of the loop on `scan`.
@@ -341,6 +418,10 @@ impl Slam {
         }
         self.check_order(scan)?;
         let node_id = self.map.nodes.len();
+        if let Some(last) = self.last_node {
+            let near = self.nodes_near(last, self.config.recovery.other_nodes_radius_m);
+            self.upkeep.bring(&mut self.map, &near)?;
+        }
         let mut attempts = Vec::new();
         let located = self.locate(scan, self.last_node, &mut attempts)?;
         let (status, matched, segment, world_from_sensor) = match located {
@@ -379,10 +460,14 @@ impl Slam {
         let mut closing = self.close_loops(node_id)?;
         attempts.append(&mut closing.attempts);
         let optimization = match closing.changed {
-            Some(segment) => Some(self.optimize_segment(segment)?),
+            Some(segment) => Some(self.solve_after_closure(segment, closing.anchored)?),
             None => None,
         };
         let loop_closure_ms = ms(closing_start);
+        let map_start = Instant::now();
+        let keep = self.config.loop_closure.min_node_separation + 1;
+        self.upkeep.after_step(&mut self.map, keep, false)?;
+        let map_update_ms = ms(map_start);
         let pose = self.map.nodes[node_id].world_from_sensor;
         let doubts = matched.as_ref().map(|m| m.doubts.clone()).unwrap_or_default();
         Ok(StepReport {
@@ -400,6 +485,7 @@ impl Slam {
             time_ms: ms(start),
             localize_ms: matched.as_ref().map_or(0.0, |m| m.localize_ms),
             loop_closure_ms,
+            map_update_ms,
             world_from_sensor: (&pose).into(),
             predicted_world_from_sensor: (&matched.as_ref().map_or(pose, |m| m.predicted)).into(),
             heading_prior: matched
@@ -451,6 +537,7 @@ impl Slam {
             time_ms: ms(start),
             localize_ms: 0.0,
             loop_closure_ms: 0.0,
+            map_update_ms: 0.0,
             world_from_sensor: (&pose).into(),
             predicted_world_from_sensor: (&pose).into(),
             heading_prior: HeadingPrior::First,
@@ -468,9 +555,9 @@ impl Slam {
     }
 
     /// Adds the scan as node `node_id` of `segment` at `world_from_sensor`, with one edge from
-    /// each of `links` (together they carry the match's information once), fuses its points
-    /// into the voxel map when it is in the world's segment, and makes it the robot's last
-    /// stop.
+    /// each of `links` (together they carry the match's information once), indexes it, fuses
+    /// its points into the voxel map when it is in the world's segment, and makes it the
+    /// robot's last stop.
     fn add_node(
         &mut self,
         scan: &ScanInput,
@@ -504,11 +591,8 @@ impl Slam {
                 kind: EdgeKind::Odometry,
             });
         }
-        if segment == self.world_segment() || self.map.nodes.is_empty() {
-            self.voxels
-                .insert_scan(&node.world_from_sensor, &node.sensor_points());
-        }
         self.map.nodes.push(node);
+        self.upkeep.node_added(&self.map, node_id)?;
         self.last_node = Some(node_id);
         self.last_scan_index = Some(scan.scan_index);
         Ok(())
@@ -530,9 +614,10 @@ impl Slam {
         self.loop_closures.push(closure.clone());
     }
 
-    /// Optimizes the pose graph of every segment (each with its first node held), moves the
-    /// nodes and rebuilds the fused map. Returns the summary of all: iterations and costs
-    /// added up, the largest move.
+    /// Optimizes the whole pose graph of every segment (each with its first node held) and
+    /// moves the nodes; the fused map follows them in the steps to come, or at once with
+    /// [`Slam::settle_map`]. Returns the summary of all: iterations, costs and free nodes added
+    /// up, the largest move.
     ///
     /// # Errors
     /// The optimizer's errors (invalid edges).
@@ -544,6 +629,8 @@ impl Slam {
             final_cost: 0.0,
             time_ms: 0.0,
             max_node_shift_m: 0.0,
+            free_nodes: 0,
+            whole_graph: true,
         };
         for segment in self.segments() {
             let s = self.optimize_segment(segment.id)?;
@@ -551,6 +638,7 @@ impl Slam {
             total.initial_cost += s.initial_cost;
             total.final_cost += s.final_cost;
             total.max_node_shift_m = total.max_node_shift_m.max(s.max_node_shift_m);
+            total.free_nodes += s.free_nodes;
         }
         total.time_ms = ms(start);
         Ok(total)

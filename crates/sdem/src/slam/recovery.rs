@@ -300,7 +300,7 @@ impl Slam {
         // Counted with the window's tolerance: the prediction may be that far off.
         let tolerance = 0.2 + prediction.window_half[0].max(prediction.window_half[1]);
         let references: Vec<(usize, usize)> = (self.map)
-            .overlaps_among(&near, query, &prediction.position, tolerance)
+            .overlaps_among(near.iter().copied(), query, &prediction.position, f64::INFINITY, tolerance)
             .into_iter()
             .filter(|&(_, cells)| cells >= self.config.min_reference_overlap_cells)
             .take(2 * self.config.max_reference_nodes)
@@ -323,7 +323,7 @@ impl Slam {
         prediction: &Prediction,
     ) -> Vec<(usize, usize)> {
         let references: Vec<(usize, usize)> = (self.map)
-            .overlaps_among(candidates, query, &prediction.position, 0.2)
+            .overlaps_among(candidates.iter().copied(), query, &prediction.position, f64::INFINITY, 0.2)
             .into_iter()
             .filter(|&(_, cells)| cells >= self.config.min_reference_overlap_cells)
             .take(self.config.max_reference_nodes)

@@ -63,6 +63,17 @@ impl Slam {
         self.map.nodes.first().map_or(0, |n| n.segment)
     }
 
+    /// The nodes of `node`'s segment whose origins lie within `radius_m` of its (`node`
+    /// among them).
+    pub(super) fn nodes_near(&self, node: usize, radius_m: f64) -> Vec<usize> {
+        let n = &self.map.nodes[node];
+        (self.map.nodes.iter())
+            .filter(|m| m.segment == n.segment)
+            .filter(|m| (m.position() - n.position()).norm() <= radius_m)
+            .map(|m| m.node_id)
+            .collect()
+    }
+
     /// The nodes of `segment`, in order.
     pub(super) fn segment_nodes(&self, segment: usize) -> Vec<usize> {
         (self.map.nodes.iter())
@@ -75,7 +86,10 @@ impl Slam {
     /// match measured in `a`'s segment's frame as `world_from_b`): the younger segment's nodes
     /// are moved rigidly so that `b` stands at `world_from_b` in the older one's frame (or `a`
     /// where `b` says), relabelled, and the edge added. Returns the join.
-    pub(super) fn join_segments(&mut self, edge: Edge, world_from_b: &Pose) -> SegmentJoin {
+    ///
+    /// # Errors
+    /// [`crate::Error::NodeStore`] when a parked node's points cannot be read back to fuse it.
+    pub(super) fn join_segments(&mut self, edge: Edge, world_from_b: &Pose) -> Result<SegmentJoin> {
         let (a, b) = (edge.from, edge.to);
         let (segment_a, segment_b) = (self.map.nodes[a].segment, self.map.nodes[b].segment);
         let b_now = self.map.nodes[b].world_from_sensor;
@@ -93,16 +107,18 @@ impl Slam {
         }
         let moved_m = (self.map.nodes[absorbed].position() - first).norm();
         self.edges.push(edge);
-        SegmentJoin {
+        let ids = self.segment_nodes(into);
+        self.upkeep.joined(&mut self.map, &ids)?;
+        Ok(SegmentJoin {
             into,
             absorbed,
             link: (a, b),
             moved_m,
-        }
+        })
     }
 
-    /// Optimizes the pose graph of `segment` alone (its first node held), moves its nodes and,
-    /// for the world's segment, rebuilds the fused map.
+    /// Optimizes the whole pose graph of `segment` alone (its first node held) and moves its
+    /// nodes (the fused map follows them in the steps to come).
     ///
     /// # Errors
     /// The optimizer's errors (invalid edges).
@@ -132,15 +148,55 @@ impl Slam {
             max_shift = max_shift.max((node.position() - pose.translation.vector).norm());
             node.world_from_sensor = pose;
         }
-        if segment == self.world_segment() {
-            self.rebuild_voxels();
-        }
+        self.upkeep.all_moved(&self.map);
         Ok(OptimizationSummary {
             iterations: report.iterations,
             initial_cost: report.initial_cost,
             final_cost: report.final_cost,
             time_ms: ms(start),
             max_node_shift_m: max_shift,
+            free_nodes: ids.len().saturating_sub(1),
+            whole_graph: true,
+        })
+    }
+
+    /// Solves the pose graph after the loop closures of this step in `segment` (the last
+    /// closure before them accepted at node `anchored`). A map of one segment is solved over
+    /// the part of it that drifted since, grown as far as the edges ask, the whole graph when
+    /// it reaches that far ([`crate::posegraph::optimize_local`]); a map of several segments
+    /// solves `segment` alone, whole. The moved nodes are fused again in the steps to come.
+    ///
+    /// # Errors
+    /// The optimizer's errors (invalid edges).
+    pub(super) fn solve_after_closure(
+        &mut self,
+        segment: usize,
+        anchored: Option<usize>,
+    ) -> Result<OptimizationSummary> {
+        let last = self.map.nodes.len().saturating_sub(1);
+        let oldest = (self.loop_closures.iter())
+            .filter(|c| c.to == last)
+            .map(|c| c.from.min(c.to))
+            .min();
+        let (Some(oldest), true) = (oldest, self.segments().len() == 1) else {
+            return self.optimize_segment(segment);
+        };
+        let start = Instant::now();
+        let (solve, max_shift) = self.upkeep.solve(
+            &mut self.map,
+            &self.edges,
+            oldest,
+            anchored,
+            &self.config.optimize,
+        )?;
+        Ok(OptimizationSummary {
+            iterations: solve.report.iterations,
+            initial_cost: solve.report.initial_cost,
+            final_cost: solve.report.final_cost,
+            time_ms: ms(start),
+            max_node_shift_m: max_shift,
+            free_nodes: solve.free_nodes,
+            whole_graph: solve.whole,
         })
     }
 }
