@@ -157,7 +157,9 @@ mod tests {
 
     fn descriptor(scale: f32) -> Descriptor {
         Descriptor {
-            mean_range: (0..72).map(|k| scale * (1.0 + (k % 5) as f32)).collect(),
+            mean_range: (0..crate::map::SECTORS * crate::map::BANDS)
+                .map(|k| scale * (1.0 + (k % 5) as f32))
+                .collect(),
         }
     }
 

@@ -226,6 +226,8 @@ mod tests {
                     world_from_sensor: Pose::identity(),
                     attitude_reading: None,
                     points_in_sensor: vec![[i as f32, 1.0, 2.0]; 10 + i],
+                    segment: 0,
+                    run: 0,
                 })
                 .collect(),
         }

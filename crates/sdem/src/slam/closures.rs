@@ -333,6 +333,7 @@ impl Slam {
             heading_half,
             window_half,
             prior_sigma_m: f64::INFINITY,
+            motion_sigma_m: f64::INFINITY,
             measured: false,
         };
         let query = Sdem::from_points(&points, &prediction.attitude, &self.config.sdem)?;

@@ -511,7 +511,8 @@ impl Slam {
     fn check_order(&self, scan: &ScanInput) -> Result<()> {
         match self.last_scan_index {
             Some(last) if scan.scan_index <= last => Err(Error::Invalid(format!(
-                "scan {} comes after scan {last} of this run in the map; scans must be added in                  order",
+                "scan {} comes after scan {last} of this run in the map; scans must be added in \
+                 order",
                 scan.scan_index
             ))),
             _ => Ok(()),

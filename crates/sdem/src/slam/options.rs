@@ -26,9 +26,10 @@ pub struct SlamOptions {
     /// position along a featureless ditch).
     pub prior_sigma_m: f64,
     /// The odometry's error grows with the distance it measured: its window's horizontal
-    /// half-size is at least 2.5 times this share of the distance driven since the last stop,
-    /// and its σ at least this share (a crawler's tracks slip by 10–15 % on rubble, and a step
-    /// of 1.5 m is 20 cm off then).
+    /// half-size is at least twice this share of the distance driven since the last stop,
+    /// and the variance its position carries along a direction the scans leave free at least
+    /// this share squared (a crawler's tracks slip by 10–15 % on rubble, and a step of 1.5 m
+    /// is 20 cm off then). The cost's prior keeps `prior_sigma_m`.
     pub odometry_error_per_m: f64,
     /// Standard deviation of the prediction without odometry (the last motion repeated), metres.
     pub prior_sigma_no_odometry_m: f64,

@@ -28,6 +28,9 @@ pub(super) struct Prediction {
     pub window_half: [f64; 3],
     /// The prediction's σ, metres, weighed into the cost.
     pub prior_sigma_m: f64,
+    /// How far off the measured motion may be, metres (one σ): the variance its position
+    /// carries along a direction the scans leave free.
+    pub motion_sigma_m: f64,
     /// The prediction measures the motion (odometry): along a direction the scans leave free,
     /// its position is taken, with its uncertainty.
     pub measured: bool,
@@ -104,7 +107,13 @@ impl Slam {
                 heading_prior,
                 heading_half,
                 window_half: config.window_half_no_odometry_m,
-                prior_sigma_m: config.prior_sigma_no_odometry_m,
+                // With odometry these are the alternatives to a measured motion: no prior pins
+                // them, so that a direction the scans leave free shows as a doubt.
+                prior_sigma_m: match scan.odometry {
+                    Some(_) => f64::INFINITY,
+                    None => config.prior_sigma_no_odometry_m,
+                },
+                motion_sigma_m: f64::INFINITY,
                 measured: false,
             }
         };
@@ -118,7 +127,7 @@ impl Slam {
             );
             let mut window_half = config.window_half_m;
             for h in &mut window_half[..2] {
-                *h = h.max(2.5 * sigma);
+                *h = h.max(2.0 * sigma);
             }
             all.push(Prediction {
                 source: PredictionSource::Odometry,
@@ -127,7 +136,8 @@ impl Slam {
                 heading_prior: HeadingPrior::Odometry,
                 heading_half: config.heading_half_deg,
                 window_half,
-                prior_sigma_m: sigma,
+                prior_sigma_m: config.prior_sigma_m,
+                motion_sigma_m: sigma,
                 measured: true,
             });
         }

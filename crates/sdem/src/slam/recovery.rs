@@ -131,11 +131,28 @@ impl Slam {
         let predictions = self.predictions(scan, last);
         let mut best: Option<(Matched, Prediction)> = None;
         for (k, prediction) in predictions.iter().enumerate() {
-            let tried = self.try_prediction(scan, prediction, Nodes::Recent, segment, last, attempts)?;
+            // Only the first prediction's match may be taken from the quick search: another
+            // one (no motion, a neighbour's place) is the best of its window only, and in a
+            // corridor that is anywhere along it, so the runner-up is searched for it.
+            let tried = self.try_prediction(
+                scan,
+                prediction,
+                Nodes::Recent,
+                k > 0,
+                (segment, last),
+                attempts,
+            )?;
             match tried {
                 Some((matched, true)) => {
                     let status = if k == 0 { StepStatus::Tracked } else { StepStatus::Recovered };
                     return Ok(found(matched, status, segment));
+                }
+                Some((matched, false)) if prediction.measured && self.confirms(&matched) => {
+                    // The scans match where the odometry says, and doubt only what a free
+                    // direction makes them doubt: the measured motion stands (the step is
+                    // doubtful), and no other place is searched — in a corridor another
+                    // prediction's window holds a match as good anywhere along it.
+                    return Ok(found(matched, StepStatus::Tracked, segment));
                 }
                 Some((matched, false)) => keep_best(&mut best, matched, prediction),
                 None => {}
@@ -162,7 +179,14 @@ impl Slam {
             if prediction.source == PredictionSource::OtherNodes && same_nodes(&recent, &others) {
                 continue;
             }
-            match self.try_prediction(scan, prediction, Nodes::Segment, segment, last, attempts)? {
+            match self.try_prediction(
+                scan,
+                prediction,
+                Nodes::Segment,
+                true,
+                (segment, last),
+                attempts,
+            )? {
                 Some((matched, true)) => return Ok(found(matched, StepStatus::Recovered, segment)),
                 Some((matched, false)) => keep_best(&mut best, matched, prediction),
                 None => {}
@@ -203,16 +227,17 @@ impl Slam {
 
     /// One prediction: the reference nodes of `segment` near it (`nodes` says which), the
     /// exact search in its window, and the verdict. `None` when nothing in the window matches;
-    /// else the match and whether it is taken. A search of the recent nodes from a prediction
-    /// is the quick one (no runner-up search); the others look for a runner-up, and may take
-    /// a match that shares little with the map but that little with confidence.
+    /// else the match and whether it is taken. Without `checked` the search is the quick one
+    /// (no runner-up search); with it, it looks for a runner-up, and may take a match that
+    /// shares little with the map but that little with confidence. `(segment, last)`: the
+    /// segment searched and the robot's last node.
     fn try_prediction(
         &self,
         scan: &ScanInput,
         prediction: &Prediction,
         nodes: Nodes,
-        segment: usize,
-        last: usize,
+        checked: bool,
+        (segment, last): (usize, usize),
         attempts: &mut Vec<Attempt>,
     ) -> Result<Option<(Matched, bool)>> {
         let start = Instant::now();
@@ -221,7 +246,6 @@ impl Slam {
             Nodes::Recent => self.reference_nodes(&query, prediction, segment, last),
             Nodes::Segment => self.segment_references(&query, prediction, segment, last),
         };
-        let checked = nodes == Nodes::Segment;
         // The quick search takes no match with fewer inliers than tracking needs; the wide one
         // none that could not be told from its runner-up; a search for a partial overlap
         // keeps the configured floor.
@@ -247,6 +271,25 @@ impl Slam {
         attempt.time_ms = ms(start);
         attempts.push(attempt);
         Ok(outcome)
+    }
+
+    /// Whether a match from the odometry's prediction confirms it: as many of the scan's
+    /// points match as tracking needs, and its only doubts are the ones a direction the scans
+    /// leave free brings (flat cost or covariance, nothing facing that way, the refinement
+    /// sliding beyond its plausible move, the optimum on the window's edge).
+    fn confirms(&self, matched: &Matched) -> bool {
+        matched.diagnostics.inlier_fraction >= self.config.min_tracking_inlier_fraction
+            && matched.doubts.iter().all(|d| {
+                matches!(
+                    d,
+                    Doubt::FlatCost { .. }
+                        | Doubt::FlatCovariance { .. }
+                        | Doubt::Unconstrained { .. }
+                        | Doubt::RefinementFailed { .. }
+                        | Doubt::OnWindowEdge
+                        | Doubt::TakenFromPrediction { .. }
+                )
+            })
     }
 
     /// The scan's S-DEM levelled by `attitude`; an error when no point is usable.
@@ -456,13 +499,19 @@ impl MapSearch<'_> {
         // reference's own origin (a forward-looking scan in a straight corridor came out 20 %
         // short at every step). Where the odometry measured the motion, it decides there, and
         // the edge carries its uncertainty.
-        if prediction.measured {
+        if prediction.measured && matched.diagnostics.flat_direction.is_some() {
+            // Along the free direction the refinement and the grid's optimum slide as the
+            // sampling pulls them, to the window's edge or beyond the refinement's plausible
+            // move: the position there is the odometry's, so neither says the match is wrong.
+            matched.doubts.retain(|d| {
+                !matches!(d, Doubt::RefinementFailed { .. } | Doubt::OnWindowEdge)
+            });
             take_prediction_along(
                 &mut matched.world_from_sensor,
                 &mut matched.diagnostics,
                 &mut matched.doubts,
                 &position,
-                prediction.prior_sigma_m,
+                prediction.motion_sigma_m,
             );
         }
         Ok(matched)
@@ -518,9 +567,12 @@ impl MapSearch<'_> {
             (Some(doubt), ..) => matched.doubts.push(doubt.clone()),
             _ => {}
         }
-        matched.doubts.extend(
-            (coarse.doubts.into_iter()).filter(|d| matches!(d, Doubt::AnotherRotation { .. })),
-        );
+        // The coarse optimum on its window's edge: the true pose may lie beyond the window,
+        // whatever the fine search around it says.
+        matched.doubts.retain(|d| !matches!(d, Doubt::OnWindowEdge));
+        matched.doubts.extend((coarse.doubts.into_iter()).filter(|d| {
+            matches!(d, Doubt::AnotherRotation { .. } | Doubt::OnWindowEdge)
+        }));
         matched.predicted = prediction.pose();
         matched.localize_ms += coarse.localize_ms;
         Ok(matched)
@@ -546,6 +598,7 @@ impl MapSearch<'_> {
                 window_half: [FINE_HALF_M; 3],
                 heading_half: FINE_HEADING_DEG,
                 prior_sigma_m: f64::INFINITY,
+            motion_sigma_m: f64::INFINITY,
                 measured: false,
                 ..prediction.clone()
             };
@@ -635,6 +688,7 @@ impl MapSearch<'_> {
             heading_half: 180.0,
             window_half: half,
             prior_sigma_m: f64::INFINITY,
+            motion_sigma_m: f64::INFINITY,
             measured: false,
         };
         let mut attempt = Attempt::new(&prediction, &references);
