@@ -282,7 +282,12 @@ impl Peers {
     /// Runs KISS-ICP odometry (`odometry_seq.py`, beside the pairs' script) over the clouds in
     /// `scans` (`*.ply`, in name order) against the truth `truth` (KITTI poses), with the
     /// sensor's `max_range_m`.
-    pub(crate) fn run_odometry(&self, scans: &Path, truth: &Path, max_range_m: f64) -> PeerOdometry {
+    pub(crate) fn run_odometry(
+        &self,
+        scans: &Path,
+        truth: &Path,
+        max_range_m: f64,
+    ) -> PeerOdometry {
         let failed = |why: String| PeerOdometry {
             ate_rmse_m: None,
             rpe_translation_rmse_m: None,
@@ -309,7 +314,10 @@ impl Peers {
         if !output.status.success() {
             let stderr = String::from_utf8_lossy(&output.stderr);
             let last = stderr.lines().last().unwrap_or("").to_string();
-            return failed(format!("odometry_seq.py exited with {}: {last}", output.status));
+            return failed(format!(
+                "odometry_seq.py exited with {}: {last}",
+                output.status
+            ));
         }
         let stdout = String::from_utf8_lossy(&output.stdout);
         let Some(v) = (stdout.lines())

@@ -307,8 +307,9 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
             folder.display(),
             tried_words(&tried)
         ),
-        other => other
-            .with_context(|| format!("{} in the map {}", scan.display(), folder.display()))?,
+        other => {
+            other.with_context(|| format!("{} in the map {}", scan.display(), folder.display()))?
+        }
     };
     let outcome = Outcome::of(found.trusted, args.accept_doubtful);
     if args.json {

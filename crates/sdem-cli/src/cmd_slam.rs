@@ -854,7 +854,10 @@ fn print_doubtful_steps(args: &Args, report: &Report) {
                     "  scan {} NEW SEGMENT {}: found nowhere with confidence; its pose is a guess",
                     step["scan_index"], step["segment"]
                 );
-                let attempts = step["attempts"].as_array().map(Vec::as_slice).unwrap_or(&[]);
+                let attempts = step["attempts"]
+                    .as_array()
+                    .map(Vec::as_slice)
+                    .unwrap_or(&[]);
                 if let Some(reason) = attempts.last().and_then(|a| a["reason"].as_str()) {
                     println!("    last search: {reason}");
                 }

@@ -91,17 +91,34 @@ fn localize_without_a_prior_finds_a_scan_in_a_saved_map_or_says_it_is_not_there(
     // A scan of the mapped route, no pose given: found, within 5 cm of the truth.
     let found = run_json(
         dir.path(),
-        &["localize", "--map", "first", "data/scans/000003.ply", "--json"],
+        &[
+            "localize",
+            "--map",
+            "first",
+            "data/scans/000003.ply",
+            "--json",
+        ],
     );
     assert_eq!(found["trusted"], true, "{found}");
     let pose = &found["world_from_sensor"];
     let estimate = ["x", "y", "z"].map(|k| pose[k].as_f64().unwrap());
     let truth = position(&dir.path().join("data/poses_truth.txt"), 3);
-    assert!(distance(estimate, truth) < 0.05, "{estimate:?} against {truth:?}");
+    assert!(
+        distance(estimate, truth) < 0.05,
+        "{estimate:?} against {truth:?}"
+    );
     // A scan of another building: not found (exit status 1), with the candidates tried.
     run_ok(
         dir.path(),
-        &["simulate", "--out", "elsewhere", "--stops", "1", "--seed", "7"],
+        &[
+            "simulate",
+            "--out",
+            "elsewhere",
+            "--stops",
+            "1",
+            "--seed",
+            "7",
+        ],
     );
     let why = fails(
         dir.path(),
@@ -120,13 +137,19 @@ fn a_second_run_is_relocalized_in_the_saved_map_and_both_runs_are_saved() {
     second_dataset(dir.path(), 3, 6);
     let report = run_json(
         dir.path(),
-        &["slam", "second", "--map", "first", "--out", "both", "--json"],
+        &[
+            "slam", "second", "--map", "first", "--out", "both", "--json",
+        ],
     );
     // Its first stop is found in the map with no pose; the others are tracked from there.
     assert_eq!(report["run"], 1, "{report}");
     assert_eq!(report["extends"]["nodes"], 6);
     assert_eq!(report["nodes"], 9);
-    assert_eq!(report["statuses"]["relocalized"], 1, "{}", report["statuses"]);
+    assert_eq!(
+        report["statuses"]["relocalized"], 1,
+        "{}",
+        report["statuses"]
+    );
     let segments = report["segments"].as_array().unwrap();
     assert_eq!(segments.len(), 1, "{segments:?}");
     // Its poses are in the first run's frame: where the first run put the same stops (the
@@ -136,7 +159,10 @@ fn a_second_run_is_relocalized_in_the_saved_map_and_both_runs_are_saved() {
     let poses = dir.path().join("both/poses.txt");
     for i in 0..3 {
         let e = distance(position(&poses, i), position(&first, i + 3));
-        assert!(e < 0.005, "stop {i} of the second run is {e} m from the map's");
+        assert!(
+            e < 0.005,
+            "stop {i} of the second run is {e} m from the map's"
+        );
     }
     // The saved map is left as it was; the new one holds both runs.
     assert_eq!(std::fs::read(&manifest).unwrap(), saved_before);
@@ -149,7 +175,15 @@ fn a_second_run_is_relocalized_in_the_saved_map_and_both_runs_are_saved() {
     // The text output names each stop's status.
     let text = run_ok(
         dir.path(),
-        &["slam", "second", "--map", "first", "--out", "again", "--no-pictures"],
+        &[
+            "slam",
+            "second",
+            "--map",
+            "first",
+            "--out",
+            "again",
+            "--no-pictures",
+        ],
     );
     assert!(text.contains("relocalized"), "{text}");
     assert!(text.contains("steps: 1 relocalized, 2 tracked"), "{text}");

@@ -139,6 +139,8 @@ mod tests {
             points_in_sensor: (0..20 + id)
                 .map(|k| [k as f32 * 0.1, 1.0, id as f32])
                 .collect(),
+            segment: 0,
+            run: 0,
         }
     }
 

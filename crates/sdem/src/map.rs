@@ -519,8 +519,20 @@ pub fn verify_loop_closure(
             map.nodes.len()
         )));
     }
-    let place = map.nearby_in_segment(from, config.reference_radius_m, config.reference_nodes.max(1));
-    verify_loop_closure_against(map, &place, to, world_from_to_prior, sdem, localize_base, config)
+    let place = map.nearby_in_segment(
+        from,
+        config.reference_radius_m,
+        config.reference_nodes.max(1),
+    );
+    verify_loop_closure_against(
+        map,
+        &place,
+        to,
+        world_from_to_prior,
+        sdem,
+        localize_base,
+        config,
+    )
 }
 
 /// [`verify_loop_closure`] against the merged nodes `place` (the closure links the first one to
@@ -537,9 +549,9 @@ pub fn verify_loop_closure_against(
     localize_base: &LocalizeOptions,
     config: &LoopClosureConfig,
 ) -> Result<LoopClosure> {
-    let from = *place.first().ok_or_else(|| {
-        Error::Invalid(format!("loop closure to {to}: no node to close it with"))
-    })?;
+    let from = *place
+        .first()
+        .ok_or_else(|| Error::Invalid(format!("loop closure to {to}: no node to close it with")))?;
     let (Some(from_node), Some(to_node)) = (map.nodes.get(from), map.nodes.get(to)) else {
         return Err(Error::Invalid(format!(
             "loop closure {from}→{to}: node not in the map ({} nodes)",
@@ -565,7 +577,13 @@ pub fn verify_loop_closure_against(
         ..localize_base.clone()
     };
     let mut closure = LoopClosure::unchecked(from, to);
-    let found = match search_coarse_to_fine(&reference, &to_node.sensor_points(), &query, &localize_config, sdem) {
+    let found = match search_coarse_to_fine(
+        &reference,
+        &to_node.sensor_points(),
+        &query,
+        &localize_config,
+        sdem,
+    ) {
         Ok(found) => found,
         Err(e) if e.is_no_match() => {
             closure.reason = e.to_string();
@@ -589,7 +607,8 @@ pub fn verify_loop_closure_against(
     if closure.reason.is_empty() {
         closure.accepted = true;
         closure.from_from_to = Some(from_node.world_from_sensor.inverse() * world_from_to);
-        closure.covariance = (found.diagnostics.covariance).map(|c| Matrix6::from_fn(|i, j| c[i][j]));
+        closure.covariance =
+            (found.diagnostics.covariance).map(|c| Matrix6::from_fn(|i, j| c[i][j]));
     }
     Ok(closure)
 }
@@ -678,7 +697,8 @@ pub(crate) fn search_coarse_to_fine(
         }
     }
     found.doubts.extend(
-        (coarse.doubts.into_iter()).filter(|d| matches!(d, crate::doubt::Doubt::AnotherRotation { .. })),
+        (coarse.doubts.into_iter())
+            .filter(|d| matches!(d, crate::doubt::Doubt::AnotherRotation { .. })),
     );
     Ok(found)
 }

@@ -44,7 +44,12 @@ fn a_step_beyond_the_window_is_found_again_in_a_wider_one() {
     for (i, stop) in run.iter().enumerate() {
         let report = add(&mut slam, stop, i);
         if i == 2 {
-            assert_eq!(report.status, StepStatus::Recovered, "{:?}", report.attempts);
+            assert_eq!(
+                report.status,
+                StepStatus::Recovered,
+                "{:?}",
+                report.attempts
+            );
             assert!(report.trusted && report.doubts.is_empty());
             let how = report.recovery.expect("a recovered step says how");
             assert_ne!(how, PredictionSource::ConstantVelocity, "{how:?}");
@@ -78,11 +83,20 @@ fn a_scan_found_nowhere_starts_a_new_segment_and_leaves_the_map_alone() {
             odometry: None,
         })
         .unwrap();
-    assert_eq!(report.status, StepStatus::NewSegment, "{:?}", report.attempts);
+    assert_eq!(
+        report.status,
+        StepStatus::NewSegment,
+        "{:?}",
+        report.attempts
+    );
     assert!(!report.trusted);
     assert_eq!(report.segment, 1);
     // Every search was tried and refused, the widest window too.
-    assert!(report.attempts.iter().all(|a| !a.accepted), "{:?}", report.attempts);
+    assert!(
+        report.attempts.iter().all(|a| !a.accepted),
+        "{:?}",
+        report.attempts
+    );
     assert!((report.attempts.iter()).any(|a| a.source == PredictionSource::WiderWindow));
     // No edge ties the new segment to the world's, whose poses did not move.
     assert!(slam.edges.iter().all(|e| e.to != 1 && e.from != 1));
@@ -160,11 +174,17 @@ fn a_scan_is_relocalized_in_a_saved_map_without_a_prior_or_reported_not_found() 
     )
     .unwrap();
     assert!(found.trusted, "{found:?}");
-    let e = error_m(&Pose::from(&found.world_from_sensor), &fresh.world_from_sensor);
+    let e = error_m(
+        &Pose::from(&found.world_from_sensor),
+        &fresh.world_from_sensor,
+    );
     assert!(e < 0.02, "{e} m off");
     assert!(!found.candidates.is_empty());
     // A scan of no place in the map is not found, with the nodes tried.
-    let lifted: Vec<Vec3> = points.iter().map(|p| p - Vec3::new(0.0, 0.0, 2.5)).collect();
+    let lifted: Vec<Vec3> = points
+        .iter()
+        .map(|p| p - Vec3::new(0.0, 0.0, 2.5))
+        .collect();
     match relocalize(&slam.map, slam.config(), &lifted, None, None, 3) {
         Err(Error::NotFound { tried }) => assert!(!tried.is_empty()),
         other => panic!("a scan from nowhere came out as {other:?}"),
@@ -182,14 +202,22 @@ fn a_second_run_starts_with_no_pose_and_is_relocalized_into_the_map() {
         let report = add(&mut slam, stop, i);
         assert_eq!(report.run, 1);
         if i == 0 {
-            assert_eq!(report.status, StepStatus::Relocalized, "{:?}", report.attempts);
+            assert_eq!(
+                report.status,
+                StepStatus::Relocalized,
+                "{:?}",
+                report.attempts
+            );
         }
         assert_eq!(report.segment, 0, "{:?}", report.attempts);
     }
     let poses = slam.poses();
     for (pose, stop) in poses[6..].iter().zip(&second) {
         let e = error_m(pose, &stop.world_from_sensor);
-        assert!(e < 0.02, "a second-run stop {e} m from the truth in the first run's frame");
+        assert!(
+            e < 0.02,
+            "a second-run stop {e} m from the truth in the first run's frame"
+        );
     }
     assert!(slam.map.nodes[6..].iter().all(|n| n.run == 1));
 }
@@ -210,6 +238,9 @@ fn a_place_descriptor_recognises_a_place_whichever_way_the_robot_faced() {
     let (distance, heading) = facing_back.distance_any_heading(&here).unwrap();
     // (Not exactly 0: a point on the ±180° edge of a sector may fall on either side of it.)
     assert!(distance < 1e-3, "{distance}");
-    assert!((heading.abs() - std::f64::consts::PI).abs() < 1e-9, "{heading}");
+    assert!(
+        (heading.abs() - std::f64::consts::PI).abs() < 1e-9,
+        "{heading}"
+    );
     assert!(as_read.is_none_or(|d| d > 0.1), "{as_read:?}");
 }

@@ -85,10 +85,14 @@ pub(super) fn run(
     let options = SlamOptions::default();
     let mut routes = Vec::new();
     let mut relocalization = None;
-    let odometry: &[bool] = if common.quick { &[false] } else { &[false, true] };
+    let odometry: &[bool] = if common.quick {
+        &[false]
+    } else {
+        &[false, true]
+    };
     for kind in RouteKind::ALL {
-        let drawn = route(kind, common.seed, &config)
-            .with_context(|| format!("route {}", kind.name()))?;
+        let drawn =
+            route(kind, common.seed, &config).with_context(|| format!("route {}", kind.name()))?;
         for &with_odometry in odometry {
             say(&format!(
                 "{} ({} stops), {} odometry ...",
@@ -97,7 +101,11 @@ pub(super) fn run(
                 if with_odometry { "with" } else { "without" }
             ));
             let (outcome, slam) = run_route(&drawn, with_odometry, &options)?;
-            let wanted = if common.quick { !with_odometry } else { with_odometry };
+            let wanted = if common.quick {
+                !with_odometry
+            } else {
+                with_odometry
+            };
             if kind == RouteKind::Revisit && wanted {
                 say("relocalization at every stop of its map ...");
                 let mut limited = drawn.clone();
@@ -227,7 +235,10 @@ fn kiss_icp(peers: &Peers, kitti: &Kitti) -> Result<(PeerOdometry, Option<Trajec
             Some(file) => {
                 let poses = sdem_io::read_kitti_poses(file)?;
                 let n = poses.len().min(kitti.world_from_velodyne.len());
-                Some(trajectory_errors(&kitti.world_from_velodyne[..n], &poses[..n])?)
+                Some(trajectory_errors(
+                    &kitti.world_from_velodyne[..n],
+                    &poses[..n],
+                )?)
             }
             None => None,
         };
@@ -342,7 +353,10 @@ fn print_report(report: &Report) {
                     k.time_ms_median / p.time_ms_median.unwrap_or(f64::NAN)
                 );
             }
-            (Some(p), _) => println!("  KISS-ICP did not run: {}", p.error.as_deref().unwrap_or("")),
+            (Some(p), _) => println!(
+                "  KISS-ICP did not run: {}",
+                p.error.as_deref().unwrap_or("")
+            ),
             (None, Some(why)) => println!("  KISS-ICP not run: {why}"),
             (None, None) => {}
         }

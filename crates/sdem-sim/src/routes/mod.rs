@@ -251,7 +251,8 @@ fn draw_plan(
         RouteKind::Kidnapped => {
             // Carried back along the route to a place it mapped, put down facing on (turned by
             // up to 20°), and driving on over known ground.
-            let from = rng.random_range(config.carried_m + 0.5..(config.carried_m + 3.0).min(length));
+            let from =
+                rng.random_range(config.carried_m + 0.5..(config.carried_m + 3.0).min(length));
             let to = from - config.carried_m;
             let mut plan = drive(0.0, from, true, StopEvent::Start, rng, &step);
             let turn = rng.random_range(-20f64..20.0).to_radians();
@@ -352,7 +353,11 @@ fn extend(
         if remaining < 0.05 {
             break;
         }
-        let d = if remaining < d + 0.5 * d { remaining } else { d };
+        let d = if remaining < d + 0.5 * d {
+            remaining
+        } else {
+            d
+        };
         s = if forward { s + d } else { s - d };
         plan.push(
             if forward {
@@ -366,12 +371,7 @@ fn extend(
 }
 
 /// Steps drawn from `config.long_step_m`, cut where the route would turn more than 30° in one.
-fn long_steps(
-    scene: &Scene,
-    length: f64,
-    config: &RouteConfig,
-    rng: &mut ChaCha8Rng,
-) -> RunPlan {
+fn long_steps(scene: &Scene, length: f64, config: &RouteConfig, rng: &mut ChaCha8Rng) -> RunPlan {
     const MAX_TURN: f64 = 30.0 * PI / 180.0;
     let mut plan = RunPlan::default();
     plan.push(Waypoint::forward(0.0), StopEvent::Start);
@@ -474,7 +474,8 @@ fn simulate(
 fn with_board(scene: &Scene, world_from_sensor: &Pose, side: f64, distance_m: f64) -> Scene {
     let yaw = sdem::geometry::attitude_of(world_from_sensor).yaw;
     let turn = Rotation3::from_axis_angle(&Vec3::z_axis(), yaw);
-    let centre = world_from_sensor.translation.vector + turn * Vec3::new(distance_m, side * 0.5, 0.0);
+    let centre =
+        world_from_sensor.translation.vector + turn * Vec3::new(distance_m, side * 0.5, 0.0);
     let mut blocked = scene.clone();
     let board = OrientedBox::new(centre, Vec3::new(0.01, 0.5, 0.6), turn)
         .expect("a board's extents are positive");

@@ -7,8 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use sdem::error::{Error, Result};
 use sdem::geometry::{pose_error, Pose};
 use sdem::slam::{
-    relocalize, trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport,
-    StepStatus,
+    relocalize, trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport, StepStatus,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -108,26 +107,6 @@ pub fn run_route(
                 attitude: Some(stop.sweep.mean_attitude()),
                 odometry,
             })?;
-            if std::env::var_os("SDEM_ROUTE_TRACE").is_some() {
-                for a in &report.attempts {
-                    eprintln!(
-                        "  stop {i} {:?} nodes {:?} d {:?} win {:?} hdg {} cost {:?} inl {:?} acc {} {:.0} ms {}",
-                        a.source, a.nodes, a.descriptor_distance, a.window_half_m, a.heading_half_deg, a.cost,
-                        a.inlier_fraction, a.accepted, a.time_ms, a.reason
-                    );
-                }
-                for c in &report.loop_closures {
-                    eprintln!("  closure {}->{} acc {} {}", c.from, c.to, c.accepted, c.reason);
-                }
-                eprintln!(
-                    "stop {i}: {:?} {:.0} ms (closures {:.0} ms, {} checked, joined {:?})",
-                    report.status,
-                    report.time_ms,
-                    report.loop_closure_ms,
-                    report.loop_closures.len(),
-                    report.joined
-                );
-            }
             reports.push((r, i, run.events[i], report));
             truth.push(stop.world_from_sensor);
         }
@@ -153,7 +132,9 @@ pub fn run_route(
         .fold(0.0, f64::max);
     let mut statuses = BTreeMap::new();
     for (_, _, _, report) in &reports {
-        *statuses.entry(report.status.name().to_string()).or_insert(0) += 1;
+        *statuses
+            .entry(report.status.name().to_string())
+            .or_insert(0) += 1;
     }
     let (accepted, rejected, false_accepted) = closure_counts(&reports, &truth);
     let mut times: Vec<f64> = reports.iter().map(|r| r.3.time_ms).collect();
@@ -181,7 +162,10 @@ pub fn run_route(
 
 /// Loop closures accepted, rejected, and accepted but false (against the truth), over every
 /// step.
-fn closure_counts(reports: &[(usize, usize, StopEvent, StepReport)], truth: &[Pose]) -> (usize, usize, usize) {
+fn closure_counts(
+    reports: &[(usize, usize, StopEvent, StepReport)],
+    truth: &[Pose],
+) -> (usize, usize, usize) {
     let (mut accepted, mut rejected, mut false_accepted) = (0, 0, 0);
     for (_, _, _, report) in reports {
         for c in &report.loop_closures {
@@ -275,8 +259,8 @@ pub fn relocalize_every_stop(
         match found {
             Ok(found) if found.trusted => {
                 let pose = Pose::from(&found.world_from_sensor);
-                let error = (pose.translation.vector - stop.world_from_sensor.translation.vector)
-                    .norm();
+                let error =
+                    (pose.translation.vector - stop.world_from_sensor.translation.vector).norm();
                 outcome.errors_m.push(Some(error));
                 if error <= RELOCALIZED_WITHIN_M {
                     outcome.right += 1;

@@ -33,7 +33,10 @@ fn long_steps_are_one_to_two_metres_where_the_route_runs_straight() {
     let r = route(RouteKind::LongSteps, 2, &coarse()).unwrap();
     let steps = steps(&r.run);
     assert!(steps.iter().all(|&d| d <= 2.0 + 1e-9), "{steps:?}");
-    assert!(steps.iter().filter(|&&d| d >= 1.0).count() >= 2, "{steps:?}");
+    assert!(
+        steps.iter().filter(|&&d| d >= 1.0).count() >= 2,
+        "{steps:?}"
+    );
     for (e, d) in r.run.events[1..].iter().zip(&steps) {
         assert_eq!(*e == StopEvent::LongStep, *d >= 1.0);
     }
@@ -42,7 +45,12 @@ fn long_steps_are_one_to_two_metres_where_the_route_runs_straight() {
 #[test]
 fn a_turn_around_faces_back_the_way_it_came() {
     let r = route(RouteKind::TurnAround, 2, &coarse()).unwrap();
-    let turn = r.run.events.iter().position(|e| *e == StopEvent::TurnedAround).unwrap();
+    let turn = r
+        .run
+        .events
+        .iter()
+        .position(|e| *e == StopEvent::TurnedAround)
+        .unwrap();
     let yaw = |i: usize| sdem::geometry::attitude_of(&r.run.stops[i].world_from_sensor).yaw;
     let turned = crate::sim::wrap_angle(yaw(turn) - yaw(turn - 1)).abs();
     assert!(turned > 150f64.to_radians(), "{}°", turned.to_degrees());
@@ -54,7 +62,12 @@ fn a_turn_around_faces_back_the_way_it_came() {
 fn a_kidnapped_robot_is_carried_five_metres_and_its_odometry_feels_nothing() {
     let config = coarse();
     let r = route(RouteKind::Kidnapped, 2, &config).unwrap();
-    let k = r.run.events.iter().position(|e| *e == StopEvent::Carried).unwrap();
+    let k = r
+        .run
+        .events
+        .iter()
+        .position(|e| *e == StopEvent::Carried)
+        .unwrap();
     let carried = r.run.waypoints[k - 1].along_m - r.run.waypoints[k].along_m;
     assert!((carried - config.carried_m).abs() < 1e-9, "{carried}");
     let felt = r.run.odometry[k - 1].inverse() * r.run.odometry[k];
@@ -76,7 +89,11 @@ fn a_board_hides_half_the_view_of_a_blocked_stop() {
         // A quarter of the returns or more come from within 45 cm: the board.
         let points = r.run.stops[i].sweep.points_in_sensor();
         let near = points.iter().filter(|p| p.norm() < 0.45).count();
-        assert!(near * 4 >= points.len(), "stop {i}: {near} of {}", points.len());
+        assert!(
+            near * 4 >= points.len(),
+            "stop {i}: {near} of {}",
+            points.len()
+        );
     }
 }
 

@@ -83,9 +83,10 @@ pub fn waypoint_stops(
         // Two draws per stop, whatever the branch below.
         let roll_noise: f64 = StandardNormal.sample(&mut rng);
         let pitch_noise: f64 = StandardNormal.sample(&mut rng);
-        if !(w.along_m.is_finite() && w.heading_offset.is_finite())
-            || !(0.0..=length).contains(&w.along_m)
-        {
+        let inside = w.along_m.is_finite()
+            && w.heading_offset.is_finite()
+            && (0.0..=length).contains(&w.along_m);
+        if !inside {
             return Err(Error::Invalid(format!(
                 "waypoint_stops: waypoint {index} lies {} m along a route of {length:.2} m",
                 w.along_m

@@ -131,7 +131,13 @@ impl Slam {
             &self.config.sdem,
         )?;
         let seeing: Vec<usize> = (self.map)
-            .overlaps_among(near.iter().copied(), &query, &node.position(), f64::INFINITY, 0.2)
+            .overlaps_among(
+                near.iter().copied(),
+                &query,
+                &node.position(),
+                f64::INFINITY,
+                0.2,
+            )
             .into_iter()
             .filter(|&(_, cells)| cells >= config.min_overlap_cells)
             .map(|(id, _)| id)
@@ -144,7 +150,10 @@ impl Slam {
             if places.len() >= config.max_candidates {
                 break;
             }
-            if places.iter().any(|p| apart(p[0], first) <= config.reference_radius_m) {
+            if places
+                .iter()
+                .any(|p| apart(p[0], first) <= config.reference_radius_m)
+            {
                 continue;
             }
             let place: Vec<usize> = (seeing.iter().copied())
@@ -241,7 +250,8 @@ impl Slam {
     fn withdraw(&mut self, from: usize, to: usize) {
         self.edges
             .retain(|e| !(e.kind == EdgeKind::LoopClosure && e.from == from && e.to == to));
-        self.loop_closures.retain(|c| !(c.from == from && c.to == to));
+        self.loop_closures
+            .retain(|c| !(c.from == from && c.to == to));
         for c in self.closure_pool.iter_mut() {
             if c.from == from && c.to == to {
                 c.accepted = false;
@@ -323,7 +333,11 @@ impl Slam {
             let c = &self.config;
             (c.window_half_no_odometry_m, c.heading_half_compass_deg, 0.0)
         } else {
-            (recovery.max_window_half_m, recovery.max_heading_half_deg, 0.3)
+            (
+                recovery.max_window_half_m,
+                recovery.max_heading_half_deg,
+                0.3,
+            )
         };
         let prediction = Prediction {
             source: PredictionSource::WiderWindow,
@@ -402,7 +416,10 @@ impl Slam {
         ScanInput {
             scan_index: n.scan_index,
             points_in_sensor: points,
-            attitude: Some(n.attitude_reading.map_or(a, |r| Attitude { sigma: r.sigma, ..a })),
+            attitude: Some(n.attitude_reading.map_or(a, |r| Attitude {
+                sigma: r.sigma,
+                ..a
+            })),
             odometry: None,
         }
     }
@@ -422,7 +439,11 @@ mod tests {
         for i in -20..=20 {
             for j in -10..=10 {
                 let (u, v) = (i as f64 * 0.1, j as f64 * 0.1);
-                points.extend([Vec3::new(2.0, u, v), Vec3::new(u, 2.0, v), Vec3::new(u, -2.0, v)]);
+                points.extend([
+                    Vec3::new(2.0, u, v),
+                    Vec3::new(u, 2.0, v),
+                    Vec3::new(u, -2.0, v),
+                ]);
             }
         }
         for id in 0..6 {
@@ -462,7 +483,11 @@ mod tests {
         let mut wrong = closure(0, 5, measured(&slam, 0, 5, 0.3));
         slam.admit(&mut wrong, &mut closing);
         assert!(!wrong.accepted);
-        assert!(wrong.reason.contains("0→4") && wrong.reason.contains("1→5"), "{}", wrong.reason);
+        assert!(
+            wrong.reason.contains("0→4") && wrong.reason.contains("1→5"),
+            "{}",
+            wrong.reason
+        );
         assert_eq!(slam.loop_closures.len(), 2);
         assert!(closing.withdrawn.is_empty());
         // 5 mm off is within the closures' and the graph's uncertainty: accepted.

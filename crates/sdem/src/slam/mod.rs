@@ -455,7 +455,14 @@ impl Slam {
             (Some(m), s) if s != StepStatus::NewSegment => m.references.clone(),
             _ => Vec::new(),
         };
-        self.add_node(scan, node_id, world_from_sensor, segment, matched.as_ref(), &links)?;
+        self.add_node(
+            scan,
+            node_id,
+            world_from_sensor,
+            segment,
+            matched.as_ref(),
+            &links,
+        )?;
         let closing_start = Instant::now();
         let mut closing = self.close_loops(node_id)?;
         attempts.append(&mut closing.attempts);
@@ -469,7 +476,10 @@ impl Slam {
         self.upkeep.after_step(&mut self.map, keep, false)?;
         let map_update_ms = ms(map_start);
         let pose = self.map.nodes[node_id].world_from_sensor;
-        let doubts = matched.as_ref().map(|m| m.doubts.clone()).unwrap_or_default();
+        let doubts = matched
+            .as_ref()
+            .map(|m| m.doubts.clone())
+            .unwrap_or_default();
         Ok(StepReport {
             scan_index: scan.scan_index,
             run: self.run,

@@ -181,8 +181,7 @@ impl RecoveryOptions {
         }
         if self.every_heading_nodes == 0 || self.relocalize_place_nodes == 0 {
             return Err(Error::Invalid(
-                "recovery.every_heading_nodes and relocalize_place_nodes must be at least 1"
-                    .into(),
+                "recovery.every_heading_nodes and relocalize_place_nodes must be at least 1".into(),
             ));
         }
         for (name, v) in [

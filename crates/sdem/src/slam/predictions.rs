@@ -59,7 +59,7 @@ impl Prediction {
     }
 
     /// This prediction from another source.
-    pub fn from_source(&self, source: PredictionSource) -> Self {
+    pub fn with_source(&self, source: PredictionSource) -> Self {
         Self {
             source,
             ..self.clone()
@@ -72,7 +72,9 @@ impl Prediction {
         let d = other.position - self.position;
         let inside = (0..3).all(|i| d[i].abs() <= 0.25 * self.window_half[i]);
         let narrower = (0..3).all(|i| other.window_half[i] <= self.window_half[i]);
-        let turn = wrap_pi(other.attitude.yaw - self.attitude.yaw).abs().to_degrees();
+        let turn = wrap_pi(other.attitude.yaw - self.attitude.yaw)
+            .abs()
+            .to_degrees();
         inside && narrower && turn + other.heading_half <= self.heading_half + 0.5
     }
 }
@@ -87,7 +89,9 @@ impl Slam {
         let last_attitude = attitude_of(&last_pose);
         let (roll, pitch) = scan
             .attitude
-            .map_or((last_attitude.roll, last_attitude.pitch), |a| (a.roll, a.pitch));
+            .map_or((last_attitude.roll, last_attitude.pitch), |a| {
+                (a.roll, a.pitch)
+            });
         let compass = self.compass(scan);
         let config = &self.config;
         // Without odometry: the compass's heading, else the motion's.
@@ -122,9 +126,9 @@ impl Slam {
             let motion = odometry.previous_sensor_from_sensor();
             let pose = last_pose * motion;
             // The odometry's error grows with the distance it measured.
-            let sigma = config.prior_sigma_m.max(
-                config.odometry_error_per_m * motion.translation.vector.norm(),
-            );
+            let sigma = config
+                .prior_sigma_m
+                .max(config.odometry_error_per_m * motion.translation.vector.norm());
             let mut window_half = config.window_half_m;
             for h in &mut window_half[..2] {
                 *h = h.max(2.0 * sigma);
@@ -178,12 +182,7 @@ impl Slam {
     pub(super) fn compass(&self, scan: &ScanInput) -> Option<(f64, f64)> {
         let a = scan.attitude?;
         let three_sigma: f64 = 3.0 * a.sigma.yaw.to_degrees();
-        (three_sigma < 90.0).then(|| {
-            (
-                a.yaw,
-                three_sigma.max(self.config.heading_half_compass_deg),
-            )
-        })
+        (three_sigma < 90.0).then(|| (a.yaw, three_sigma.max(self.config.heading_half_compass_deg)))
     }
 
     /// The stop before node `last` on the robot's way, when it is in the same segment and run

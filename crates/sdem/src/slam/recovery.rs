@@ -118,14 +118,16 @@ impl Slam {
         attempts: &mut Vec<Attempt>,
     ) -> Result<Located> {
         let Some(last) = last else {
-            return Ok(match self.search().find_in_map(scan, |_| true, None, attempts)? {
-                Some(found) => found,
-                None => Located::Lost {
-                    guess: pose_from_parts(Vec3::zeros(), scan.attitude.unwrap_or_default()),
-                    best: None,
-                    measured: false,
+            return Ok(
+                match self.search().find_in_map(scan, |_| true, None, attempts)? {
+                    Some(found) => found,
+                    None => Located::Lost {
+                        guess: pose_from_parts(Vec3::zeros(), scan.attitude.unwrap_or_default()),
+                        best: None,
+                        measured: false,
+                    },
                 },
-            });
+            );
         };
         let segment = self.map.nodes[last].segment;
         let predictions = self.predictions(scan, last);
@@ -144,7 +146,11 @@ impl Slam {
             )?;
             match tried {
                 Some((matched, true)) => {
-                    let status = if k == 0 { StepStatus::Tracked } else { StepStatus::Recovered };
+                    let status = if k == 0 {
+                        StepStatus::Tracked
+                    } else {
+                        StepStatus::Recovered
+                    };
                     return Ok(found(matched, status, segment));
                 }
                 Some((matched, false)) if prediction.measured && self.confirms(&matched) => {
@@ -165,11 +171,13 @@ impl Slam {
         // With a compass, the widest heading window is what a compass disturbed by steel may
         // be off by; without one, the configured widest.
         let widest_heading = match self.compass(scan) {
-            Some((_, half)) => half.max(DISTURBED_COMPASS_DEG).min(recovery.max_heading_half_deg),
+            Some((_, half)) => half
+                .max(DISTURBED_COMPASS_DEG)
+                .min(recovery.max_heading_half_deg),
             None => recovery.max_heading_half_deg,
         };
         let again = [
-            base.from_source(PredictionSource::OtherNodes),
+            base.with_source(PredictionSource::OtherNodes),
             base.grown(&recovery.max_window_half_m, widest_heading),
         ];
         for prediction in &again {
@@ -256,18 +264,19 @@ impl Slam {
         };
         let mut attempt = Attempt::new(prediction, &references);
         let search = self.search();
-        let outcome = match search.match_prediction(scan, &query, prediction, references, checked, gate) {
-            Ok(mut matched) => {
-                let reason = search.verdict(&mut matched, prediction.measured, checked, false);
-                attempt.record(&matched, reason);
-                Some((matched, attempt.accepted))
-            }
-            Err(e) if e.is_no_match() => {
-                attempt.reason = e.to_string();
-                None
-            }
-            Err(e) => return Err(e),
-        };
+        let outcome =
+            match search.match_prediction(scan, &query, prediction, references, checked, gate) {
+                Ok(mut matched) => {
+                    let reason = search.verdict(&mut matched, prediction.measured, checked, false);
+                    attempt.record(&matched, reason);
+                    Some((matched, attempt.accepted))
+                }
+                Err(e) if e.is_no_match() => {
+                    attempt.reason = e.to_string();
+                    None
+                }
+                Err(e) => return Err(e),
+            };
         attempt.time_ms = ms(start);
         attempts.push(attempt);
         Ok(outcome)
@@ -343,13 +352,24 @@ impl Slam {
         // Counted with the window's tolerance: the prediction may be that far off.
         let tolerance = 0.2 + prediction.window_half[0].max(prediction.window_half[1]);
         let references: Vec<(usize, usize)> = (self.map)
-            .overlaps_among(near.iter().copied(), query, &prediction.position, f64::INFINITY, tolerance)
+            .overlaps_among(
+                near.iter().copied(),
+                query,
+                &prediction.position,
+                f64::INFINITY,
+                tolerance,
+            )
             .into_iter()
             .filter(|&(_, cells)| cells >= self.config.min_reference_overlap_cells)
             .take(2 * self.config.max_reference_nodes)
             .collect();
         if references.is_empty() {
-            return self.most_overlapping(&near, &self.recent_nodes(segment, last), query, prediction);
+            return self.most_overlapping(
+                &near,
+                &self.recent_nodes(segment, last),
+                query,
+                prediction,
+            );
         }
         references
     }
@@ -366,7 +386,13 @@ impl Slam {
         prediction: &Prediction,
     ) -> Vec<(usize, usize)> {
         let references: Vec<(usize, usize)> = (self.map)
-            .overlaps_among(candidates.iter().copied(), query, &prediction.position, f64::INFINITY, 0.2)
+            .overlaps_among(
+                candidates.iter().copied(),
+                query,
+                &prediction.position,
+                f64::INFINITY,
+                0.2,
+            )
             .into_iter()
             .filter(|&(_, cells)| cells >= self.config.min_reference_overlap_cells)
             .take(self.config.max_reference_nodes)
@@ -374,10 +400,15 @@ impl Slam {
         if !references.is_empty() {
             return references;
         }
-        nearest(&self.map, fallback, &prediction.position, self.config.max_reference_nodes)
-            .into_iter()
-            .map(|id| (id, 0))
-            .collect()
+        nearest(
+            &self.map,
+            fallback,
+            &prediction.position,
+            self.config.max_reference_nodes,
+        )
+        .into_iter()
+        .map(|id| (id, 0))
+        .collect()
     }
 
     /// The last [`crate::map::LoopClosureConfig::min_node_separation`] nodes of `segment` up
@@ -457,7 +488,9 @@ impl MapSearch<'_> {
         let ids: Vec<usize> = references.iter().map(|r| r.0).collect();
         let position = prediction.position;
         let origin = self.map.nodes[ids[0]].position();
-        let reference = self.map.merged_reference(&ids, &origin, &self.config.sdem)?;
+        let reference = self
+            .map
+            .merged_reference(&ids, &origin, &self.config.sdem)?;
         // A wide window, or a search for a runner-up (whose costs, near the cap, prune little),
         // runs on the coarse grid first.
         let wide = prediction.window_half[0].max(prediction.window_half[1]) > WIDE_HALF_M
@@ -466,7 +499,11 @@ impl MapSearch<'_> {
         let base = &self.config.localize;
         let options = LocalizeOptions {
             window: SearchWindow::around(&(position - origin), prediction.window_half),
-            step_m: if wide { base.step_m.max(COARSE_STEP_M) } else { base.step_m },
+            step_m: if wide {
+                base.step_m.max(COARSE_STEP_M)
+            } else {
+                base.step_m
+            },
             heading: HeadingWindow {
                 half_range_deg: prediction.heading_half,
                 step_deg: None,
@@ -503,9 +540,9 @@ impl MapSearch<'_> {
             // Along the free direction the refinement and the grid's optimum slide as the
             // sampling pulls them, to the window's edge or beyond the refinement's plausible
             // move: the position there is the odometry's, so neither says the match is wrong.
-            matched.doubts.retain(|d| {
-                !matches!(d, Doubt::RefinementFailed { .. } | Doubt::OnWindowEdge)
-            });
+            matched
+                .doubts
+                .retain(|d| !matches!(d, Doubt::RefinementFailed { .. } | Doubt::OnWindowEdge));
             take_prediction_along(
                 &mut matched.world_from_sensor,
                 &mut matched.diagnostics,
@@ -534,7 +571,12 @@ impl MapSearch<'_> {
         let mut matched = self.fine_at(scan, prediction, &coarse, &coarse.world_from_sensor)?;
         let rival = (coarse.doubts.iter()).find(|d| matches!(d, Doubt::RunnerUp { .. }));
         let d = &coarse.diagnostics;
-        match (rival, d.runner_up_offset, d.runner_up_heading_deg, search_yaw) {
+        match (
+            rival,
+            d.runner_up_offset,
+            d.runner_up_heading_deg,
+            search_yaw,
+        ) {
             (Some(_), Some(offset), Some(heading), Some(yaw)) => {
                 let origin = self.map.nodes[coarse.references[0].0].position();
                 let at = pose_from_parts(
@@ -570,9 +612,10 @@ impl MapSearch<'_> {
         // The coarse optimum on its window's edge: the true pose may lie beyond the window,
         // whatever the fine search around it says.
         matched.doubts.retain(|d| !matches!(d, Doubt::OnWindowEdge));
-        matched.doubts.extend((coarse.doubts.into_iter()).filter(|d| {
-            matches!(d, Doubt::AnotherRotation { .. } | Doubt::OnWindowEdge)
-        }));
+        matched.doubts.extend(
+            (coarse.doubts.into_iter())
+                .filter(|d| matches!(d, Doubt::AnotherRotation { .. } | Doubt::OnWindowEdge)),
+        );
         matched.predicted = prediction.pose();
         matched.localize_ms += coarse.localize_ms;
         Ok(matched)
@@ -598,7 +641,7 @@ impl MapSearch<'_> {
                 window_half: [FINE_HALF_M; 3],
                 heading_half: FINE_HEADING_DEG,
                 prior_sigma_m: f64::INFINITY,
-            motion_sigma_m: f64::INFINITY,
+                motion_sigma_m: f64::INFINITY,
                 measured: false,
                 ..prediction.clone()
             };
@@ -639,7 +682,9 @@ impl MapSearch<'_> {
             && shared >= recovery.min_shared_inlier_fraction
             && inliers >= recovery.min_shared_inliers;
         if shared_holds {
-            matched.doubts.retain(|d| !matches!(d, Doubt::FewInliers { .. }));
+            matched
+                .doubts
+                .retain(|d| !matches!(d, Doubt::FewInliers { .. }));
         }
         rejection(&matched.doubts, measured).or_else(|| {
             let tracking = self.config.min_tracking_inlier_fraction;
@@ -737,8 +782,11 @@ impl MapSearch<'_> {
             .collect();
         let level = Attitude::default().with_sigma_deg(0.05, 0.05);
         let reference = crate::scan::Scan::with_grid(&points, Some(level), grid)?;
-        let query_points: Vec<Point3<f64>> =
-            scan.points_in_sensor.iter().map(|p| Point3::from(*p)).collect();
+        let query_points: Vec<Point3<f64>> = scan
+            .points_in_sensor
+            .iter()
+            .map(|p| Point3::from(*p))
+            .collect();
         // A heading σ of 60° is three σ of a half turn: every heading.
         let unknown_heading = scan.attitude.map(|a| Attitude {
             sigma: AttitudeSigma {
@@ -817,11 +865,13 @@ impl MapSearch<'_> {
         let ratio = self.config.localize.ambiguous_cost_ratio;
         let segment_of = |m: &Matched| self.map.nodes[m.references[0].0].segment;
         let elsewhere = |m: &Matched| {
-            let apart = m.world_from_sensor.translation.vector
-                - best.world_from_sensor.translation.vector;
+            let apart =
+                m.world_from_sensor.translation.vector - best.world_from_sensor.translation.vector;
             segment_of(m) != segment_of(best)
                 || apart.norm() > 0.3
-                || m.world_from_sensor.rotation.angle_to(&best.world_from_sensor.rotation)
+                || m.world_from_sensor
+                    .rotation
+                    .angle_to(&best.world_from_sensor.rotation)
                     > 10f64.to_radians()
         };
         let rival = (results.iter().chain(&rivals))
@@ -922,7 +972,11 @@ fn nearest(map: &Map, ids: &[usize], position: &Vec3, count: usize) -> Vec<usize
         .map(|&id| (id, (map.nodes[id].position() - position).norm()))
         .collect();
     by_distance.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-    by_distance.into_iter().take(count).map(|(id, _)| id).collect()
+    by_distance
+        .into_iter()
+        .take(count)
+        .map(|(id, _)| id)
+        .collect()
 }
 
 /// Whether two lists of reference nodes name the same nodes.

@@ -112,7 +112,10 @@ fn relocalize_anywhere(
         },
         ..config.clone()
     };
-    let search = MapSearch { map, config: &config };
+    let search = MapSearch {
+        map,
+        config: &config,
+    };
     let scan = ScanInput {
         scan_index: 0,
         points_in_sensor,
@@ -125,7 +128,10 @@ fn relocalize_anywhere(
         .filter(|a| !a.accepted || !a.reason.is_empty())
         .map(|a| (a.nodes.first().copied().unwrap_or(0), a.reason.clone()))
         .collect();
-    let Some(Located::Found { matched, segment, .. }) = found else {
+    let Some(Located::Found {
+        matched, segment, ..
+    }) = found
+    else {
         return Err(Error::NotFound { tried });
     };
     Ok(Relocalization {
@@ -197,7 +203,13 @@ fn relocalize_near(
     let mut diagnostics = found.diagnostics;
     let mut doubts = found.doubts;
     if let Some(sigma_m) = near.sigma_m {
-        take_prediction_along(&mut pose, &mut diagnostics, &mut doubts, &near.position, sigma_m);
+        take_prediction_along(
+            &mut pose,
+            &mut diagnostics,
+            &mut doubts,
+            &near.position,
+            sigma_m,
+        );
     }
     Ok(Relocalization {
         world_from_sensor: (&pose).into(),

@@ -138,7 +138,10 @@ impl Slam {
             })
             .collect();
         let graph = PoseGraph {
-            world_from_node: ids.iter().map(|&id| self.map.nodes[id].world_from_sensor).collect(),
+            world_from_node: ids
+                .iter()
+                .map(|&id| self.map.nodes[id].world_from_sensor)
+                .collect(),
             edges,
         };
         let (poses, report) = optimize(&graph, 0, &self.config.optimize)?;

@@ -120,7 +120,12 @@ impl Upkeep {
     pub(super) fn node_added(&mut self, map: &Map, node_id: usize) -> Result<()> {
         let node = &map.nodes[node_id];
         let fuse = in_world(map, node_id);
-        self.enter(node_id, &node.world_from_sensor, &node.points_in_sensor, fuse)
+        self.enter(
+            node_id,
+            &node.world_from_sensor,
+            &node.points_in_sensor,
+            fuse,
+        )
     }
 
     /// Indexes every node of `map` afresh, and fuses those of the world's segment (a restored
@@ -143,7 +148,8 @@ impl Upkeep {
             self.index.moved(id, map.nodes[id].position());
             if in_world(map, id) && self.fusion.fused_pose(id).is_none() {
                 let sensor = as_vectors(&self.residency.points_of(map, id)?);
-                self.fusion.add(id, &map.nodes[id].world_from_sensor, &sensor)?;
+                self.fusion
+                    .add(id, &map.nodes[id].world_from_sensor, &sensor)?;
             }
         }
         Ok(())
