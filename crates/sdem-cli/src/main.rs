@@ -25,6 +25,7 @@ mod export_e57;
 mod export_mcap;
 mod memory;
 mod output;
+mod parse;
 mod progress;
 
 use clap::{Parser, Subcommand};
