@@ -345,18 +345,26 @@ fn a_killed_run_resumes_from_its_saved_map() {
 #[test]
 fn slam_marks_doubtful_steps_and_exits_3() {
     let dir = TempDir::new().unwrap();
+    run_ok(dir.path(), &["simulate", "--out", "data", "--stops", "3"]);
+    // Stop 2's scan swapped for one taken in another building: it matches nowhere. (Odometry
+    // that is merely wrong, even by 60 %, no longer does it: the loop finds such stops again.)
     run_ok(
         dir.path(),
         &[
             "simulate",
             "--out",
-            "data",
+            "elsewhere",
             "--stops",
-            "3",
-            "--odometry-noise",
-            "0.6",
+            "12",
+            "--seed",
+            "7",
         ],
     );
+    std::fs::copy(
+        dir.path().join("elsewhere/scans/000011.ply"),
+        dir.path().join("data/scans/000002.ply"),
+    )
+    .unwrap();
     let r = run(
         dir.path(),
         &["slam", "data", "--out", "out", "--no-pictures", "--json"],
@@ -364,41 +372,20 @@ fn slam_marks_doubtful_steps_and_exits_3() {
     assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
     let summary: Value = serde_json::from_str(&r.stdout).unwrap();
     assert_eq!(summary["trusted"], false, "{summary}");
+    assert_eq!(summary["doubtful_scans"], Value::from(vec![2]), "{summary}");
     let report: Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("out/report.json")).unwrap())
             .unwrap();
     let steps = report["steps"].as_array().unwrap();
-    let doubtful: Vec<&Value> = steps.iter().filter(|s| s["trusted"] == false).collect();
-    assert!(!doubtful.is_empty(), "no doubtful step");
-    assert_eq!(summary["doubtful_steps"], doubtful.len(), "{summary}");
-    assert_eq!(
-        summary["doubtful_scans"],
-        Value::from(
-            doubtful
-                .iter()
-                .map(|s| s["scan_index"].clone())
-                .collect::<Vec<_>>()
-        )
-    );
-    for step in &doubtful {
-        let kinds = doubt_kinds(step);
-        assert!(!kinds.is_empty(), "doubtful without a doubt: {step}");
-        // The window missed the truth: some doubt says so or says the match is flat.
-        assert!(
-            kinds
-                .iter()
-                .any(|k| k == "on_window_edge" || k == "flat_cost" || k == "refinement_failed"),
-            "{kinds:?}"
-        );
-    }
+    // Not bent into the map: a new segment of its own, its pose a guess.
+    assert_eq!(steps[2]["status"], "new_segment", "{}", steps[2]);
+    assert_eq!(steps[2]["trusted"], false);
+    assert_eq!(report["segments"].as_array().unwrap().len(), 2);
     for step in steps.iter().filter(|s| s["trusted"] == true) {
         assert!(doubt_kinds(step).is_empty(), "{step}");
     }
-    // The doubts were deserved: the map is centimetres off the truth.
-    let ate = summary["truth"]["ate_rmse_m"].as_f64().unwrap();
-    assert!(ate > 0.03, "ATE {ate} m");
 
-    // --accept-doubtful: status 0, the same steps counted and marked in the text.
+    // --accept-doubtful: status 0, the same step counted and marked in the text.
     let r = run(
         dir.path(),
         &[
@@ -412,16 +399,10 @@ fn slam_marks_doubtful_steps_and_exits_3() {
         ],
     );
     assert_eq!(r.code, Some(0), "{}\n{}", r.stdout, r.stderr);
-    let counted = format!("{} of 3 steps doubtful", doubtful.len());
-    assert!(r.stdout.contains(&counted), "{}", r.stdout);
-    assert!(r.stdout.contains("DOUBT: "), "{}", r.stdout);
-    // The progress lines (stderr) mark each doubtful step.
-    assert_eq!(
-        r.stderr.matches("DOUBTFUL (").count(),
-        doubtful.len(),
-        "{}",
-        r.stderr
-    );
+    assert!(r.stdout.contains("1 of 3 steps doubtful"), "{}", r.stdout);
+    assert!(r.stdout.contains("scan 2 NEW SEGMENT 2"), "{}", r.stdout);
+    // The progress lines (stderr) mark it.
+    assert_eq!(r.stderr.matches("NEW SEGMENT").count(), 1, "{}", r.stderr);
 }
 
 #[test]
