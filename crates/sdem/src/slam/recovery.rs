@@ -254,10 +254,14 @@ impl Slam {
             Nodes::Recent => self.reference_nodes(&query, prediction, segment, last),
             Nodes::Segment => self.segment_references(&query, prediction, segment, last),
         };
-        // The quick search takes no match with fewer inliers than tracking needs; the wide one
-        // none that could not be told from its runner-up; a search for a partial overlap
-        // keeps the configured floor.
-        let gate = match (checked, prediction.source) {
+        // A prediction's window against the recent nodes takes no match with fewer inliers
+        // than tracking needs, runner-up searched or not (a step beyond the window matches a
+        // wrong optimum inside it with a third of the points); the wide one none that could
+        // not be told from its runner-up; a search of the whole segment for a partial overlap
+        // keeps the configured floor, and may take a match that shares little but that little
+        // with confidence.
+        let partial = nodes == Nodes::Segment;
+        let gate = match (partial, prediction.source) {
             (false, _) => self.config.min_tracking_inlier_fraction,
             (true, PredictionSource::WiderWindow) => WIDE_MIN_INLIERS,
             (true, _) => 0.0,
@@ -267,7 +271,7 @@ impl Slam {
         let outcome =
             match search.match_prediction(scan, &query, prediction, references, checked, gate) {
                 Ok(mut matched) => {
-                    let reason = search.verdict(&mut matched, prediction.measured, checked, false);
+                    let reason = search.verdict(&mut matched, prediction.measured, partial, false);
                     attempt.record(&matched, reason);
                     Some((matched, attempt.accepted))
                 }
