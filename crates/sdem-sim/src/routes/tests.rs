@@ -70,8 +70,10 @@ fn a_kidnapped_robot_is_carried_five_metres_and_its_odometry_feels_nothing() {
         .unwrap();
     let carried = r.run.waypoints[k - 1].along_m - r.run.waypoints[k].along_m;
     assert!((carried - config.carried_m).abs() < 1e-9, "{carried}");
+    // It measured no motion: no translation; only its heading noise (σ 0.5° a step) turns it.
     let felt = r.run.odometry[k - 1].inverse() * r.run.odometry[k];
-    assert!(felt.translation.vector.norm() < 1e-12 && felt.rotation.angle() < 1e-9);
+    assert!(felt.translation.vector.norm() < 1e-9, "{felt}");
+    assert!(felt.rotation.angle() < 2f64.to_radians(), "{felt}");
     let truth = r.run.truth();
     assert!((truth[k].translation.vector - truth[k - 1].translation.vector).norm() > 2.0);
 }
@@ -86,9 +88,10 @@ fn a_board_hides_half_the_view_of_a_blocked_stop() {
         .collect();
     assert!(!blocked.is_empty());
     for i in blocked {
-        // A quarter of the returns or more come from within 45 cm: the board.
+        // A quarter of the returns or more come from the board: within 60 cm (a board 40 cm
+        // away returns from up to 0.40·√2 = 57 cm where the beams meet it at 45°).
         let points = r.run.stops[i].sweep.points_in_sensor();
-        let near = points.iter().filter(|p| p.norm() < 0.45).count();
+        let near = points.iter().filter(|p| p.norm() < 0.6).count();
         assert!(
             near * 4 >= points.len(),
             "stop {i}: {near} of {}",
