@@ -37,8 +37,9 @@ use std::path::{Path, PathBuf};
 ///         match from a prediction is taken at once only above it, else searched again wider),
 ///         ``edge_sigma_floor_m`` (0.005), ``edge_sigma_floor_deg`` (0.1), ``recovery`` (what
 ///         the loop does when its predictions fail: the widest window, every heading, the whole
-///         map), ``loop_closure``, ``optimize`` (the pose graph) and ``voxel`` (the fused
-///         occupancy map). A step's ``status`` is ``first``, ``tracked``, ``recovered``,
+///         map), ``loop_closure``, ``optimize`` (the pose graph), ``voxel`` (the fused
+///         occupancy map) and ``growth`` (what keeps the work per stop and the memory bounded
+///         as the map grows). A step's ``status`` is ``first``, ``tracked``, ``recovered``,
 ///         ``relocalized``, ``new_segment`` (found nowhere with confidence: a new map segment,
 ///         its pose a guess) or ``doubtful``.
 ///
@@ -388,7 +389,8 @@ impl Map {
     ///         prediction (odometry since the last known pose): it then also weighs in the
     ///         cost, and along a direction the scan leaves free the position is the
     ///         prediction's.
-    ///     max_nodes: at most this many nodes are tried (3).
+    ///     max_nodes: at most this many nodes are tried (3 near ``near``; without it, the
+    ///         map's ``recovery.relocalize_candidates``, 6, as ``sdem localize --map``).
     ///     roll_pitch_sigma_deg, yaw_sigma_deg: the reading's standard deviations, degrees.
     ///
     /// Returns:
@@ -397,7 +399,7 @@ impl Map {
     /// Raises:
     ///     sdem.NotFoundError: no node matches (``tried`` says why for each).
     ///     sdem.InvalidInputError, sdem.TooFewPointsError: bad input.
-    #[pyo3(signature = (points, attitude_deg=None, *, near=None, near_sigma_m=None, max_nodes=3, roll_pitch_sigma_deg=None, yaw_sigma_deg=None))]
+    #[pyo3(signature = (points, attitude_deg=None, *, near=None, near_sigma_m=None, max_nodes=None, roll_pitch_sigma_deg=None, yaw_sigma_deg=None))]
     #[allow(clippy::too_many_arguments)]
     fn localize(
         &self,
@@ -406,13 +408,17 @@ impl Map {
         attitude_deg: Option<&Bound<'_, PyAny>>,
         near: Option<&Bound<'_, PyAny>>,
         near_sigma_m: Option<f64>,
-        max_nodes: usize,
+        max_nodes: Option<usize>,
         roll_pitch_sigma_deg: Option<f64>,
         yaw_sigma_deg: Option<f64>,
     ) -> PyResult<Relocalization> {
         let points = points_from(points, "points")?;
         let attitude = attitude_from(attitude_deg, roll_pitch_sigma_deg, yaw_sigma_deg)?;
         let near = near_from(near, near_sigma_m)?;
+        let max_nodes = max_nodes.unwrap_or(match near {
+            Some(_) => 3,
+            None => self.saved.config.recovery.relocalize_candidates,
+        });
         if max_nodes == 0 {
             return Err(invalid_input(
                 "max_nodes",

@@ -226,7 +226,7 @@ class Map:
         *,
         near: Sequence[float] | None = None,
         near_sigma_m: float | None = None,
-        max_nodes: int = 3,
+        max_nodes: int | None = None,
         roll_pitch_sigma_deg: float | None = None,
         yaw_sigma_deg: float | None = None,
     ) -> Relocalization:
