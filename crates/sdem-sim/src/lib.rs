@@ -27,5 +27,6 @@ pub mod experiment;
 pub mod faults;
 pub mod odometry;
 pub mod pose_graphs;
+pub mod reviews;
 pub mod sim;
 pub mod suites;

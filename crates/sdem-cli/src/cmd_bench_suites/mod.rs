@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod print;
+mod real_geometry;
 
 /// Simulated pairs per suite [default], and with `--quick`.
 const SIMULATED_PAIRS: (usize, usize) = (200, 8);
@@ -61,6 +62,8 @@ pub enum Suite {
     CompassNoise,
     /// KITTI frames and simulated spinning-LiDAR scans, no guess.
     Lidar,
+    /// Real scans seen again from known poses, beside GICP from identity.
+    RealGeometry,
 }
 
 impl Suite {
@@ -69,6 +72,7 @@ impl Suite {
             Suite::Unlevelled => "unlevelled",
             Suite::CompassNoise => "compass-noise",
             Suite::Lidar => "lidar",
+            Suite::RealGeometry => "real-geometry",
         }
     }
 }
@@ -80,9 +84,16 @@ pub struct SuiteArgs {
     /// to ±30°, any heading, steps up to 1 m; 8 with --quick), compass-noise (the same pairs
     /// with readings off by σ 2° roll/pitch and σ 20° heading), lidar (KITTI frames and 20
     /// simulated spinning-LiDAR pairs, no guess; searched on a 5 cm grid, where --step sets
-    /// the tilting scanner's). The peers run beside it when found.
+    /// the tilting scanner's), real-geometry (real scans seen again from 50 known poses
+    /// each, 3 with --quick: the 3DTK scans and KITTI frames, or --scan; beside GICP). The
+    /// peers run beside it when found.
     #[arg(long, value_enum, conflicts_with = "faults")]
     pub suite: Option<Suite>,
+    /// With --suite real-geometry: a real scan to re-view (any point file sdem reads, in its
+    /// sensor's frame; repeat the flag) [default: the 3DTK scans and KITTI frames 0, 7 and 15
+    /// in ../shared/data beside the repository].
+    #[arg(long = "scan", value_name = "FILE", requires = "suite")]
+    pub scans: Vec<PathBuf>,
     /// With --suite lidar: the KITTI folder (velodyne/, poses.txt, calib.txt) [default:
     /// ../shared/data/kitti-00-first16 beside the repository, skipped, saying so, when absent].
     #[arg(long, value_name = "DIR", requires = "suite")]
@@ -299,6 +310,9 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
     if args.kitti.is_some() && suite != Suite::Lidar {
         bail!("--kitti applies to --suite lidar only");
     }
+    if !args.scans.is_empty() && suite != Suite::RealGeometry {
+        bail!("--scan applies to --suite real-geometry only");
+    }
     let peers = bench_peers::find(args.peers.as_deref())?;
     let mut parts = Vec::new();
     match suite {
@@ -311,6 +325,7 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
             let spec = simulated_spec(suite.name(), config, args, common)?;
             parts.push(run_part(spec, &peers, common.json, say)?);
         }
+        Suite::RealGeometry => return real_geometry::run(args, common, &peers, say),
         Suite::Lidar => {
             let kitti = match &args.kitti {
                 Some(dir) => Ok(Kitti::read(dir)?),
