@@ -189,7 +189,7 @@ impl SurfaceNormals {
             point_of_cell[c as usize] = i as u32;
         }
         let k = radius_cells.max(1) as i64;
-        let points = sdem.points();
+        let points = sdem.surface_points();
         let normals = sdem
             .cells()
             .par_iter()
@@ -433,8 +433,11 @@ impl Pairing<'_> {
         scale: f64,
     ) -> NormalEquations {
         let reference = self.reference;
-        let (grid, surfaces, reference_points) =
-            (reference.grid(), reference.surfaces(), reference.points());
+        let (grid, surfaces, reference_points) = (
+            reference.grid(),
+            reference.surfaces(),
+            reference.surface_points(),
+        );
         let max_distance = self.config.max_correspondence_m;
         let n = points.len();
         let mut rotated = [[0f32; 3]; CHUNK];
@@ -558,10 +561,13 @@ pub fn refine(
     let sampled;
     let query_points: &[[f32; 3]] =
         if config.max_points > 0 && query.points().len() > config.max_points {
-            sampled = crate::cost::even_points(query, 0.05, config.max_points);
+            let surface = query.surface_points();
+            sampled = (crate::cost::even_indices(query, 0.05, config.max_points).iter())
+                .map(|&i| surface[i as usize])
+                .collect::<Vec<_>>();
             &sampled
         } else {
-            query.points()
+            query.surface_points()
         };
     let mut pairs = vec![u32::MAX; query_points.len()];
     let mut associate = true;
