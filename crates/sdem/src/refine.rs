@@ -131,7 +131,8 @@ pub struct Refinement {
     /// Robust RMS point-to-plane residual, metres.
     pub rms_m: f64,
     /// Information matrix of `[x, y, z, rx, ry, rz]` (metres, radians; rotation about the
-    /// reference levelled frame's axes), `JᵀWJ / σ²`.
+    /// reference levelled frame's axes), `JᵀWJ / (σ² d)`: `d` the residuals' [`design_effect`]
+    /// (their correlation between neighbours).
     pub information: Matrix6<f64>,
     /// The reference normals (levelled frame) of the last iteration's residuals within the
     /// robust kernel (weight at least ½), each with the square of its point's range: the
@@ -521,6 +522,98 @@ impl Pairing<'_> {
     }
 }
 
+impl Pairing<'_> {
+    /// Kish's design effect ([`design_effect`]) of the inlying residuals (robust weight at
+    /// least ½) of `points` moved by `pose` against their `pairs`, grouped in patches of
+    /// [`CORRELATION_PATCH_CELLS`]² reference cells.
+    fn design_effect(
+        &self,
+        pose: &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>),
+        points: &[[f32; 3]],
+        pairs: &[u32],
+        scale: f64,
+    ) -> f64 {
+        let n_az = self.reference.grid().azimuth_cells() as u64;
+        let block = CORRELATION_PATCH_CELLS;
+        let cells = self.reference.cells();
+        let mut residuals: Vec<(u64, f64)> = (points.par_iter().zip(pairs.par_iter()))
+            .filter_map(|(q, &j)| {
+                let (r, _) = self.residual(pose, q, j)?;
+                let c = cells[j as usize] as u64;
+                let patch = (c / n_az / block) * (n_az / block + 1) + (c % n_az) / block;
+                (robust_weight(r, scale) >= 0.5).then_some((patch, r))
+            })
+            .collect();
+        design_effect(&mut residuals)
+    }
+
+    /// The point-to-plane residual and its Jacobian of query point `q` moved by `pose` against
+    /// reference point `j` (`None`: unpaired, no normal, or beyond the correspondence distance).
+    fn residual(
+        &self,
+        (rotation, translation): &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>),
+        q: &[f32; 3],
+        j: u32,
+    ) -> Option<(f64, [f64; 6])> {
+        if j == u32::MAX {
+            return None;
+        }
+        let normal = self.normals.normals[j as usize];
+        if normal[0].is_nan() {
+            return None;
+        }
+        let y = rotation * nalgebra::Vector3::new(q[0], q[1], q[2]);
+        let x = y + translation;
+        let p = self.reference.surface_points()[j as usize];
+        let d = [x.x - p[0], x.y - p[1], x.z - p[2]];
+        let max_distance = self.config.max_correspondence_m;
+        if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > max_distance * max_distance {
+            return None;
+        }
+        let normal = Vec3::new(normal[0] as f64, normal[1] as f64, normal[2] as f64);
+        let r = normal.x * d[0] as f64 + normal.y * d[1] as f64 + normal.z * d[2] as f64;
+        let jr = Vec3::new(y.x as f64, y.y as f64, y.z as f64).cross(&normal);
+        Some((r, [normal.x, normal.y, normal.z, jr.x, jr.y, jr.z]))
+    }
+}
+
+/// The side, in reference cells, of the patches whose residuals [`design_effect`] compares.
+/// On re-views of KITTI frames and 3DTK scans (`sdem bench --suite real-geometry`) the effect
+/// grew with the patch from 3 cells (1.1–1.5) to 9 (1.1–2.1) and stayed there at 25 and 60.
+pub const CORRELATION_PATCH_CELLS: u64 = 15;
+
+/// Kish's design effect `1 + (m̄ − 1) ρ` of residuals grouped in patches (`(patch, residual)`,
+/// any order; sorted here): how many times the variance of an estimate from them exceeds the
+/// one they would give if independent. `ρ` is their intra-patch correlation (the one-way
+/// ANOVA estimator, at least 0) and `m̄ = Σ m² / Σ m` the mean size of the patch a residual
+/// lies in. Two scans sample one surface at different places, so neighbouring residuals share
+/// the surface's departures from the planes fitted to it; counted as independent they make
+/// the covariance too small. 1 with fewer than two patches or no residual within one.
+pub fn design_effect(residuals: &mut [(u64, f64)]) -> f64 {
+    residuals.sort_unstable_by_key(|x| x.0);
+    let n = residuals.len() as f64;
+    let mean = residuals.iter().map(|x| x.1).sum::<f64>() / n;
+    let (mut between, mut within, mut patches, mut m2) = (0.0, 0.0, 0.0, 0.0);
+    for patch in residuals.chunk_by(|a, b| a.0 == b.0) {
+        let m = patch.len() as f64;
+        let patch_mean = patch.iter().map(|x| x.1).sum::<f64>() / m;
+        between += m * (patch_mean - mean).powi(2);
+        within += patch.iter().map(|x| (x.1 - patch_mean).powi(2)).sum::<f64>();
+        patches += 1.0;
+        m2 += m * m;
+    }
+    if patches < 2.0 || n <= patches {
+        return 1.0;
+    }
+    let (between, within) = (between / (patches - 1.0), within / (n - patches));
+    let m0 = (n - m2 / n) / (patches - 1.0);
+    let rho = (between - within) / (between + (m0 - 1.0) * within);
+    if !rho.is_finite() {
+        return 1.0;
+    }
+    1.0 + (m2 / n - 1.0) * rho.clamp(0.0, 1.0)
+}
+
 /// Refines `initial` (`reference_level_from_query_level`) by robust point-to-plane Gauss-Newton,
 /// each query point paired with the nearest reference point (or, with
 /// [`Association::Projective`], the one in its S-DEM cell). A `prior` on the offset (the
@@ -629,6 +722,10 @@ pub fn refine(
     }
     let (h, sigma_sq, inliers, supporting) = last.expect("at least one iteration ran");
     check_plausible(initial, &rotation, &translation, config)?;
+    // The residuals of neighbouring points are not independent (see `design_effect`).
+    let pose = (rotation.matrix().cast::<f32>(), translation.cast::<f32>());
+    let scale = annealed_scale(config, iterations, settled);
+    let deff = pairing.design_effect(&pose, query_points, &pairs, scale);
     Ok(Refinement {
         reference_level_from_query_level: Isometry3::from_parts(
             Translation3::from(translation),
@@ -638,7 +735,7 @@ pub fn refine(
         converged,
         inliers,
         rms_m: sigma_sq.sqrt(),
-        information: h / sigma_sq,
+        information: h / (sigma_sq * deff),
         supporting_normals: supporting,
     })
 }
