@@ -21,7 +21,7 @@ pub struct AttitudeFlags {
 
 /// Parses `--attitude-sigma-deg ROLL_PITCH,YAW` (degrees), checked as sensor.toml's σ is.
 pub fn parse_attitude_sigma(text: &str) -> Result<AttitudeSigma> {
-    let [rp, yaw] = crate::cmd_localize::parse_numbers(
+    let [rp, yaw] = crate::parse::parse_numbers(
         "--attitude-sigma-deg",
         text,
         "ROLL_PITCH,YAW (standard deviations in degrees)",

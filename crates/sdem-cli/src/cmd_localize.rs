@@ -8,6 +8,7 @@ use crate::output::{
     doubts_json, elapsed_ms, estimate_label, pose_line, print_doubts, print_json,
     with_doubt_messages, Outcome,
 };
+use crate::parse::parse_numbers;
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, Attitude, AttitudeSigma, Pose, PoseRecord};
@@ -207,23 +208,6 @@ struct Report {
     error_m: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     error_deg: Option<f64>,
-}
-
-/// Parses `N` comma-separated finite numbers given to `flag`; `form` names them in messages.
-pub(crate) fn parse_numbers<const N: usize>(
-    flag: &str,
-    text: &str,
-    form: &str,
-) -> Result<[f64; N]> {
-    let values: Vec<f64> = text
-        .split(',')
-        .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
-        .collect::<Option<Vec<f64>>>()
-        .with_context(|| format!("{flag} '{text}': expected {N} finite numbers {form}"))?;
-    let count = values.len();
-    values
-        .try_into()
-        .map_err(|_| anyhow::anyhow!("{flag} '{text}': expected {N} numbers {form}, got {count}"))
 }
 
 /// Parses three comma-separated finite numbers.

@@ -23,6 +23,7 @@ mod cmd_view;
 mod export_e57;
 mod export_mcap;
 mod output;
+mod parse;
 mod progress;
 
 use clap::{Parser, Subcommand};

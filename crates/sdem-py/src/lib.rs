@@ -20,9 +20,10 @@ mod slam;
 use pyo3::prelude::*;
 use std::path::PathBuf;
 
-/// Reads a point cloud file as the command line does: ``.ply``, ``.pcd`` (ascii or binary),
-/// ``.xyz`` / ``.txt`` (x y z per line), KITTI ``.bin``, 3DTK ``.3d`` (centimetres, converted)
-/// or a raw ``.sweep``; points with a NaN coordinate (no return) are skipped.
+/// Reads a point cloud file as the command line does: ``.ply``, ``.pcd`` (ascii, binary or
+/// binary_compressed), ``.las`` / ``.laz`` (scale and offset applied), ``.xyz`` / ``.txt``
+/// (x y z per line), KITTI ``.bin``, 3DTK ``.3d`` (centimetres, converted) or a raw ``.sweep``;
+/// points with a NaN coordinate (no return) are skipped.
 ///
 /// Args:
 ///     path: the file, a ``str`` or ``os.PathLike``.

@@ -139,7 +139,7 @@ def test_file_errors_are_os_errors_and_parse_errors_name_the_line(tmp_path):
     assert info.value.line == 2 and info.value.path == str(bad)
     assert str(info.value).startswith(f"{bad}:2:")
     with pytest.raises(sdem.ParseError, match="not a point-cloud format"):
-        sdem.read_points(tmp_path / "scan.las")
+        sdem.read_points(tmp_path / "scan.abc")
 
 
 def test_a_folder_without_a_map_or_with_a_damaged_one_is_refused(tmp_path, run):

@@ -19,6 +19,16 @@ use nalgebra::{Matrix3, Rotation3, SymmetricEigen};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
+/// The fewest cells with a measured surface orientation a scan needs for its rotation to be
+/// found from them.
+pub const MIN_ORIENTED_CELLS: usize = 50;
+
+/// Roll and pitch readings whose difference is within this at three standard deviations are
+/// taken as they are: the levelled search and the 6-DoF refinement absorb such a tilt. Beyond
+/// it, the rotation is searched ([`crate::global`]). Radians (3°: the default readings, 0.5°
+/// each, stay levelled).
+pub const LEVEL_TOLERANCE: f64 = 3.0 * PI / 180.0;
+
 /// A cell's surface: its unit normal (pointing towards the sensor) and the area it stands
 /// for, square metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -170,7 +180,7 @@ pub fn level_from_cells(
     expected_up: &Vec3,
     max_tilt: f64,
 ) -> Option<Levelling> {
-    if cells.len() < crate::global::MIN_ORIENTED_CELLS {
+    if cells.len() < MIN_ORIENTED_CELLS {
         return None;
     }
     let total: f64 = cells.iter().map(|c| c.area).sum();

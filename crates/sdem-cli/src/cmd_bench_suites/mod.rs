@@ -82,11 +82,11 @@ impl Suite {
 pub struct SuiteArgs {
     /// Run a suite instead: unlevelled (200 simulated pairs without attitude: roll/pitch up
     /// to ±30°, any heading, steps up to 1 m; 8 with --quick), compass-noise (the same pairs
-    /// with readings off by σ 2° roll/pitch and σ 20° heading), lidar (KITTI frames and 20
-    /// simulated spinning-LiDAR pairs, no guess; searched on a 5 cm grid, where --step sets
-    /// the tilting scanner's), real-geometry (real scans seen again from 50 known poses
-    /// each, 3 with --quick: the 3DTK scans and KITTI frames, or --scan; beside GICP). The
-    /// peers run beside it when found.
+    /// with readings off by σ 2° roll/pitch and σ 20° heading), lidar (KITTI frames, 20
+    /// simulated spinning-LiDAR and 20 solid-state (70° field of view) pairs, no guess; on the
+    /// grid and scale derived from each scan), real-geometry (real scans seen again from 50
+    /// known poses each, 3 with --quick: the 3DTK scans and KITTI frames, or --scan; beside
+    /// GICP). The peers run beside it when found.
     #[arg(long, value_enum, conflicts_with = "faults")]
     pub suite: Option<Suite>,
     /// With --suite real-geometry: a real scan to re-view (any point file sdem reads, in its
@@ -353,6 +353,13 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
                 common,
             )?;
             parts.push(run_part(spec, &peers, common.json, say)?);
+            let spec = simulated_spec(
+                "simulated-solid-state",
+                SuiteConfig::solid_state_lidar(),
+                args,
+                common,
+            )?;
+            parts.push(run_part(spec, &peers, common.json, say)?);
         }
     }
     let report = Report {
@@ -539,11 +546,17 @@ fn describe(config: &SuiteConfig, count: usize, seed: u64) -> String {
             s.range_noise_m * 1e3
         ),
         SuiteSensor::Spinning(l) => format!(
-            "a spinning LiDAR ({} rings {}°..{}°, {}° azimuth step, {} m, {} mm range noise)",
+            "a {} LiDAR ({} rings {}°..{}°, {}° azimuth step over {}°, {} m, {} mm range noise)",
+            if l.azimuth_fov_deg >= 360.0 {
+                "spinning"
+            } else {
+                "solid-state"
+            },
             l.rings,
             l.elevation_min_deg,
             l.elevation_max_deg,
             l.azimuth_step_deg,
+            l.azimuth_fov_deg,
             l.max_range_m,
             l.range_noise_m * 1e3
         ),

@@ -2,14 +2,14 @@
 //! sensor frame, the attitude of the sensor at each stop (`attitude.csv`), the odometry's pose
 //! of the sensor at each stop (`odometry.txt`).
 
-use super::collect::{collect, CloudEntry, Collected, Kept, Origin};
+use super::collect::{collect, CloudEntry, Collected, Kept};
 use super::messages::{self, rotation_of, MessageKind};
+use super::plan::{mounting, BagImportOptions, Candidate, Plan};
 use super::pointcloud::CloudLayout;
 use super::select::{self, Chosen};
 use super::series::{blend_pose, OutOfSpan, Series};
-use super::stops::{self, StopRules};
+use super::stops;
 use super::storage::{Bag, BagMessage, Damage, Storage};
-use super::sweeps::SweepScan;
 use super::tf::{frame_name, TfTree};
 use crate::error::{Error, Result};
 use crate::import::{check_out, write_or_roll_back};
@@ -19,51 +19,6 @@ use sdem::geometry::{Attitude, Pose, Vec3};
 use sdem::sensor::SensorConfig;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-
-/// What to import from a bag and how.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BagImportOptions {
-    /// The scan topic (`PointCloud2` or `LaserScan`); `None`: the only one of either type.
-    pub scan_topic: Option<String>,
-    /// The IMU topic; `None`: the only `Imu` topic, if any.
-    pub imu_topic: Option<String>,
-    /// The odometry topic; `None`: the only `Odometry` topic, if any.
-    pub odom_topic: Option<String>,
-    /// A tilting laser's `JointState` topic; `None`: the only one, if any.
-    pub joint_topic: Option<String>,
-    /// A tilting laser's joint; `None`: the one named `*tilt*`, or the only one.
-    pub tilt_joint: Option<String>,
-    /// A positive joint angle tilts the scan plane up (default: down, a joint about +y).
-    pub tilt_positive_up: bool,
-    /// Leave the IMU out (no `attitude.csv`).
-    pub no_imu: bool,
-    /// Leave the odometry out (no `odometry.txt`, no motion compensation).
-    pub no_odometry: bool,
-    /// How scans become stops.
-    pub stops: StopRules,
-    /// The least tilt a laser's sweep must span, degrees.
-    pub min_sweep_deg: f64,
-    /// Use what is readable before damage; leave out the scans that cannot be used.
-    pub salvage: bool,
-}
-
-impl Default for BagImportOptions {
-    fn default() -> Self {
-        Self {
-            scan_topic: None,
-            imu_topic: None,
-            odom_topic: None,
-            joint_topic: None,
-            tilt_joint: None,
-            tilt_positive_up: false,
-            no_imu: false,
-            no_odometry: false,
-            stops: StopRules::default(),
-            min_sweep_deg: 20.0,
-            salvage: false,
-        }
-    }
-}
 
 /// How far an import has come, for a progress bar.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -124,30 +79,11 @@ pub struct BagImportSummary {
     pub written: Vec<String>,
 }
 
-/// A scan before it becomes a stop.
-pub(super) struct Candidate {
-    pub(super) stamp_ns: i64,
-    pub(super) origin: Origin,
-    pub(super) sweep: Option<SweepScan>,
-}
-
 /// The odometry of the sensor over time.
 struct OdometryTrack {
     chosen: Chosen,
     odom_from_base: Series<Pose>,
     base_frame: String,
-}
-
-/// The scans of a bag before the stops are chosen.
-pub(super) struct Plan {
-    pub(super) scan: Chosen,
-    pub(super) sensor_frame: String,
-    pub(super) candidates: Vec<Candidate>,
-    /// Where a laser's tilt came from, in words.
-    pub(super) tilt: Option<String>,
-    /// A laser's sensor model.
-    pub(super) laser: Option<SensorConfig>,
-    pub(super) left_out: Vec<String>,
 }
 
 /// Imports the ROS 2 bag `source` (a rosbag2 folder or one `.mcap`/`.db3` file) into the
@@ -345,31 +281,6 @@ fn odometry_track(
         odom_from_base: Series::new(samples),
         base_frame,
     }))
-}
-
-/// `base_from_sensor` from `/tf_static`, or identity, with the mounting in words.
-pub(super) fn mounting(tree: &TfTree, base_frame: &str, sensor_frame: &str) -> (Pose, String) {
-    match tree.fixed_transform(base_frame, sensor_frame) {
-        Some(pose) => {
-            let t = pose.translation.vector;
-            let [r, p, y] = Attitude::from_quaternion(&pose.rotation).to_degrees();
-            (
-                pose,
-                format!(
-                    "{base_frame} → {sensor_frame} from /tf_static: ({:.3}, {:.3}, {:.3}) m, roll \
-                     {r:.2}° pitch {p:.2}° yaw {y:.2}°",
-                    t.x, t.y, t.z
-                ),
-            )
-        }
-        None => (
-            Pose::identity(),
-            format!(
-                "identity: no /tf_static transform joins {base_frame} and {sensor_frame}, so the \
-                 sensor is taken to sit at the robot's origin, axes aligned"
-            ),
-        ),
-    }
 }
 
 /// The scans of the chosen topic: clouds as they are, a laser's lines assembled into sweeps.

@@ -2,13 +2,12 @@
 //! moving on `/tf`, or a joint of a `JointState` topic), the sweeps, and the sensor model.
 
 use super::collect::{Collected, Kept};
-use super::import::{mounting, Candidate, Plan};
 use super::messages::{LaserScan, MessageKind};
+use super::plan::{mounting, BagImportOptions, Candidate, Plan};
 use super::select::{self, Chosen};
 use super::series::{blend_f64, blend_pose, OutOfSpan, Series};
 use super::sweeps::{assemble, SweepRules, TiltSource};
 use super::tf::{frame_name, TfTree};
-use super::BagImportOptions;
 use crate::error::{Error, Result};
 use sdem::geometry::Pose;
 use sdem::sensor::SensorConfig;

@@ -43,6 +43,7 @@ mod info;
 mod laser;
 mod messages;
 mod metadata;
+mod plan;
 mod pointcloud;
 mod select;
 mod series;
@@ -54,8 +55,9 @@ mod tf;
 
 pub use cdr::{CdrError, CdrReader, CdrWriter};
 pub use collect::TopicStats;
-pub use import::{import_rosbag, BagImportOptions, BagImportSummary, ImportProgress};
+pub use import::{import_rosbag, BagImportSummary, ImportProgress};
 pub use info::{bag_info, sdem_use, BagInfo, TopicInfo};
+pub use plan::BagImportOptions;
 pub use select::Chosen;
 pub use stops::{StopPolicy, StopRules, CONTINUOUS_BELOW_S};
 pub use storage::{Bag, BagMessage, Damage, Storage};

@@ -129,8 +129,8 @@ def slam_options(**overrides: Any) -> dict[str, Any]:
     """Every ``SlamOptions`` field with its default, ``overrides`` laid over them."""
 
 def read_points(path: PathLike) -> npt.NDArray[np.float64]:
-    """Reads ``.ply``, ``.pcd``, ``.xyz``/``.txt``, KITTI ``.bin``, 3DTK ``.3d`` or ``.sweep``
-    as ``(N, 3)`` float64; raises ``FileError`` or ``ParseError``."""
+    """Reads ``.ply``, ``.pcd``, ``.las``/``.laz``, ``.xyz``/``.txt``, KITTI ``.bin``, 3DTK
+    ``.3d`` or ``.sweep`` as ``(N, 3)`` float64; raises ``FileError`` or ``ParseError``."""
 
 @final
 class Step:

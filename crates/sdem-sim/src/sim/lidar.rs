@@ -26,6 +26,9 @@ pub struct LidarConfig {
     pub elevation_max_deg: f64,
     /// Azimuth step between firings, degrees.
     pub azimuth_step_deg: f64,
+    /// The horizontal field of view, degrees, centred on the sensor's +x: 360 for a spinning
+    /// LiDAR, 60–120 for a solid-state one (Livox, the forward units of an Ouster or Hesai).
+    pub azimuth_fov_deg: f64,
     /// Largest range returned, metres; beyond it, no return.
     pub max_range_m: f64,
     /// Returns closer than this are dropped (the vehicle itself), metres.
@@ -43,6 +46,7 @@ impl Default for LidarConfig {
             elevation_min_deg: -25.0,
             elevation_max_deg: 15.0,
             azimuth_step_deg: 0.2,
+            azimuth_fov_deg: 360.0,
             max_range_m: 100.0,
             min_range_m: 0.5,
             range_noise_m: 0.02,
@@ -65,6 +69,12 @@ impl LidarConfig {
         if !(lo.is_finite() && hi.is_finite() && -90.0 <= lo && lo < hi && hi <= 90.0) {
             return bad(format!(
                 "elevations {lo}°..{hi}° must increase and lie within ±90°"
+            ));
+        }
+        if !(self.azimuth_fov_deg > 0.0 && self.azimuth_fov_deg <= 360.0) {
+            return bad(format!(
+                "azimuth field of view {}° must lie in (0, 360]",
+                self.azimuth_fov_deg
             ));
         }
         if !(self.azimuth_step_deg > 0.0 && self.azimuth_step_deg <= 90.0) {
@@ -101,21 +111,51 @@ impl LidarConfig {
             .collect()
     }
 
-    /// The firing azimuths of one turn, degrees, from −180° on.
+    /// The solid-state sensor of [`crate::suites::SuiteConfig::solid_state_lidar`]: 64 rows
+    /// from −35° to +35°, 0.2° apart in azimuth over a 70° field of view (~22,000 beams), 100 m,
+    /// 2 cm of noise; a forward-looking unit of the Livox class, on a regular pattern.
+    pub fn solid_state() -> Self {
+        Self {
+            rings: 64,
+            elevation_min_deg: -35.0,
+            elevation_max_deg: 35.0,
+            azimuth_fov_deg: 70.0,
+            ..Self::default()
+        }
+    }
+
+    /// The firing azimuths of one frame, degrees: a full turn from −180° on, or the field of
+    /// view, centred on 0°.
     pub fn azimuths_deg(&self) -> Vec<f64> {
-        let n = (360.0 / self.azimuth_step_deg).round().max(1.0) as usize;
-        (0..n)
-            .map(|i| -180.0 + i as f64 * 360.0 / n as f64)
+        if self.azimuth_fov_deg >= 360.0 {
+            let n = (360.0 / self.azimuth_step_deg).round().max(1.0) as usize;
+            return (0..n)
+                .map(|i| -180.0 + i as f64 * 360.0 / n as f64)
+                .collect();
+        }
+        let n = (self.azimuth_fov_deg / self.azimuth_step_deg)
+            .round()
+            .max(1.0) as usize;
+        let step = self.azimuth_fov_deg / n as f64;
+        (0..=n)
+            .map(|i| -0.5 * self.azimuth_fov_deg + i as f64 * step)
             .collect()
     }
 
     /// True when a beam along `direction_in_sensor` (a unit vector) lies within the rings'
-    /// band of elevations (half a ring spacing beyond the outer rings).
+    /// band of elevations (half a ring spacing beyond the outer rings) and the field of view
+    /// (half an azimuth step beyond its edges).
     pub fn sees(&self, direction_in_sensor: &Vec3) -> bool {
         let elevation = direction_in_sensor.z.clamp(-1.0, 1.0).asin().to_degrees();
         let half = 0.5 * (self.elevation_max_deg - self.elevation_min_deg)
             / (self.rings.max(2) - 1) as f64;
+        let azimuth = direction_in_sensor
+            .y
+            .atan2(direction_in_sensor.x)
+            .to_degrees();
         (self.elevation_min_deg - half..=self.elevation_max_deg + half).contains(&elevation)
+            && (self.azimuth_fov_deg >= 360.0
+                || azimuth.abs() <= 0.5 * (self.azimuth_fov_deg + self.azimuth_step_deg))
     }
 }
 

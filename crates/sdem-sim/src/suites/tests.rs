@@ -236,6 +236,34 @@ fn spinning_lidar_scans_all_around_within_its_rings() {
 }
 
 #[test]
+fn a_solid_state_lidar_sees_only_its_field_of_view() {
+    let lidar = LidarConfig {
+        rings: 8,
+        azimuth_step_deg: 2.0,
+        ..LidarConfig::solid_state()
+    };
+    let hall = sim::open_hall(1);
+    let pose = Pose::translation(0.0, 0.0, 1.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let points = sim::spin_scan(&hall, &lidar, &pose, &mut rng).unwrap();
+    // 70° at 2° steps: 36 azimuths a row, every beam returning in a closed hall.
+    assert_eq!(points.len(), 8 * 36);
+    for p in &points {
+        let azimuth = p.y.atan2(p.x).to_degrees();
+        assert!(azimuth.abs() <= 35.0 + 1e-9, "{azimuth}");
+        assert!(lidar.sees(&(p / p.norm())));
+    }
+    assert!(!lidar.sees(&Vec3::new(-1.0, 0.0, 0.0)));
+    assert!(!lidar.sees(&Vec3::new(0.5, 0.5, 0.0).normalize()));
+    assert!(LidarConfig {
+        azimuth_fov_deg: 0.0,
+        ..lidar.clone()
+    }
+    .validate()
+    .is_err());
+}
+
+#[test]
 fn open_scenes_are_seeded_and_their_regions_are_free() {
     assert_eq!(sim::open_hall(1), sim::open_hall(1));
     assert_ne!(sim::open_hall(1), sim::open_hall(2));

@@ -23,7 +23,7 @@ use crate::level::oriented_cells;
 use crate::localize::{
     localize, localize_below, HeadingWindow, Localization, LocalizeOptions, SearchWindow,
 };
-use crate::scan::Scan;
+use crate::scan::input::Scan;
 use crate::sdem::Sdem;
 use nalgebra::Rotation3;
 use rayon::prelude::*;
