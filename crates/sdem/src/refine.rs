@@ -728,11 +728,16 @@ pub fn refine(
         let r32 = rotation.matrix().cast::<f32>();
         let t32 = translation.cast::<f32>();
         let pose = (r32, t32);
-        let normal_equations = query_points
+        // Summed in the chunks' order, not rayon's reduction tree (which follows the threads'
+        // stealing): the same scans give the same pose to the last bit, however busy the
+        // machine.
+        let chunks: Vec<NormalEquations> = query_points
             .par_chunks(CHUNK)
             .zip(pairs.par_chunks_mut(CHUNK))
             .map(|(points, pairs)| pairing.accumulate(&pose, points, pairs, fresh, scale, gate))
-            .reduce(NormalEquations::default, NormalEquations::merged);
+            .collect();
+        let normal_equations =
+            (chunks.into_iter()).fold(NormalEquations::default(), NormalEquations::merged);
         let (h, g, chi2, wsum, inliers) = normal_equations.parts();
         let supporting = normal_equations.normals;
         if inliers < config.min_inliers {
