@@ -5,7 +5,7 @@ use anyhow::{bail, Context, Result};
 use sdem::sensor::SensorConfig;
 use sdem_sim::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected};
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
-use sdem_sim::sim;
+use sdem_sim::sim::{self, LongRoute};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
@@ -18,9 +18,15 @@ pub struct Args {
     /// Seed of the scene, the path and the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Number of stops.
+    /// Number of stops: up to 40 in the collapsed building, up to 100,000 on a --route.
     #[arg(long, default_value_t = 8)]
     stops: usize,
+    /// A long route instead of the collapsed building: room-laps (laps of a furnished room,
+    /// 30 stops a lap), floor (3 x 3 rooms toured in three different laps), wings (two wings
+    /// joined by a low ditch and a corridor). Lap after lap, as many stops as --stops asks,
+    /// with loops to close. Faults cannot be injected on them.
+    #[arg(long, value_name = "ROUTE", conflicts_with = "faults")]
+    route: Option<String>,
     /// Standard deviation of the range noise, metres.
     #[arg(long, default_value_t = 0.005)]
     range_noise: f64,
@@ -68,6 +74,11 @@ pub struct Args {
 struct Summary {
     out: PathBuf,
     seed: u64,
+    /// The long route, when one was asked for (`null`: the collapsed building).
+    route: Option<LongRoute>,
+    /// Where each lap begins, on a long route.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    lap_starts: Vec<usize>,
     stops: usize,
     points_per_scan: Vec<usize>,
     odometry: bool,
@@ -78,9 +89,21 @@ struct Summary {
 
 /// Runs `sdem simulate`.
 pub fn run(args: Args) -> Result<()> {
-    check_out_and_stops(&args)?;
+    let route = match &args.route {
+        Some(name) => Some(name.parse::<LongRoute>().context("--route")?),
+        None => None,
+    };
+    check_out_and_stops(&args, route)?;
     let sensor = sensor_config(&args)?;
     let odometry_noise = odometry_noise(&args)?;
+    if let Some(route) = route {
+        let summary = write_long_run(&args, route, &sensor, &odometry_noise)?;
+        if args.json {
+            return print_json(&summary);
+        }
+        print_text(&args, &summary);
+        return Ok(());
+    }
     let faults = parse_faults(&args.faults)?;
     let (run, injected) = simulate(&args, &sensor, &faults)?;
     let summary = write(&args, &sensor, &odometry_noise, &run, faults, injected)?;
@@ -92,12 +115,22 @@ pub fn run(args: Args) -> Result<()> {
 }
 
 /// Refuses to write over a dataset without `--force`, and a route longer than the scene's.
-fn check_out_and_stops(args: &Args) -> Result<()> {
+fn check_out_and_stops(args: &Args, route: Option<LongRoute>) -> Result<()> {
     if args.out.join("scans").exists() && !args.force {
         bail!(
             "{} already holds a dataset (scans/); choose another --out or pass --force to replace it",
             args.out.display()
         );
+    }
+    if route.is_some() {
+        if !(1..=sim::MAX_LONG_STOPS).contains(&args.stops) {
+            bail!(
+                "--stops {} must lie in 1..={} on a long route",
+                args.stops,
+                sim::MAX_LONG_STOPS
+            );
+        }
+        return Ok(());
     }
     if !(1..=sim::MAX_STOPS).contains(&args.stops) {
         bail!(
@@ -220,6 +253,8 @@ fn write(
     Ok(Summary {
         out: args.out.clone(),
         seed: args.seed,
+        route: None,
+        lap_starts: Vec::new(),
         stops: run.len(),
         points_per_scan: scans.iter().map(|s| s.0.len()).collect(),
         odometry: odometry.is_some(),
@@ -228,10 +263,77 @@ fn write(
     })
 }
 
+/// Stops simulated at a time on a long route (their sweeps are held until written).
+const LONG_CHUNK: usize = 32;
+
+/// Simulates a long route a chunk of stops at a time and writes each stop as it comes, so
+/// that thousands of stops never sit in memory together.
+fn write_long_run(
+    args: &Args,
+    route: LongRoute,
+    sensor: &SensorConfig,
+    odometry_noise: &OdometryNoise,
+) -> Result<Summary> {
+    let run = sim::long_run(route, args.seed, args.stops, &sensor.lift)?;
+    let truth = run.truth(&sensor.lift)?;
+    let odometry = if args.no_odometry {
+        None
+    } else {
+        Some(simulate_odometry(&truth, odometry_noise, args.seed)?)
+    };
+    if args.force {
+        remove_old_dataset(&args.out)?;
+    }
+    let plan = sdem_io::DatasetPlan {
+        scans: run.stops.len(),
+        with_sweeps: true,
+        truth: Some(&truth),
+        odometry: odometry.as_deref(),
+    };
+    let bar = crate::progress::bar(run.stops.len() as u64, args.json, "stops simulated");
+    let mut chunk: Vec<sim::SimStop> = Vec::new();
+    let mut points_per_scan = Vec::with_capacity(run.stops.len());
+    sdem_io::write_dataset_streamed(&args.out, sensor, &plan, |i| {
+        if i % LONG_CHUNK == 0 {
+            let end = (i + LONG_CHUNK).min(run.stops.len());
+            chunk = run.simulate(sensor, args.seed, i..end)?;
+        }
+        bar.inc(1);
+        let stop = &chunk[i % LONG_CHUNK];
+        let points = stop.sweep.points_in_sensor();
+        points_per_scan.push(points.len());
+        Ok(sdem_io::StreamedScan {
+            points: points.into(),
+            attitude: stop.sweep.mean_attitude(),
+            sweep: Some(std::borrow::Cow::Owned(stop.sweep.clone())),
+        })
+    })?;
+    bar.finish_and_clear();
+    Ok(Summary {
+        out: args.out.clone(),
+        seed: args.seed,
+        route: Some(route),
+        lap_starts: run.lap_starts.clone(),
+        stops: run.stops.len(),
+        points_per_scan,
+        odometry: odometry.is_some(),
+        faults: Vec::new(),
+        injected: Vec::new(),
+    })
+}
+
 /// Prints the summary as text.
 fn print_text(args: &Args, summary: &Summary) {
+    let what = match summary.route {
+        Some(route) => format!(
+            "the {} route ({} laps)",
+            route.name(),
+            summary.lap_starts.len()
+        ),
+        None => "a collapsed building".to_string(),
+    };
     println!(
-        "wrote {} stops of a collapsed building (seed {}) to {}",
+        "wrote {} stops of {what} (seed {}) to {}",
         summary.stops,
         summary.seed,
         args.out.display()

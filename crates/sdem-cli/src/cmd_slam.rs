@@ -7,12 +7,13 @@ use sdem::slam::{
     trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport, TrajectoryErrors,
 };
 use sdem_io::{
-    load_map, read_kitti_poses, save_map, write_atomic, write_points_ply, write_poses,
-    write_voxel_map, Dataset, NodeFiles,
+    load_map, read_kitti_poses, write_atomic, write_points_ply, write_poses, write_voxel_map,
+    Dataset, MapFolder,
 };
 use serde::Serialize;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Arguments of `sdem slam`.
@@ -188,14 +189,16 @@ struct Run {
     steps: Vec<Value>,
     /// With `--resume`: the number of nodes the saved map held.
     resumed_at: Option<usize>,
-    /// The node files OUT/map holds, as far as this run knows (see `sdem_io::save_map`).
-    node_files: NodeFiles,
+    /// OUT/map: the saved map, and the store of the nodes parked far from the robot.
+    folder: Arc<MapFolder>,
 }
 
 /// What the run wrote after its last scan, for the report.
 struct Outputs {
     poses: Vec<Pose>,
     cloud: Vec<Vec3>,
+    /// The fused map's occupied and free voxels.
+    voxel_counts: (usize, usize),
     pictures: Vec<PathBuf>,
     mcap: Option<sdem_io::McapSummary>,
 }
@@ -218,7 +221,7 @@ pub fn run(args: Args) -> Result<Outcome> {
     };
     write_config(&args.out, run.slam.config())?;
     let total = map_scans(&args, &dataset, sigma, &map_dir, &mut run)?;
-    let outputs = write_outputs(&args, &run.slam)?;
+    let outputs = write_outputs(&args, &mut run.slam)?;
     let attitude = slam_attitude(&dataset, sigma);
     let report = make_report(&args, &dataset, run, total, outputs, attitude, start)?;
     let report_text = serde_json::to_vec_pretty(&report).context("cannot encode the report")?;
@@ -259,12 +262,14 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
     }
     let steps = read_steps(&args.out.join(STEPS_FILE), saved.map.nodes.len())?;
     let next = saved.map.nodes.len();
-    let slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+    let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+    let folder = Arc::new(MapFolder::open(map_dir, saved.node_files)?);
+    slam.set_node_store(folder.clone());
     Ok(Run {
         slam,
         steps,
         resumed_at: Some(next),
-        node_files: saved.node_files,
+        folder,
     })
 }
 
@@ -290,11 +295,14 @@ fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
     if args.no_loop_closure {
         config.loop_closure.enabled = false;
     }
+    let mut slam = Slam::new(config)?;
+    let folder = Arc::new(MapFolder::create(&args.out.join(MAP_DIR))?);
+    slam.set_node_store(folder.clone());
     Ok(Run {
-        slam: Slam::new(config)?,
+        slam,
         steps: Vec::new(),
         resumed_at: None,
-        node_files: NodeFiles::default(),
+        folder,
     })
 }
 
@@ -426,9 +434,8 @@ fn step_line(index: usize, total: usize, step: &StepReport) -> String {
 /// the map.
 fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
     let slam = &run.slam;
-    save_map(
-        map_dir,
-        &mut run.node_files,
+    debug_assert_eq!(run.folder.path(), map_dir);
+    run.folder.save(
         slam.config(),
         &slam.map,
         &slam.edges,
@@ -442,12 +449,18 @@ fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
 
 /// Writes the final outputs: poses.txt (+ .tum), map.ply, map.sdemvox and, unless
 /// `--no-pictures`, the pictures and viewer.html.
-fn write_outputs(args: &Args, slam: &Slam) -> Result<Outputs> {
+fn write_outputs(args: &Args, slam: &mut Slam) -> Result<Outputs> {
+    // The nodes the last loop closures moved are fused again on their final poses first.
+    slam.settle_map()?;
+    let slam = &*slam;
     let poses = slam.poses();
     write_poses(&args.out.join("poses.txt"), &poses)?;
-    let cloud = slam.merged_cloud();
+    let cloud = slam.merged_cloud()?;
     write_points_ply(&args.out.join("map.ply"), &cloud)?;
-    write_voxel_map(&args.out.join("map.sdemvox"), &slam.voxels)?;
+    let voxels = slam.voxels();
+    let voxel_counts = voxels.counts();
+    write_voxel_map(&args.out.join("map.sdemvox"), &voxels)?;
+    drop(voxels);
     let pictures = if args.no_pictures {
         Vec::new()
     } else {
@@ -467,6 +480,7 @@ fn write_outputs(args: &Args, slam: &Slam) -> Result<Outputs> {
     Ok(Outputs {
         poses,
         cloud,
+        voxel_counts,
         pictures,
         mcap,
     })
@@ -512,6 +526,7 @@ fn make_report(
     let Outputs {
         poses,
         cloud,
+        voxel_counts,
         pictures,
         mcap,
     } = outputs;
@@ -531,12 +546,9 @@ fn make_report(
         .filter(|s| s["trusted"] == Value::Bool(false))
         .map(|s| s["scan_index"].as_u64().unwrap_or_default())
         .collect();
-    let (occupied_voxels, free_voxels) = slam.voxels.counts();
-    let points_total: usize = slam
-        .map
-        .nodes
-        .iter()
-        .map(|n| n.points_in_sensor.len())
+    let (occupied_voxels, free_voxels) = voxel_counts;
+    let points_total: usize = (0..slam.map.nodes.len())
+        .map(|id| slam.node_point_count(id))
         .sum();
     Ok(Report {
         dataset: args.dataset.clone(),

@@ -27,8 +27,21 @@ pub fn check_target(path: &Path, force: bool) -> Result<()> {
 /// accepted loop closures.
 pub fn write(path: &Path, slam: &Slam) -> Result<McapSummary> {
     let poses = slam.poses();
-    let scans: Vec<_> = slam.map.nodes.iter().map(|n| n.points_in_world()).collect();
-    let cloud = slam.merged_cloud();
+    // Every node's points, parked ones read back from the map's node files.
+    let scans = (slam.map.nodes.iter())
+        .map(|n| {
+            let points = slam.node_points(n.node_id)?;
+            Ok(points
+                .iter()
+                .map(|p| {
+                    (n.world_from_sensor
+                        * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                    .coords
+                })
+                .collect::<Vec<_>>())
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let cloud = slam.merged_cloud()?;
     let closures: Vec<(usize, usize)> = slam
         .loop_closures
         .iter()

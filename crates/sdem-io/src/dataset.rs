@@ -377,57 +377,127 @@ pub fn write_dataset(
     truth: Option<&[Pose]>,
     odometry: Option<&[Pose]>,
 ) -> Result<()> {
-    if scans.is_empty() {
+    if !scans.is_empty() {
+        check_count(root, "sweeps", sweeps.map(<[_]>::len), scans.len())?;
+    }
+    let plan = DatasetPlan {
+        scans: scans.len(),
+        with_sweeps: sweeps.is_some(),
+        truth,
+        odometry,
+    };
+    write_dataset_streamed(root, sensor, &plan, |i| {
+        Ok(StreamedScan {
+            points: std::borrow::Cow::Borrowed(&scans[i].0),
+            attitude: scans[i].1,
+            sweep: sweeps.map(|s| std::borrow::Cow::Borrowed(&s[i])),
+        })
+    })
+}
+
+/// What [`write_dataset_streamed`] writes besides the scans: how many, whether raw sweeps
+/// come with them, and the pose files.
+#[derive(Debug, Clone, Copy)]
+pub struct DatasetPlan<'a> {
+    /// The number of scans.
+    pub scans: usize,
+    /// Whether each scan comes with its raw sweep (`sweeps/`).
+    pub with_sweeps: bool,
+    /// True `world_from_sensor` poses, one per scan.
+    pub truth: Option<&'a [Pose]>,
+    /// Dead-reckoned `world_from_sensor` poses, one per scan.
+    pub odometry: Option<&'a [Pose]>,
+}
+
+/// One scan handed to [`write_dataset_streamed`].
+#[derive(Debug, Clone)]
+pub struct StreamedScan<'a> {
+    /// The points in the sensor frame, metres.
+    pub points: std::borrow::Cow<'a, [Vec3]>,
+    /// The measured attitude.
+    pub attitude: Attitude,
+    /// The raw sweep, when the plan has sweeps.
+    pub sweep: Option<std::borrow::Cow<'a, Sweep>>,
+}
+
+/// [`write_dataset`] for runs too long to hold in memory: scan `i` comes from `scan_at(i)`, in
+/// order, and is written before the next is asked for. The same files, checks and errors as
+/// [`write_dataset`], and a scan without its sweep where the plan has sweeps is an error.
+///
+/// # Example
+/// ```
+/// use sdem::geometry::{Attitude, Vec3};
+/// use sdem_io::{write_dataset_streamed, DatasetPlan, StreamedScan};
+/// let dir = tempfile::tempdir().unwrap();
+/// let plan = DatasetPlan { scans: 3, with_sweeps: false, truth: None, odometry: None };
+/// write_dataset_streamed(dir.path(), &Default::default(), &plan, |i| {
+///     let points = vec![Vec3::new(1.0 + i as f64, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0)];
+///     Ok(StreamedScan { points: points.into(), attitude: Attitude::default(), sweep: None })
+/// })?;
+/// assert_eq!(sdem_io::Dataset::open(dir.path())?.len(), 3);
+/// # Ok::<(), sdem_io::Error>(())
+/// ```
+pub fn write_dataset_streamed<'s>(
+    root: &Path,
+    sensor: &SensorConfig,
+    plan: &DatasetPlan,
+    mut scan_at: impl FnMut(usize) -> Result<StreamedScan<'s>>,
+) -> Result<()> {
+    let count = plan.scans;
+    if count == 0 {
         return Err(Error::Invalid(format!(
             "cannot write dataset {}: there are no scans",
             root.display()
         )));
     }
-    check_count(root, "sweeps", sweeps.map(<[_]>::len), scans.len())?;
-    check_count(root, "truth poses", truth.map(<[_]>::len), scans.len())?;
-    check_count(
-        root,
-        "odometry poses",
-        odometry.map(<[_]>::len),
-        scans.len(),
-    )?;
+    check_count(root, "truth poses", plan.truth.map(<[_]>::len), count)?;
+    check_count(root, "odometry poses", plan.odometry.map(<[_]>::len), count)?;
     sensor.validate()?;
 
     let scans_dir = root.join(SCANS_DIR);
     let sweeps_dir = root.join(SWEEPS_DIR);
     let names =
-        |ext: &str| -> Vec<String> { (0..scans.len()).map(|i| format!("{i:06}.{ext}")).collect() };
+        |ext: &str| -> Vec<String> { (0..count).map(|i| format!("{i:06}.{ext}")).collect() };
     let scan_names = names("ply");
-    let sweep_names = if sweeps.is_some() {
+    let sweep_names = if plan.with_sweeps {
         names("sweep")
     } else {
         Vec::new()
     };
     check_no_stale(&scans_dir, &scan_names, "a scan")?;
     check_no_stale(&sweeps_dir, &sweep_names, "a raw sweep")?;
-    if truth.is_none() {
+    if plan.truth.is_none() {
         check_no_stale_file(root, TRUTH_FILE, "truth")?;
     }
-    if odometry.is_none() {
+    if plan.odometry.is_none() {
         check_no_stale_file(root, ODOMETRY_FILE, "odometry")?;
     }
 
     std::fs::create_dir_all(&scans_dir).map_err(|e| Error::io(&scans_dir, e))?;
-    for ((points, _), name) in scans.iter().zip(&scan_names) {
-        write_points_ply(&scans_dir.join(name), points)?;
-    }
-    if let Some(sweeps) = sweeps {
+    if plan.with_sweeps {
         std::fs::create_dir_all(&sweeps_dir).map_err(|e| Error::io(&sweeps_dir, e))?;
-        for (sweep, name) in sweeps.iter().zip(&sweep_names) {
-            write_sweep(&sweeps_dir.join(name), sweep)?;
-        }
     }
-    let attitudes: Vec<Attitude> = scans.iter().map(|(_, a)| *a).collect();
+    let mut attitudes = Vec::with_capacity(count);
+    for (i, name) in scan_names.iter().enumerate() {
+        let scan = scan_at(i)?;
+        write_points_ply(&scans_dir.join(name), &scan.points)?;
+        match (&scan.sweep, plan.with_sweeps) {
+            (Some(sweep), true) => write_sweep(&sweeps_dir.join(&sweep_names[i]), sweep)?,
+            (None, true) => {
+                return Err(Error::Invalid(format!(
+                    "cannot write dataset {}: scan {i} comes without its raw sweep",
+                    root.display()
+                )))
+            }
+            (_, false) => {}
+        }
+        attitudes.push(scan.attitude);
+    }
     write_attitude_csv(&root.join(ATTITUDE_FILE), &attitudes)?;
-    if let Some(truth) = truth {
+    if let Some(truth) = plan.truth {
         write_poses(&root.join(TRUTH_FILE), truth)?;
     }
-    if let Some(odometry) = odometry {
+    if let Some(odometry) = plan.odometry {
         write_poses(&root.join(ODOMETRY_FILE), odometry)?;
     }
     write_sensor_toml(&root.join(SENSOR_FILE), sensor)

@@ -235,6 +235,7 @@ mod e57;
 mod error;
 mod import;
 mod las;
+mod map_store;
 mod mapfile;
 mod mcap_out;
 mod pcd;
@@ -252,8 +253,9 @@ pub use attitude::{
     ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG,
 };
 pub use dataset::{
-    clear_dataset, write_dataset, Dataset, SigmaSource, ATTITUDE_FILE, DATASET_ENTRIES,
-    ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
+    clear_dataset, write_dataset, write_dataset_streamed, Dataset, DatasetPlan, SigmaSource,
+    StreamedScan, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE,
+    SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
 };
 pub use import::{
     import_3dtk, import_dataset, import_e57, import_kitti, kitti_velodyne_poses,
@@ -261,6 +263,7 @@ pub use import::{
     uos_matrix_to_world_from_sensor, uos_pose_to_world_from_sensor, ImportFormat, ImportOptions,
     ImportSummary, UOS_MAX_RANGE_M, UOS_MIN_RANGE_M,
 };
+pub use map_store::MapFolder;
 pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
 pub use mcap_out::{
     point_cloud2_message, write_map_mcap, MapScene, McapSummary, MAP_FRAME, ROBOT_FRAME,

@@ -41,11 +41,39 @@ pub const MAP_VERSION: u32 = 1;
 const POINTS_MAGIC: &[u8; 8] = b"SDEMPTS1";
 const POINTS_VERSION: u32 = 1;
 
-/// The node files a map folder holds, as far as this process knows: the CRC-32 of node `i`'s
-/// file at index `i` (written by [`save_map`], or checked by [`load_map`]).
+/// The node files a map folder holds, as far as this process knows: node `i`'s file's CRC-32
+/// and point count at index `i` (written by [`save_map`] or a [`crate::MapFolder`], or checked
+/// by [`load_map`]).
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
 pub struct NodeFiles {
-    crc32: Vec<u32>,
+    files: Vec<Option<NodeFile>>,
+}
+
+/// One node file: its CRC-32 and its number of points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct NodeFile {
+    pub(crate) crc32: u32,
+    pub(crate) points: usize,
+}
+
+impl NodeFiles {
+    /// Node `node_id`'s file, when it is written.
+    pub(crate) fn get(&self, node_id: usize) -> Option<NodeFile> {
+        self.files.get(node_id).copied().flatten()
+    }
+
+    /// Records node `node_id`'s file.
+    pub(crate) fn set(&mut self, node_id: usize, file: NodeFile) {
+        if self.files.len() <= node_id {
+            self.files.resize(node_id + 1, None);
+        }
+        self.files[node_id] = Some(file);
+    }
+
+    /// Whether node `node_id`'s file is written.
+    pub fn holds(&self, node_id: usize) -> bool {
+        self.get(node_id).is_some()
+    }
 }
 
 /// A saved map, as loaded.
@@ -228,6 +256,57 @@ fn decode_points(path: &Path, bytes: &[u8], expected_crc: u32) -> Result<Vec<[f3
     Ok(points)
 }
 
+/// Writes `node`'s points file into the map `folder` (its `nodes/` folder made already).
+///
+/// # Errors
+/// A node without points in memory (parked in a node store: save through the
+/// [`crate::MapFolder`] that keeps them), or the file system's errors.
+pub(crate) fn write_node_file(folder: &Path, node: &Node) -> Result<NodeFile> {
+    if node.points_in_sensor.is_empty() {
+        return Err(Error::Invalid(format!(
+            "node {} has no points in memory and no file in {}: a node parked in a node store \
+             is saved by the store's own map folder (sdem_io::MapFolder)",
+            node.node_id,
+            folder.display()
+        )));
+    }
+    let bytes = encode_points(&node.points_in_sensor);
+    let crc = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().expect("4 bytes"));
+    write_atomic(&folder.join(points_file_name(node.node_id)), |w| {
+        w.write_all(&bytes)
+    })?;
+    Ok(NodeFile {
+        crc32: crc,
+        points: node.points_in_sensor.len(),
+    })
+}
+
+/// Reads node `node_id`'s points file back from the map `folder`, checked against `file`.
+///
+/// # Errors
+/// A missing, truncated or damaged file, naming it.
+pub(crate) fn read_node_file(
+    folder: &Path,
+    node_id: usize,
+    file: NodeFile,
+) -> Result<Vec<[f32; 3]>> {
+    let path = folder.join(points_file_name(node_id));
+    let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
+    let points = decode_points(&path, &bytes, file.crc32)?;
+    if points.len() != file.points {
+        return Err(Error::parse(
+            &path,
+            None,
+            format!(
+                "holds {} points, the map says {}",
+                points.len(),
+                file.points
+            ),
+        ));
+    }
+    Ok(points)
+}
+
 /// Saves the map into `folder` (created when missing): node files that `node_files` does not
 /// list yet, then the manifest, each atomically (see the module documentation). `node_files`
 /// is updated; start with [`NodeFiles::default`] for a new folder, or take
@@ -253,24 +332,19 @@ pub fn save_map(
         let name = points_file_name(node.node_id);
         // A node's points never change: only the nodes this folder does not hold yet are
         // encoded and written (a save used to re-read every node file to compare).
-        let crc = match node_files.crc32.get(node.node_id) {
-            Some(&crc) => crc,
-            None => {
-                let bytes = encode_points(&node.points_in_sensor);
-                let crc = u32::from_le_bytes(bytes[bytes.len() - 4..].try_into().expect("4 bytes"));
-                write_atomic(&folder.join(&name), |w| w.write_all(&bytes))?;
-                node_files.crc32.push(crc);
-                crc
-            }
+        let file = match node_files.get(node.node_id) {
+            Some(file) => file,
+            None => write_node_file(folder, node)?,
         };
+        node_files.set(node.node_id, file);
         records.push(NodeRecord {
             node_id: node.node_id,
             scan_index: node.scan_index,
             world_from_sensor: pose_to_row_major(&node.world_from_sensor),
             attitude_reading_deg: node.attitude_reading.map(|a| a.to_degrees()),
             points_file: name,
-            points: node.points_in_sensor.len(),
-            points_crc32: crc,
+            points: file.points,
+            points_crc32: file.crc32,
         });
     }
     let body = Body {
@@ -336,7 +410,14 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
         .validate()
         .map_err(|e| bad(format!("invalid configuration: {e}")))?;
     let node_files = NodeFiles {
-        crc32: body.nodes.iter().map(|r| r.points_crc32).collect(),
+        files: (body.nodes.iter())
+            .map(|r| {
+                Some(NodeFile {
+                    crc32: r.points_crc32,
+                    points: r.points,
+                })
+            })
+            .collect(),
     };
     Ok(SavedMap {
         node_files,

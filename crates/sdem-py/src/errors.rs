@@ -117,6 +117,15 @@ fn sdem_exception<'py>(py: Python<'py>, error: &sdem::Error) -> Bound<'py, PyAny
             (message,),
             vec![("tried", py_value(py, tried.clone()))],
         ),
+        E::NodeStore { node_id, reason } => instance(
+            py,
+            "NodeStoreError",
+            (message,),
+            vec![
+                ("node_id", py_value(py, *node_id)),
+                ("reason", py_value(py, reason)),
+            ],
+        ),
         E::AtScan {
             scan_index,
             nodes,

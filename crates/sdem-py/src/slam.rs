@@ -155,9 +155,11 @@ impl Slam {
     /// The merged point cloud: every node's points in the world, kept where the fused map is
     /// occupied now (moved rubble, seen through later, drops out), one per voxel; ``(M, 3)``
     /// float64.
-    fn merged_cloud<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let cloud = py.detach(|| self.inner.merged_cloud());
-        points_array(py, &cloud, |p| [p.x, p.y, p.z])
+    fn merged_cloud<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let cloud = py
+            .detach(|| self.inner.merged_cloud())
+            .map_err(sdem_error)?;
+        Ok(points_array(py, &cloud, |p| [p.x, p.y, p.z]))
     }
 
     /// Accepted loop closures as ``(from_node, to_node)`` pairs.

@@ -17,13 +17,14 @@ def points(pairs):
 
 def test_every_exception_is_an_sdem_error_and_the_natural_builtin():
     classes = [getattr(sdem, name) for name in sdem.__all__ if name.endswith("Error")]
-    assert len(classes) == 13
+    assert len(classes) == 14
     for cls in classes:
         assert issubclass(cls, sdem.Error), cls
         assert cls.__doc__, cls
     for cls in (sdem.InvalidError, sdem.InvalidInputError, sdem.TooFewPointsError, sdem.ParseError):
         assert issubclass(cls, ValueError)
     assert issubclass(sdem.FileError, OSError)
+    assert issubclass(sdem.NodeStoreError, OSError)
     for cls in (sdem.NoOverlapError, sdem.NoMatchError, sdem.NoSurfacesError,
                 sdem.RefinementFailedError, sdem.NotFoundError):
         assert issubclass(cls, sdem.MatchError) and cls.is_no_match

@@ -16,6 +16,7 @@
 //! | a vertical cut through the map | [`map_section`] |
 //! | a localization's cost over x–y through the optimum | [`sample_cost_slice`], [`cost_surface`] |
 //! | a self-contained 3D viewer page (inline WebGL, no network) | [`viewer_html`] |
+//! | measurements against a count, with running medians (time per stop by stop number) | [`series_plot`] |
 //!
 //! # Example
 //! ```
@@ -34,6 +35,7 @@ mod cost_view;
 mod draw;
 mod html;
 mod map_view;
+mod plot;
 mod sdem_view;
 mod text;
 
@@ -41,6 +43,7 @@ pub use cost_view::{cost_surface, sample_cost_slice, CostSlice};
 pub use html::{viewer_html, VIEWER_MAX_POINTS};
 pub use image::{Rgb, RgbImage};
 pub use map_view::{map_plan, map_section, MapView, Section};
+pub use plot::{series_plot, Series};
 pub use sdem_view::{sdem_panorama, sdem_polar_slice};
 
 use sdem::error::{Error, Result};

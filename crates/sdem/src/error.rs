@@ -87,6 +87,16 @@ pub enum Error {
         /// Each node tried, with why it did not match.
         tried: Vec<(usize, String)>,
     },
+    /// The node store ([`crate::store::NodeStore`]) could not keep or give back a node's
+    /// points (a full disk, a removed or damaged file): the step that needed them failed, and
+    /// the map is as it was before it.
+    #[error("node {node_id}'s points in the node store: {reason}")]
+    NodeStore {
+        /// The node.
+        node_id: usize,
+        /// What the store said.
+        reason: String,
+    },
     /// A step of the stop-and-go loop failed to localize its scan against the map.
     #[error("scan {scan_index} against nodes {nodes:?}: {source}")]
     AtScan {

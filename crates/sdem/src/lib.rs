@@ -67,6 +67,7 @@ pub mod doubt;
 pub mod error;
 pub mod geometry;
 pub mod global;
+pub mod index;
 pub mod level;
 pub mod localize;
 pub mod map;
@@ -77,6 +78,7 @@ pub mod sdem;
 pub mod search;
 pub mod sensor;
 pub mod slam;
+pub mod store;
 pub mod voxel;
 
 pub use doubt::Doubt;

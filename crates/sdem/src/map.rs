@@ -218,11 +218,30 @@ impl Map {
         radius_m: f64,
         tolerance_m: f64,
     ) -> Vec<(usize, usize)> {
+        self.overlaps_among(
+            0..self.nodes.len(),
+            query_levelled,
+            origin,
+            radius_m,
+            tolerance_m,
+        )
+    }
+
+    /// [`Map::overlaps`] among the nodes `node_ids` only (the recent ones, say): the work is
+    /// theirs, not the map's.
+    pub fn overlaps_among(
+        &self,
+        node_ids: impl IntoIterator<Item = usize>,
+        query_levelled: &Sdem,
+        origin: &Vec3,
+        radius_m: f64,
+        tolerance_m: f64,
+    ) -> Vec<(usize, usize)> {
         let spec = query_levelled.grid();
         let ranges = query_levelled.ranges();
-        let mut scored: Vec<(usize, usize)> = self
-            .nodes
-            .iter()
+        let mut scored: Vec<(usize, usize)> = node_ids
+            .into_iter()
+            .filter_map(|id| self.nodes.get(id))
             .filter(|n| (n.position() - origin).norm() <= radius_m)
             .map(|n| {
                 let mut seen = vec![false; ranges.len()];

@@ -88,10 +88,12 @@ fn the_simulated_loop_is_closed_and_the_map_stays_within_2_cm() {
         );
         let last = run.truth.len() - 1;
         let closures: Vec<&LoopClosure> = run.steps.iter().flat_map(|s| &s.loop_closures).collect();
+        // Closed from one of the loop's first nodes at one of its last stops (after a stop
+        // that accepted a closure the next few look for none: the loop is closed already).
         assert!(
             closures
                 .iter()
-                .any(|c| c.accepted && c.to == last && c.from <= 2),
+                .any(|c| c.accepted && c.to + 3 >= last && c.from <= 2),
             "seed {seed}: the return to the loop's start was not closed: {closures:?}"
         );
         assert!(
@@ -200,7 +202,7 @@ fn near_a_surface(scene: &sim::Scene, p: &Vec3, h: f64) -> bool {
 fn the_fused_map_holds_the_scene_and_free_space() {
     let run = loop_run();
     let scene = &run.scene;
-    let voxels = &run.slam.voxels;
+    let voxels = &run.slam.voxels();
     let s = voxels.voxel_m();
     let scene_from_map = run.scene_from_map();
     let in_scene =
@@ -327,7 +329,7 @@ fn the_fused_map_holds_the_scene_and_free_space() {
     println!("occupied on a surface {fraction:.5}, free in the air {in_air:.5}, deep free {}, sweep returns held {held:.5} of {seen}", deep.len());
     assert!(seen > 1000 && held >= 0.99, "{held} of {seen} returns held");
 
-    let cloud = run.slam.merged_cloud();
+    let cloud = run.slam.merged_cloud().unwrap();
     assert!(cloud.len() > 1000 && cloud.len() <= occupied.len());
 }
 

@@ -64,6 +64,8 @@ pub enum Suite {
     Lidar,
     /// Real scans seen again from known poses, beside GICP from identity.
     RealGeometry,
+    /// The stop-and-go loop on long routes, as the map grows (see `cmd_bench_scale`).
+    Scale,
 }
 
 impl Suite {
@@ -73,6 +75,7 @@ impl Suite {
             Suite::CompassNoise => "compass-noise",
             Suite::Lidar => "lidar",
             Suite::RealGeometry => "real-geometry",
+            Suite::Scale => "scale",
         }
     }
 }
@@ -107,6 +110,27 @@ pub struct SuiteArgs {
     /// of the simulated pairs, 4 with --quick; every KITTI pair].
     #[arg(long, value_name = "N", requires = "suite")]
     pub peer_pairs: Option<usize>,
+    /// With --suite scale: the map sizes measured, nodes, increasing; each route runs up to
+    /// the largest [default: 100,300,1000; 100 with --quick; the full set is 100,300,1000,3000].
+    #[arg(
+        long,
+        value_name = "N,N,...",
+        value_delimiter = ',',
+        requires = "suite"
+    )]
+    pub sizes: Vec<usize>,
+    /// With --suite scale: the routes (repeat or separate by commas) [default: room-laps,
+    /// floor, wings; room-laps with --quick].
+    #[arg(
+        long = "route",
+        value_name = "ROUTE",
+        value_delimiter = ',',
+        requires = "suite"
+    )]
+    pub routes: Vec<String>,
+    /// With --suite scale: where the plot of time per stop against stop number goes.
+    #[arg(long, value_name = "FILE.png", default_value = crate::cmd_bench_scale::DEFAULT_PLOT, requires = "suite")]
+    pub plot: PathBuf,
 }
 
 /// The flags `sdem bench` shares with its suites.
@@ -298,9 +322,43 @@ struct PartSpec<'a> {
     make: Box<dyn FnMut(Range<usize>) -> Result<Vec<Case>> + 'a>,
 }
 
+/// The scale suite's arguments from the flags, with its defaults.
+fn scale_args(args: &SuiteArgs, common: &Common) -> Result<crate::cmd_bench_scale::ScaleArgs> {
+    let (full, quick) = crate::cmd_bench_scale::DEFAULT_SIZES;
+    let sizes = if args.sizes.is_empty() {
+        (if common.quick { quick } else { full }).to_vec()
+    } else {
+        args.sizes.clone()
+    };
+    let routes = if args.routes.is_empty() {
+        if common.quick {
+            vec![sdem_sim::sim::LongRoute::RoomLaps]
+        } else {
+            sdem_sim::sim::LongRoute::ALL.to_vec()
+        }
+    } else {
+        (args.routes.iter())
+            .map(|r| r.parse().with_context(|| format!("--route {r}")))
+            .collect::<Result<_>>()?
+    };
+    Ok(crate::cmd_bench_scale::ScaleArgs {
+        sizes,
+        routes,
+        plot: args.plot.clone(),
+        seed: common.seed,
+        json: common.json,
+    })
+}
+
 /// Runs `sdem bench --suite`.
 pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> {
     let suite = args.suite.context("no --suite given")?;
+    if suite == Suite::Scale {
+        return crate::cmd_bench_scale::run(&scale_args(args, common)?, say);
+    }
+    if !args.sizes.is_empty() || !args.routes.is_empty() {
+        bail!("--sizes and --route apply to --suite scale only");
+    }
     if common.pairs == Some(0) {
         bail!("--pairs must be at least 1");
     }
@@ -361,6 +419,7 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
             )?;
             parts.push(run_part(spec, &peers, common.json, say)?);
         }
+        Suite::Scale => unreachable!("the scale suite runs on its own, above"),
     }
     let report = Report {
         suite: suite.name(),

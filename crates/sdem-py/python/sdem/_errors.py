@@ -19,6 +19,7 @@ __all__ = [
     "RefinementFailedError",
     "NotFoundError",
     "AtScanError",
+    "NodeStoreError",
     "FileError",
     "ParseError",
 ]
@@ -147,6 +148,19 @@ class AtScanError(Error):
     scan_index: int
     nodes: list[int]
     source: Error
+
+
+class NodeStoreError(Error, OSError):
+    """The store that keeps the points of nodes far from the robot on disk could not keep or
+    give one back (``Error::NodeStore``); the map is as it was before the step.
+
+    Attributes:
+        node_id: the node.
+        reason: what the store said.
+    """
+
+    node_id: int
+    reason: str
 
 
 class FileError(Error, OSError):

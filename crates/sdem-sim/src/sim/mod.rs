@@ -37,7 +37,9 @@ mod building;
 mod fixed_scenes;
 mod lidar;
 pub mod lidar_street;
+mod long_routes;
 mod open_scenes;
+mod plan;
 mod route;
 mod scanner;
 mod scene;
@@ -52,6 +54,7 @@ pub use fixed_scenes::{
 };
 pub use lidar::{lidar_beam, spin_scan, LidarConfig};
 pub use lidar_street::{spinning_scan, SpinningLidar, STREET_SENSOR_HEIGHT_M};
+pub use long_routes::{long_run, LongRoute, LongRun, MAX_LONG_STOPS};
 pub use open_scenes::{open_hall, open_hall_sensor_region, street, street_sensor_region};
 pub use route::{COLLAPSED_BUILDING_START_HEIGHT_M, MAX_STOPS};
 pub use scanner::{scan, simulate_changing_run, simulate_run, SimStop};

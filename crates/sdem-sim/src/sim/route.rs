@@ -24,13 +24,13 @@ const MIN_STEM_M: f64 = 1.6;
 
 /// One piece of the route: a straight line or a circular arc (positive angle turns left).
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Segment {
+pub(super) enum Segment {
     Line(f64),
     Arc { radius: f64, angle: f64 },
 }
 
 impl Segment {
-    fn length(&self) -> f64 {
+    pub(super) fn length(&self) -> f64 {
         match *self {
             Segment::Line(l) => l,
             Segment::Arc { radius, angle } => radius * angle.abs(),
@@ -59,37 +59,43 @@ impl Route {
     /// Position (x, y) and heading at arc length `s`; before the start and past the end the
     /// first and last segments are extended.
     pub(super) fn at(&self, s: f64) -> ([f64; 2], f64) {
-        let (mut x, mut y, mut yaw) = (0.0f64, 0.0f64, 0.0f64);
-        let mut rest = s;
-        let n = self.segments.len();
-        for (i, seg) in self.segments.iter().enumerate() {
-            let len = seg.length();
-            let ends_here = rest <= len || i + 1 == n;
-            let step = if ends_here { rest } else { len };
-            match *seg {
-                Segment::Line(_) => {
-                    x += step * yaw.cos();
-                    y += step * yaw.sin();
-                }
-                Segment::Arc { radius, angle } => {
-                    let sign = angle.signum();
-                    let (cx, cy) = (x - sign * radius * yaw.sin(), y + sign * radius * yaw.cos());
-                    yaw += sign * step / radius;
-                    x = cx + sign * radius * yaw.sin();
-                    y = cy - sign * radius * yaw.cos();
-                }
-            }
-            if ends_here {
-                break;
-            }
-            rest -= len;
-        }
-        ([x, y], wrap_angle(yaw))
+        pose_along(&self.segments, s)
     }
 
     pub(super) fn lift_is_low(&self, s: f64) -> bool {
         (self.low_lift.0..=self.low_lift.1).contains(&s)
     }
+}
+
+/// Position (x, y) and heading at arc length `s` along `segments`, which start at the origin
+/// heading +x; before the start and past the end the first and last segments are extended.
+pub(super) fn pose_along(segments: &[Segment], s: f64) -> ([f64; 2], f64) {
+    let (mut x, mut y, mut yaw) = (0.0f64, 0.0f64, 0.0f64);
+    let mut rest = s;
+    let n = segments.len();
+    for (i, seg) in segments.iter().enumerate() {
+        let len = seg.length();
+        let ends_here = rest <= len || i + 1 == n;
+        let step = if ends_here { rest } else { len };
+        match *seg {
+            Segment::Line(_) => {
+                x += step * yaw.cos();
+                y += step * yaw.sin();
+            }
+            Segment::Arc { radius, angle } => {
+                let sign = angle.signum();
+                let (cx, cy) = (x - sign * radius * yaw.sin(), y + sign * radius * yaw.cos());
+                yaw += sign * step / radius;
+                x = cx + sign * radius * yaw.sin();
+                y = cy - sign * radius * yaw.cos();
+            }
+        }
+        if ends_here {
+            break;
+        }
+        rest -= len;
+    }
+    ([x, y], wrap_angle(yaw))
 }
 
 /// The route for a ditch with legs `leg1`, `leg2` and a `bend` between them: along the legs

@@ -121,6 +121,25 @@ impl Scene {
         }
     }
 
+    /// The part of the scene a sensor at `centre` can see within `range` metres: the free
+    /// boxes and solids whose bounding spheres come that close (without the route). Rays from
+    /// `centre` no longer than `range` meet the same surfaces in both, so a large scene is
+    /// cast stop by stop at the cost of its neighbourhood.
+    pub fn cropped(&self, centre: &Vec3, range: f64) -> Scene {
+        let near = |c: &Vec3, radius: f64| (c - centre).norm() <= range + radius + EPS;
+        Scene {
+            free: (self.free.iter())
+                .filter(|b| near(&b.center, b.half_extents.norm()))
+                .cloned()
+                .collect(),
+            solids: (self.solids.iter())
+                .filter(|s| near(s.center(), s.bounding_radius()))
+                .cloned()
+                .collect(),
+            route: None,
+        }
+    }
+
     /// True when `p` is inside the air and not strictly inside any solid.
     pub fn is_free(&self, p: &Vec3) -> bool {
         self.free.iter().any(|b| b.contains(p)) && !self.solids.iter().any(|s| s.contains(p))

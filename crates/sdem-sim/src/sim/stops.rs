@@ -169,7 +169,7 @@ pub fn collapsed_building_stops(
 }
 
 /// Stop 0: the sensor at the world origin, level, heading +x; the body on the flat floor below.
-fn first_stop(lift: &LiftConfig, slide: f64) -> Result<Stop> {
+pub(super) fn first_stop(lift: &LiftConfig, slide: f64) -> Result<Stop> {
     Ok(Stop {
         world_from_body: lift.body_from_sensor(slide)?.inverse(),
         lift_slide_m: slide,
@@ -177,7 +177,7 @@ fn first_stop(lift: &LiftConfig, slide: f64) -> Result<Stop> {
 }
 
 /// A stop whose sensor origin is above `sensor_xy` heading `yaw`, the body standing on the floor.
-fn place_stop(
+pub(super) fn place_stop(
     scene: &Scene,
     lift: &LiftConfig,
     (sensor_xy, yaw): ([f64; 2], f64),
@@ -204,7 +204,12 @@ fn place_stop(
     })
 }
 
-fn check_clearance(scene: &Scene, lift: &LiftConfig, stop: &Stop, index: usize) -> Result<()> {
+pub(super) fn check_clearance(
+    scene: &Scene,
+    lift: &LiftConfig,
+    stop: &Stop,
+    index: usize,
+) -> Result<()> {
     let sensor = stop.world_from_sensor(lift)?.translation.vector;
     let clearance = scene.clearance(&sensor, CLEARANCE_DIRECTIONS);
     if clearance < MIN_SENSOR_CLEARANCE_M {

@@ -18,21 +18,30 @@
 //!    weighs the new pose-graph edges.
 //! 4. **Loop closure**: older nodes near the new one whose place descriptor is similar are
 //!    verified with the exact search; an accepted closure becomes an edge and the pose graph is
-//!    optimized (robust Cauchy kernel), and the fused map is rebuilt on the new poses.
+//!    optimized (robust Cauchy kernel) over the part of it the closure touches; the nodes that
+//!    moved are fused again into the voxel map, a few per stop.
+//!
+//! As the map grows the work per stop stays bounded (`upkeep`): candidates come from an index
+//! of node positions and descriptors, not from every node; the fused map takes a moved node's
+//! scan out and puts it back instead of fusing every scan again; and with a node store
+//! attached, the nodes far from the robot keep their points there.
 
 //!
 //! The module's files: this one holds the configuration and the loop, `relocalize` finding a scan
-//! in a saved map, `trajectory` the errors of an estimated trajectory against a reference one.
+//! in a saved map, `trajectory` the errors of an estimated trajectory against a reference one,
+//! `upkeep` what keeps the work per stop and the memory bounded as the map grows.
 
 mod options;
 mod relocalize;
 mod step;
 mod trajectory;
+mod upkeep;
 
 pub use options::SlamOptions;
 pub use relocalize::{relocalize, Near, Relocalization};
 pub use step::{HeadingPrior, OptimizationSummary, Step, StepReport, StepStatus};
 pub use trajectory::{trajectory_errors, TrajectoryErrors};
+pub use upkeep::GrowthOptions;
 
 use crate::doubt::Doubt;
 use crate::error::{Error, Result};
@@ -41,14 +50,17 @@ use crate::localize::{
     localize, CostConfig, Diagnostics, LocalizeOptions, OffsetPrior, RefinementSummary,
     SearchWindow,
 };
-use crate::map::{verify_loop_closure, world_from_query, Descriptor, LoopClosure, Map, Node};
+use crate::map::{verify_loop_closure, world_from_query, LoopClosure, Map, Node};
 use crate::posegraph::{optimize, Edge, EdgeKind, PoseGraph};
 use crate::sdem::Sdem;
 use crate::search::HeadingWindow;
+use crate::store::NodeStore;
 use crate::voxel::VoxelMap;
 use nalgebra::{Matrix3, Matrix6};
 use relocalize::take_prediction_along;
+use std::sync::Arc;
 use std::time::Instant;
+use upkeep::Upkeep;
 
 /// One scan as the loop receives it.
 #[derive(Debug, Clone)]
@@ -86,14 +98,16 @@ impl Odometry {
 #[derive(Debug, Clone)]
 pub struct Slam {
     config: SlamOptions,
-    /// The nodes.
+    /// The nodes. With a node store attached ([`Slam::set_node_store`]), the points of nodes
+    /// far from the robot are in the store and their `points_in_sensor` is empty: read them
+    /// through [`Slam::node_points`].
     pub map: Map,
     /// The pose graph's edges (matches to reference nodes and loop closures).
     pub edges: Vec<Edge>,
     /// Accepted loop closures.
     pub loop_closures: Vec<LoopClosure>,
-    /// The fused occupancy map on the current poses.
-    pub voxels: VoxelMap,
+    /// The node index, the fused occupancy map and the nodes' residency.
+    upkeep: Upkeep,
     /// The odometry's reading at the last scan given to [`Slam::add`].
     last_odom_from_sensor: Option<Pose>,
     /// The index [`Slam::add`] gives the next scan.
@@ -107,13 +121,13 @@ impl Slam {
     /// An invalid configuration.
     pub fn new(config: SlamOptions) -> Result<Self> {
         config.validate()?;
-        let voxels = VoxelMap::new(config.voxel)?;
+        let upkeep = Upkeep::new(&config.growth, config.voxel)?;
         Ok(Self {
             config,
             map: Map::default(),
             edges: Vec::new(),
             loop_closures: Vec::new(),
-            voxels,
+            upkeep,
             last_odom_from_sensor: None,
             next_scan_index: 0,
         })
@@ -141,7 +155,7 @@ impl Slam {
         slam.edges = edges;
         slam.loop_closures = loop_closures;
         slam.next_scan_index = slam.map.nodes.last().map_or(0, |node| node.scan_index + 1);
-        slam.rebuild_voxels();
+        slam.rebuild_voxels()?;
         Ok(slam)
     }
 
@@ -237,26 +251,87 @@ impl Slam {
         self.map.nodes.iter().map(|n| n.world_from_sensor).collect()
     }
 
-    /// Rebuilds the fused voxel map from every node on the current poses.
-    pub fn rebuild_voxels(&mut self) {
-        let mut voxels = VoxelMap::new(self.config.voxel)
-            .expect("the voxel configuration was validated in Slam::new");
-        for node in &self.map.nodes {
-            voxels.insert_scan(&node.world_from_sensor, &node.sensor_points());
+    /// Indexes and fuses every node afresh, on the current poses.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back.
+    pub fn rebuild_voxels(&mut self) -> Result<()> {
+        self.upkeep.rebuild(&mut self.map)
+    }
+
+    /// The fused occupancy map: every node's scan, each at the pose it was fused at, which
+    /// lies within [`GrowthOptions::refuse_tolerance_m`] and `refuse_tolerance_deg` of its
+    /// current one once [`Slam::settle_map`] has run (after a loop closure, the moved nodes
+    /// are fused again a few per stop).
+    pub fn voxels(&self) -> VoxelMap {
+        self.upkeep.fusion.to_voxel_map()
+    }
+
+    /// Fuses again every node a solve moved beyond the tolerances, so that [`Slam::voxels`]
+    /// and [`Slam::merged_cloud`] show the map on the current poses.
+    ///
+    /// # Returns
+    /// The nodes fused again.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back.
+    pub fn settle_map(&mut self) -> Result<usize> {
+        let keep = self.config.loop_closure.min_node_separation + 1;
+        self.upkeep.after_step(&mut self.map, keep, true)
+    }
+
+    /// Keeps the points of nodes far from the robot in `store`: from now on at most
+    /// [`GrowthOptions::resident_nodes`] nodes hold their points in memory, the most recently
+    /// used; the others' come back from the store when a step needs them (a loop closure to an
+    /// old place, a moved node fused again).
+    pub fn set_node_store(&mut self, store: Arc<dyn NodeStore>) {
+        self.upkeep.set_store(store);
+    }
+
+    /// Node `node_id`'s points, sensor frame: from memory, or read back from the node store
+    /// for this use when the node is parked.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back; [`Error::Invalid`]
+    /// for a node not in the map.
+    pub fn node_points(&self, node_id: usize) -> Result<std::borrow::Cow<'_, [[f32; 3]]>> {
+        if node_id >= self.map.nodes.len() {
+            return Err(Error::Invalid(format!(
+                "node {node_id} is not in the map ({} nodes)",
+                self.map.nodes.len()
+            )));
         }
-        self.voxels = voxels;
+        self.upkeep.residency.points_of(&self.map, node_id)
+    }
+
+    /// The number of node `node_id`'s points, parked or not (0 for a node not in the map).
+    pub fn node_point_count(&self, node_id: usize) -> usize {
+        self.upkeep.residency.point_count(&self.map, node_id)
+    }
+
+    /// Nodes whose points are in memory (all of them without a node store).
+    pub fn resident_nodes(&self) -> usize {
+        self.upkeep.residency.resident(&self.map)
     }
 
     /// The merged point cloud: every node's points in the world, kept where the fused map is
-    /// occupied now (moved rubble, seen through later, drops out), one per voxel.
-    pub fn merged_cloud(&self) -> Vec<Vec3> {
-        let all: Vec<Vec3> = self
-            .map
-            .nodes
-            .iter()
-            .flat_map(|n| n.points_in_world())
-            .collect();
-        self.voxels.filter_occupied(&all)
+    /// occupied now (moved rubble, seen through later, drops out), one per voxel. Parked nodes
+    /// are read back one at a time.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back.
+    pub fn merged_cloud(&self) -> Result<Vec<Vec3>> {
+        let voxels = self.voxels();
+        let mut merged = voxels.occupied_centroids();
+        for node in &self.map.nodes {
+            let points = self.node_points(node.node_id)?;
+            merged.add(points.iter().map(|p| {
+                (node.world_from_sensor
+                    * nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+                .coords
+            }));
+        }
+        Ok(merged.finish())
     }
 
     /// Runs one step of the loop on `scan`.
@@ -281,6 +356,8 @@ impl Slam {
 
         // 1. Predict.
         let prediction = self.predict(scan, last.world_from_sensor, node_id);
+        let recent = self.recent_nodes(node_id);
+        self.upkeep.bring(&mut self.map, &recent)?;
 
         // 2. Reference nodes: recent nodes (the local map) that see what the scan sees.
         let query = Sdem::from_points(
@@ -302,7 +379,13 @@ impl Slam {
         self.add_node(scan, node_id, &matched, &reference_ids)?;
 
         // 4. Loop closure.
+        let closure_start = Instant::now();
         let (closures, optimization) = self.close_loops_and_optimize(node_id)?;
+        let loop_closure_ms = ms(closure_start);
+        let map_start = Instant::now();
+        let keep = self.config.loop_closure.min_node_separation + 1;
+        self.upkeep.after_step(&mut self.map, keep, false)?;
+        let map_update_ms = ms(map_start);
 
         let pose = self.map.nodes[node_id].world_from_sensor;
         let Matched {
@@ -318,6 +401,8 @@ impl Slam {
             node_id,
             time_ms: ms(start),
             localize_ms,
+            loop_closure_ms,
+            map_update_ms,
             world_from_sensor: (&pose).into(),
             predicted_world_from_sensor: (&prediction.predicted).into(),
             heading_prior: prediction.heading_prior,
@@ -348,15 +433,16 @@ impl Slam {
             scan.points_in_sensor,
             &self.config.sdem,
         )?;
-        self.voxels
-            .insert_scan(&node.world_from_sensor, &node.sensor_points());
         self.map.nodes.push(node);
+        self.upkeep.node_added(&self.map, node_id)?;
         let pose = world_from_sensor;
         Ok(StepReport {
             scan_index: scan.scan_index,
             node_id,
             time_ms: ms(start),
             localize_ms: 0.0,
+            loop_closure_ms: 0.0,
+            map_update_ms: 0.0,
             world_from_sensor: (&pose).into(),
             predicted_world_from_sensor: (&pose).into(),
             heading_prior: HeadingPrior::First,
@@ -439,6 +525,13 @@ impl Slam {
         }
     }
 
+    /// The recent nodes, among which step 2 picks the references: the last
+    /// `min_node_separation` (older ones are loop closures' to find).
+    fn recent_nodes(&self, node_id: usize) -> Vec<usize> {
+        let recent_from = node_id.saturating_sub(self.config.loop_closure.min_node_separation);
+        (recent_from..node_id).collect()
+    }
+
     /// Step 2: the recent nodes near `position` that overlap `query` enough, most overlap first,
     /// with the cells they overlap; the last node when none does (the search then says why).
     fn reference_nodes(
@@ -447,14 +540,17 @@ impl Slam {
         position: &Vec3,
         node_id: usize,
     ) -> Vec<(usize, usize)> {
-        let recent_from = node_id.saturating_sub(self.config.loop_closure.min_node_separation);
         let mut references: Vec<(usize, usize)> = self
             .map
-            .overlaps(query, position, self.config.reference_radius_m, 0.2)
+            .overlaps_among(
+                self.recent_nodes(node_id),
+                query,
+                position,
+                self.config.reference_radius_m,
+                0.2,
+            )
             .into_iter()
-            .filter(|&(id, cells)| {
-                id >= recent_from && cells >= self.config.min_reference_overlap_cells
-            })
+            .filter(|&(_, cells)| cells >= self.config.min_reference_overlap_cells)
             .take(self.config.max_reference_nodes)
             .collect();
         if references.is_empty() {
@@ -571,10 +667,8 @@ impl Slam {
                 kind: EdgeKind::Odometry,
             });
         }
-        self.voxels
-            .insert_scan(&node.world_from_sensor, &node.sensor_points());
         self.map.nodes.push(node);
-        Ok(())
+        self.upkeep.node_added(&self.map, node_id)
     }
 
     /// Step 4, when loop closure is enabled: closes loops to node `node_id` and, when one was
@@ -586,9 +680,14 @@ impl Slam {
         let mut closures = Vec::new();
         let mut optimization = None;
         if self.config.loop_closure.enabled {
+            let anchored = self.upkeep.last_closure();
             closures = self.close_loops(node_id)?;
-            if closures.iter().any(|c| c.accepted) {
-                optimization = Some(self.optimize_graph()?);
+            let oldest = (closures.iter())
+                .filter(|c| c.accepted)
+                .map(|c| c.from.min(c.to))
+                .min();
+            if let Some(oldest) = oldest {
+                optimization = Some(self.solve_after_closure(oldest, anchored)?);
             }
         }
         Ok((closures, optimization))
@@ -597,25 +696,12 @@ impl Slam {
     /// Proposes revisits of older places for node `to` and verifies them; accepted ones become
     /// pose-graph edges.
     fn close_loops(&mut self, to: usize) -> Result<Vec<LoopClosure>> {
-        let config = &self.config.loop_closure;
-        let to_node = &self.map.nodes[to];
-        let to_descriptor = Descriptor::from_levelled(&to_node.points_levelled());
-        let mut candidates: Vec<(usize, f64)> = self
-            .map
-            .nodes
-            .iter()
-            .filter(|n| n.node_id + config.min_node_separation <= to)
-            .filter(|n| (n.position() - to_node.position()).norm() <= config.search_radius_m)
-            .filter_map(|n| {
-                let d =
-                    Descriptor::from_levelled(&n.points_levelled()).distance(&to_descriptor, 1)?;
-                (d <= config.max_descriptor_distance).then_some((n.node_id, d))
-            })
-            .collect();
-        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
-        candidates.truncate(config.max_candidates);
+        let candidates = self
+            .upkeep
+            .closure_candidates(&self.map, to, &self.config.loop_closure);
         let mut checked = Vec::new();
         for (from, distance) in candidates {
+            self.upkeep.bring(&mut self.map, &[from, to])?;
             let prior = self.map.nodes[to].world_from_sensor;
             let mut closure = verify_loop_closure(
                 &self.map,
@@ -629,6 +715,7 @@ impl Slam {
             closure.descriptor_distance = Some(distance);
             if closure.accepted {
                 self.add_loop_closure_edge(&closure);
+                self.upkeep.closure_accepted(to);
             }
             checked.push(closure);
         }
@@ -651,7 +738,37 @@ impl Slam {
         self.loop_closures.push(closure.clone());
     }
 
-    /// Optimizes the pose graph (node 0 held), moves the nodes and rebuilds the fused map.
+    /// Solves the pose graph after loop closures whose oldest node is `oldest` (the last
+    /// closure before them accepted at node `anchored`): over the part of the graph that
+    /// drifted since, grown as far as the edges ask, the whole graph when it reaches that far
+    /// (see [`crate::posegraph::optimize_local`]); the moved nodes are fused again in the
+    /// steps to come.
+    fn solve_after_closure(
+        &mut self,
+        oldest: usize,
+        anchored: Option<usize>,
+    ) -> Result<OptimizationSummary> {
+        let start = Instant::now();
+        let (solve, max_shift) = self.upkeep.solve(
+            &mut self.map,
+            &self.edges,
+            oldest,
+            anchored,
+            &self.config.optimize,
+        )?;
+        Ok(OptimizationSummary {
+            iterations: solve.report.iterations,
+            initial_cost: solve.report.initial_cost,
+            final_cost: solve.report.final_cost,
+            time_ms: ms(start),
+            max_node_shift_m: max_shift,
+            free_nodes: solve.free_nodes,
+            whole_graph: solve.whole,
+        })
+    }
+
+    /// Optimizes the whole pose graph (node 0 held) and moves the nodes; the fused map follows
+    /// them in the steps to come, or at once with [`Slam::settle_map`].
     ///
     /// # Errors
     /// The optimizer's errors (invalid edges).
@@ -667,13 +784,15 @@ impl Slam {
             max_shift = max_shift.max((node.position() - pose.translation.vector).norm());
             node.world_from_sensor = pose;
         }
-        self.rebuild_voxels();
+        self.upkeep.all_moved(&self.map);
         Ok(OptimizationSummary {
             iterations: report.iterations,
             initial_cost: report.initial_cost,
             final_cost: report.final_cost,
             time_ms: ms(start),
             max_node_shift_m: max_shift,
+            free_nodes: self.map.nodes.len().saturating_sub(1),
+            whole_graph: true,
         })
     }
 

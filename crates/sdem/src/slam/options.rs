@@ -50,6 +50,8 @@ pub struct SlamOptions {
     pub optimize: OptimizeConfig,
     /// The fused occupancy map.
     pub voxel: VoxelConfig,
+    /// How the work per stop and the memory stay bounded as the map grows.
+    pub growth: super::GrowthOptions,
 }
 
 impl Default for SlamOptions {
@@ -78,6 +80,7 @@ impl Default for SlamOptions {
             loop_closure: LoopClosureConfig::default(),
             optimize: OptimizeConfig::default(),
             voxel: VoxelConfig::default(),
+            growth: super::GrowthOptions::default(),
         }
     }
 }
@@ -88,6 +91,7 @@ impl SlamOptions {
     pub fn validate(&self) -> Result<()> {
         self.sdem.validate()?;
         self.voxel.validate()?;
+        self.growth.validate()?;
         let halves = self
             .window_half_m
             .iter()

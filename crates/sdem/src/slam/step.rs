@@ -32,6 +32,11 @@ pub struct StepReport {
     pub time_ms: f64,
     /// Wall time of the localization alone, ms.
     pub localize_ms: f64,
+    /// Wall time of loop closure: the candidates' verification and the graph solve, ms.
+    pub loop_closure_ms: f64,
+    /// Wall time of the map's upkeep after the step: moved nodes fused again, far nodes
+    /// parked in the node store, ms.
+    pub map_update_ms: f64,
     /// The estimated pose of the scan's sensor in the world when the step ended, as
     /// `{x, y, z, roll_deg, …}`.
     pub world_from_sensor: crate::geometry::PoseRecord,
@@ -76,6 +81,10 @@ pub struct OptimizationSummary {
     pub time_ms: f64,
     /// The largest move of a node, metres.
     pub max_node_shift_m: f64,
+    /// Nodes the solve was free to move (the part of the graph the closure touched).
+    pub free_nodes: usize,
+    /// The whole graph was solved.
+    pub whole_graph: bool,
 }
 
 /// How a stop went, in one word.

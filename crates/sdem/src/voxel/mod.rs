@@ -17,13 +17,16 @@
 
 //!
 //! The module's files: this one holds the configuration and the map, `keys` how voxels are keyed,
-//! hashed and stored in blocks, `traverse` the ray walk.
+//! hashed and stored in blocks, `traverse` the ray walk, `fusion` the fused map of scans that
+//! can be taken out and put back when the nodes they came from move ([`VoxelFusion`]).
 
+mod fusion;
 mod keys;
 #[cfg(test)]
 mod tests;
 mod traverse;
 
+pub use fusion::VoxelFusion;
 pub use keys::{Key, KeyHasher, KeyMap};
 
 use crate::error::{Error, Result};
@@ -304,78 +307,44 @@ impl VoxelMap {
     pub fn insert_scan(&mut self, world_from_sensor: &Pose, points_in_sensor: &[Vec3]) {
         self.next_stamp();
         let stamp = self.scan_counter;
-        let inv_s = 1.0 / self.config.voxel_m;
         let (lo, hi) = self.clamp_bounds();
         let hit = self.config.hit_log_odds as f32;
         let miss = self.config.miss_log_odds as f32;
-        let max_range = self.config.max_range_m;
-
-        let origin = world_from_sensor.translation.vector;
-        let Some(origin_key) = key_of(&origin, inv_s) else {
-            return;
-        };
-        // Rays as (end point, whether it is a hit); hits are applied first, so that a voxel hit
-        // anywhere in this scan is stamped before any ray could mark it free.
-        let mut rays: Vec<(Vec3, bool)> = Vec::with_capacity(points_in_sensor.len());
-        for point_in_sensor in points_in_sensor {
-            let range = point_in_sensor.norm();
-            if !range.is_finite() {
-                continue;
-            }
-            let ray = if range > max_range {
-                let cut = world_from_sensor.rotation * (point_in_sensor * (max_range / range));
-                (origin + cut, false)
-            } else {
-                (
-                    world_from_sensor
-                        .transform_point(&(*point_in_sensor).into())
-                        .coords,
-                    true,
-                )
-            };
-            if key_of(&ray.0, inv_s).is_some() {
-                rays.push(ray);
-            }
-        }
 
         // Hornung et al. 2013, Eq. (2)–(4): L(n) ← clamp(L(n) + l, l_min, l_max). Consecutive
         // voxels of a ray mostly share a block, so the last block found is kept.
         let (blocks, block_index, known) =
             (&mut self.blocks, &mut self.block_index, &mut self.known);
         let mut last_block: Option<(VoxelKey, usize)> = None;
-        let mut update = |key: VoxelKey, delta: f32| {
-            let (block_key, index) = split_key(key);
-            let position = match last_block {
-                Some((k, position)) if k == block_key => position,
-                _ => {
-                    let position = block_position(blocks, block_index, block_key);
-                    last_block = Some((block_key, position));
-                    position
+        for_each_update(
+            &self.config,
+            world_from_sensor,
+            points_in_sensor,
+            |key, is_hit| {
+                let (block_key, index) = split_key(key);
+                let position = match last_block {
+                    Some((k, position)) if k == block_key => position,
+                    _ => {
+                        let position = block_position(blocks, block_index, block_key);
+                        last_block = Some((block_key, position));
+                        position
+                    }
+                };
+                let cell = &mut blocks[position].cells[index];
+                if cell.stamp == stamp {
+                    return;
                 }
-            };
-            let cell = &mut blocks[position].cells[index];
-            if cell.stamp == stamp {
-                return;
-            }
-            cell.stamp = stamp;
-            let old = cell.log_odds;
-            cell.log_odds = if old.is_nan() {
-                *known += 1;
-                delta.clamp(lo, hi)
-            } else {
-                (old + delta).clamp(lo, hi)
-            };
-        };
-        for (end, is_hit) in &rays {
-            if *is_hit {
-                if let Some(key) = key_of(end, inv_s) {
-                    update(key, hit);
-                }
-            }
-        }
-        for (end, _) in &rays {
-            traverse(&origin, origin_key, end, inv_s, |key| update(key, miss));
-        }
+                cell.stamp = stamp;
+                let delta = if is_hit { hit } else { miss };
+                let old = cell.log_odds;
+                cell.log_odds = if old.is_nan() {
+                    *known += 1;
+                    delta.clamp(lo, hi)
+                } else {
+                    (old + delta).clamp(lo, hi)
+                };
+            },
+        );
     }
 
     /// Advances the scan counter; on the (theoretical) wrap-around every stamp is cleared.
@@ -424,28 +393,19 @@ impl VoxelMap {
     /// centroid of that voxel's points. Points on rubble that later scans saw through have turned
     /// free and drop out. The output is ordered by each voxel's first point in the input.
     pub fn filter_occupied(&self, points_in_world: &[Vec3]) -> Vec<Vec3> {
-        let inv_s = 1.0 / self.config.voxel_m;
-        // Per occupied voxel: its position in the output, the sum of its points and their count.
-        let mut sums: KeyMap<usize> = KeyMap::default();
-        let mut acc: Vec<(Vec3, u32)> = Vec::new();
-        for p in points_in_world {
-            let Some(key) = key_of(p, inv_s) else {
-                continue;
-            };
-            let occupied = self
-                .log_odds(&key)
-                .is_some_and(|l| occupancy_of(l) == Occupancy::Occupied);
-            if !occupied {
-                continue;
-            }
-            let slot = *sums.entry(Key(key)).or_insert_with(|| {
-                acc.push((Vec3::zeros(), 0));
-                acc.len() - 1
-            });
-            acc[slot].0 += p;
-            acc[slot].1 += 1;
+        let mut centroids = self.occupied_centroids();
+        centroids.add(points_in_world.iter().copied());
+        centroids.finish()
+    }
+
+    /// [`VoxelMap::filter_occupied`] for points given a batch at a time (each node's scan, say,
+    /// so that every scan of a large map never sits in memory at once).
+    pub fn occupied_centroids(&self) -> OccupiedCentroids<'_> {
+        OccupiedCentroids {
+            map: self,
+            slots: KeyMap::default(),
+            sums: Vec::new(),
         }
-        acc.into_iter().map(|(sum, n)| sum / f64::from(n)).collect()
     }
 
     /// The axis-aligned box around all known (free or occupied) voxels, `(min corner, max
@@ -469,6 +429,183 @@ impl VoxelMap {
             )
         };
         Some((corner(min, 0), corner(max, 1)))
+    }
+}
+
+/// Calls `update(key, is_hit)` for every voxel a scan's rays reach, as
+/// [`VoxelMap::insert_scan`] describes: first the end voxel of every ray shorter than
+/// `max_range_m` (a hit), then every voxel each ray crosses before its end (a miss); a ray longer
+/// than `max_range_m` is cut there and only crosses. The same voxel may come more than once; the
+/// caller keeps the first update of a scan (a hit wins, since hits come first). The order is a
+/// function of the pose and the points alone, so a scan's updates can be replayed exactly.
+pub(crate) fn for_each_update(
+    config: &VoxelConfig,
+    world_from_sensor: &Pose,
+    points_in_sensor: &[Vec3],
+    mut update: impl FnMut(VoxelKey, bool),
+) {
+    let inv_s = 1.0 / config.voxel_m;
+    let Some(ScanRays {
+        origin,
+        origin_key,
+        rays,
+    }) = scan_rays(config, world_from_sensor, points_in_sensor)
+    else {
+        return;
+    };
+    for (end, is_hit) in &rays {
+        if *is_hit {
+            if let Some(key) = key_of(end, inv_s) {
+                update(key, true);
+            }
+        }
+    }
+    for (end, _) in &rays {
+        traverse(&origin, origin_key, end, inv_s, |key| update(key, false));
+    }
+}
+
+/// [`for_each_update`] with the rays' ends taken a voxel at a time, as OctoMap's
+/// `insertPointCloud(…, discretize = true)` does: one hit for each voxel some ray ends in, and
+/// one ray from the sensor to the centre of each such voxel (or of the voxel where a ray longer
+/// than `max_range_m` is cut) for the misses. Surfaces near the sensor put several returns in one
+/// voxel, and the rays to them cross nearly the same voxels: on the simulated floor a node's
+/// 9,800 points end in 5,400–6,900 voxels. The same updates for the same pose and points, in the
+/// same order, every time.
+pub(crate) fn for_each_voxel_ray(
+    config: &VoxelConfig,
+    world_from_sensor: &Pose,
+    points_in_sensor: &[Vec3],
+    mut update: impl FnMut(VoxelKey, bool),
+) {
+    let inv_s = 1.0 / config.voxel_m;
+    let Some(ScanRays {
+        origin,
+        origin_key,
+        rays,
+    }) = scan_rays(config, world_from_sensor, points_in_sensor)
+    else {
+        return;
+    };
+    // Each end voxel once, in the order of its first ray; a hit where any ray ends in it.
+    let mut slots: KeyMap<usize> = KeyMap::default();
+    let mut ends: Vec<(VoxelKey, bool)> = Vec::with_capacity(rays.len());
+    for (end, is_hit) in &rays {
+        let Some(key) = key_of(end, inv_s) else {
+            continue;
+        };
+        let slot = *slots.entry(Key(key)).or_insert_with(|| {
+            ends.push((key, false));
+            ends.len() - 1
+        });
+        ends[slot].1 |= *is_hit;
+    }
+    for &(key, is_hit) in &ends {
+        if is_hit {
+            update(key, true);
+        }
+    }
+    let s = config.voxel_m;
+    for &(key, _) in &ends {
+        let centre = Vec3::new(
+            (f64::from(key[0]) + 0.5) * s,
+            (f64::from(key[1]) + 0.5) * s,
+            (f64::from(key[2]) + 0.5) * s,
+        );
+        traverse(&origin, origin_key, &centre, inv_s, |k| update(k, false));
+    }
+}
+
+/// A scan's rays in the world: where they start, and where each ends.
+struct ScanRays {
+    /// The sensor's origin.
+    origin: Vec3,
+    /// The origin's voxel.
+    origin_key: VoxelKey,
+    /// Each ray as `(end, is_hit)`: the point, or the point cut at `max_range_m` (not a hit).
+    rays: Vec<(Vec3, bool)>,
+}
+
+/// A scan's [`ScanRays`]; `None` when the origin has no voxel key.
+fn scan_rays(
+    config: &VoxelConfig,
+    world_from_sensor: &Pose,
+    points_in_sensor: &[Vec3],
+) -> Option<ScanRays> {
+    let inv_s = 1.0 / config.voxel_m;
+    let max_range = config.max_range_m;
+    let origin = world_from_sensor.translation.vector;
+    let origin_key = key_of(&origin, inv_s)?;
+    let mut rays: Vec<(Vec3, bool)> = Vec::with_capacity(points_in_sensor.len());
+    for point_in_sensor in points_in_sensor {
+        let range = point_in_sensor.norm();
+        if !range.is_finite() {
+            continue;
+        }
+        let ray = if range > max_range {
+            let cut = world_from_sensor.rotation * (point_in_sensor * (max_range / range));
+            (origin + cut, false)
+        } else {
+            (
+                world_from_sensor
+                    .transform_point(&(*point_in_sensor).into())
+                    .coords,
+                true,
+            )
+        };
+        if key_of(&ray.0, inv_s).is_some() {
+            rays.push(ray);
+        }
+    }
+    Some(ScanRays {
+        origin,
+        origin_key,
+        rays,
+    })
+}
+
+/// The centroid of the points in each occupied voxel, gathered a batch at a time (see
+/// [`VoxelMap::occupied_centroids`]).
+#[derive(Debug)]
+pub struct OccupiedCentroids<'m> {
+    map: &'m VoxelMap,
+    /// Per occupied voxel: its position in `sums`.
+    slots: KeyMap<usize>,
+    /// The sum of each voxel's points and their count.
+    sums: Vec<(Vec3, u32)>,
+}
+
+impl OccupiedCentroids<'_> {
+    /// Adds points (world frame); those whose voxel is not occupied are dropped.
+    pub fn add(&mut self, points_in_world: impl IntoIterator<Item = Vec3>) {
+        let inv_s = 1.0 / self.map.config.voxel_m;
+        for p in points_in_world {
+            let Some(key) = key_of(&p, inv_s) else {
+                continue;
+            };
+            let occupied = self
+                .map
+                .log_odds(&key)
+                .is_some_and(|l| occupancy_of(l) == Occupancy::Occupied);
+            if !occupied {
+                continue;
+            }
+            let sums = &mut self.sums;
+            let slot = *self.slots.entry(Key(key)).or_insert_with(|| {
+                sums.push((Vec3::zeros(), 0));
+                sums.len() - 1
+            });
+            self.sums[slot].0 += p;
+            self.sums[slot].1 += 1;
+        }
+    }
+
+    /// One point per occupied voxel that received any, in the order of each voxel's first.
+    pub fn finish(self) -> Vec<Vec3> {
+        self.sums
+            .into_iter()
+            .map(|(sum, n)| sum / f64::from(n))
+            .collect()
     }
 }
 

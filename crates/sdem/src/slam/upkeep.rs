@@ -1,0 +1,270 @@
+//! What keeps the loop's work per stop and its memory bounded as the map grows: the index of
+//! node positions and descriptors (the candidates of a step come from near its place, not from
+//! every node), the fused map that follows moved nodes by taking their scans out and putting
+//! them back ([`VoxelFusion`]), the pose graph solved over the part a loop closure touches
+//! ([`optimize_local`]), and the nodes far from the robot parked in a [`NodeStore`].
+//!
+//! [`Slam`](super::Slam) calls these at named points of its step: when a node joins the map
+//! ([`Upkeep::node_added`]), before it reads nodes' points ([`Upkeep::bring`]), for the
+//! loop-closure candidates ([`Upkeep::closure_candidates`]), for the solve after an accepted
+//! closure ([`Upkeep::solve`]) and at the end of the step ([`Upkeep::after_step`]).
+
+use crate::error::Result;
+use crate::geometry::{attitude_of, Pose, Vec3};
+use crate::index::NodeIndex;
+use crate::map::{Descriptor, LoopClosureConfig, Map};
+use crate::posegraph::{optimize_local, Edge, LocalSolve, OptimizeConfig, PoseGraph};
+use crate::store::{NodeStore, Residency};
+use crate::voxel::{VoxelConfig, VoxelFusion};
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// How the loop keeps its work per stop and its memory bounded as the map grows; written with
+/// the rest of [`SlamOptions`](super::SlamOptions) as `[growth]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GrowthOptions {
+    /// With a node store attached ([`Slam::set_node_store`](super::Slam::set_node_store)): at
+    /// most this many nodes hold their points in memory, the most recently used (the newest
+    /// always among them); the others' points are in the store until a step needs them.
+    pub resident_nodes: usize,
+    /// A node is fused again (taken out of the voxel map at the pose it was fused at and put
+    /// back at its current one) once a solve has moved it more than this, metres …
+    pub refuse_tolerance_m: f64,
+    /// … or turned it more than this, degrees.
+    pub refuse_tolerance_deg: f64,
+    /// At most this many moved nodes are fused again per stop, the largest moves first; the
+    /// others wait for later stops ([`Slam::settle_map`](super::Slam::settle_map) does them all).
+    pub refuse_per_stop: usize,
+    /// After a stop that accepted a loop closure, this many stops look for none: on a route
+    /// that retraces itself every stop could close a loop, and one in a few keeps the map as
+    /// well at a fraction of the time.
+    pub closure_interval: usize,
+    /// The solve after a closure frees the nodes from this many before the closure's oldest
+    /// node on; older ones that edges reach are held.
+    pub solve_margin_nodes: usize,
+    /// A solve that would free more than this share of the nodes solves the whole graph.
+    pub whole_solve_fraction: f64,
+}
+
+impl Default for GrowthOptions {
+    fn default() -> Self {
+        Self {
+            resident_nodes: 300,
+            refuse_tolerance_m: 0.02,
+            refuse_tolerance_deg: 0.2,
+            refuse_per_stop: 2,
+            closure_interval: 4,
+            solve_margin_nodes: 10,
+            whole_solve_fraction: 0.5,
+        }
+    }
+}
+
+impl GrowthOptions {
+    /// Checks the values.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |why: String| Err(crate::error::Error::Invalid(format!("growth: {why}")));
+        if self.resident_nodes == 0 {
+            return bad("resident_nodes must be at least 1".into());
+        }
+        for (name, v) in [
+            ("refuse_tolerance_m", self.refuse_tolerance_m),
+            ("refuse_tolerance_deg", self.refuse_tolerance_deg),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(format!("{name} = {v} must be a finite number >= 0"));
+            }
+        }
+        if !(0.0..=1.0).contains(&self.whole_solve_fraction) {
+            return bad(format!(
+                "whole_solve_fraction = {} must lie in 0..=1",
+                self.whole_solve_fraction
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The loop's indices, fused map and node residency (see the module documentation).
+#[derive(Debug, Clone)]
+pub(super) struct Upkeep {
+    options: GrowthOptions,
+    index: NodeIndex,
+    pub(super) fusion: VoxelFusion,
+    pub(super) residency: Residency,
+    /// The newest node at which a loop closure was accepted.
+    last_closure: Option<usize>,
+}
+
+impl Upkeep {
+    pub(super) fn new(options: &GrowthOptions, voxel: VoxelConfig) -> Result<Self> {
+        options.validate()?;
+        Ok(Self {
+            options: options.clone(),
+            index: NodeIndex::new(),
+            fusion: VoxelFusion::new(voxel)?,
+            residency: Residency::in_memory(),
+            last_closure: None,
+        })
+    }
+
+    /// Attaches a store: nodes beyond [`GrowthOptions::resident_nodes`] are parked in it.
+    pub(super) fn set_store(&mut self, store: Arc<dyn NodeStore>) {
+        self.residency = Residency::with_store(store, self.options.resident_nodes);
+    }
+
+    /// Indexes and fuses node `node_id`, which has just joined `map` with its points.
+    pub(super) fn node_added(&mut self, map: &Map, node_id: usize) -> Result<()> {
+        let node = &map.nodes[node_id];
+        self.enter(node_id, &node.world_from_sensor, &node.points_in_sensor)
+    }
+
+    /// Indexes and fuses every node of `map` afresh (a restored map).
+    pub(super) fn rebuild(&mut self, map: &mut Map) -> Result<()> {
+        self.index = NodeIndex::new();
+        self.fusion = VoxelFusion::new(*self.fusion.config())?;
+        for id in 0..map.nodes.len() {
+            let points = self.residency.points_of(map, id)?.into_owned();
+            self.enter(id, &map.nodes[id].world_from_sensor, &points)?;
+        }
+        Ok(())
+    }
+
+    /// Indexes node `node_id` at `world_from_sensor` with the descriptor of its points, and
+    /// fuses them there.
+    fn enter(
+        &mut self,
+        node_id: usize,
+        world_from_sensor: &Pose,
+        points_in_sensor: &[[f32; 3]],
+    ) -> Result<()> {
+        let sensor = as_vectors(points_in_sensor);
+        let levelled: Vec<[f32; 3]> = sensor
+            .iter()
+            .map(|p| {
+                let q = world_from_sensor.rotation * p;
+                [q.x as f32, q.y as f32, q.z as f32]
+            })
+            .collect();
+        self.index.insert(
+            node_id,
+            world_from_sensor.translation.vector,
+            Descriptor::from_levelled(&levelled),
+            attitude_of(world_from_sensor).yaw,
+        );
+        self.fusion.add(node_id, world_from_sensor, &sensor)
+    }
+
+    /// Brings the points of `ids` back into memory (from the store, where they were parked).
+    pub(super) fn bring(&mut self, map: &mut Map, ids: &[usize]) -> Result<()> {
+        self.residency.bring(map, ids)
+    }
+
+    /// The older nodes near node `to` whose descriptors resemble its, most similar first, at
+    /// most `config.max_candidates`; none in the [`GrowthOptions::closure_interval`] stops after
+    /// one that accepted a closure.
+    pub(super) fn closure_candidates(
+        &self,
+        map: &Map,
+        to: usize,
+        config: &LoopClosureConfig,
+    ) -> Vec<(usize, f64)> {
+        if self
+            .last_closure
+            .is_some_and(|last| to <= last + self.options.closure_interval)
+        {
+            return Vec::new();
+        }
+        let Some(newest) = to.checked_sub(config.min_node_separation) else {
+            return Vec::new();
+        };
+        let Some((descriptor, _)) = self.index.descriptor(to) else {
+            return Vec::new();
+        };
+        self.index
+            .similar_near(&map.nodes[to].position(), descriptor, newest, config, 1)
+    }
+
+    /// The newest node at which a loop closure was accepted, if any.
+    pub(super) fn last_closure(&self) -> Option<usize> {
+        self.last_closure
+    }
+
+    /// Records that node `to` accepted a loop closure.
+    pub(super) fn closure_accepted(&mut self, to: usize) {
+        self.last_closure = Some(self.last_closure.map_or(to, |last| last.max(to)));
+    }
+
+    /// Solves the pose graph after loop closures whose oldest node is `oldest_from`, the last
+    /// accepted before them at node `anchored`: what drifted since that closure, or since
+    /// `oldest_from` when it is newer (a loop of its own), is freed with a margin, and the
+    /// part grows as far as it must (see [`optimize_local`]). Moves the nodes and their index
+    /// entries.
+    pub(super) fn solve(
+        &mut self,
+        map: &mut Map,
+        edges: &[Edge],
+        oldest_from: usize,
+        anchored: Option<usize>,
+        config: &OptimizeConfig,
+    ) -> Result<(LocalSolve, f64)> {
+        let graph = PoseGraph {
+            world_from_node: map.nodes.iter().map(|n| n.world_from_sensor).collect(),
+            edges: edges.to_vec(),
+        };
+        let drifted_from = anchored.map_or(oldest_from, |a| a.max(oldest_from));
+        let first = drifted_from.saturating_sub(self.options.solve_margin_nodes);
+        let (poses, solve) =
+            optimize_local(&graph, first, 0, config, self.options.whole_solve_fraction)?;
+        let mut max_shift: f64 = 0.0;
+        for (id, pose) in poses.into_iter().enumerate().skip(solve.first_free) {
+            let node = &mut map.nodes[id];
+            max_shift = max_shift.max((node.position() - pose.translation.vector).norm());
+            node.world_from_sensor = pose;
+            self.index.moved(id, pose.translation.vector);
+        }
+        Ok((solve, max_shift))
+    }
+
+    /// Moves every node's position in the index (after a solve of the whole graph elsewhere).
+    pub(super) fn all_moved(&mut self, map: &Map) {
+        for node in &map.nodes {
+            self.index.moved(node.node_id, node.position());
+        }
+    }
+
+    /// The end of a step: fuses again up to [`GrowthOptions::refuse_per_stop`] of the nodes a
+    /// solve moved (`all`: every one), then parks the least recently used nodes beyond the
+    /// resident limit (never the `keep_newest` newest). Returns the nodes fused again.
+    pub(super) fn after_step(
+        &mut self,
+        map: &mut Map,
+        keep_newest: usize,
+        all: bool,
+    ) -> Result<usize> {
+        let poses: Vec<Pose> = map.nodes.iter().map(|n| n.world_from_sensor).collect();
+        let mut stale = self.fusion.stale(
+            &poses,
+            self.options.refuse_tolerance_m,
+            self.options.refuse_tolerance_deg.to_radians(),
+        );
+        if !all {
+            stale.truncate(self.options.refuse_per_stop);
+        }
+        for &id in &stale {
+            let sensor = as_vectors(&self.residency.points_of(map, id)?);
+            self.fusion.moved(id, &poses[id], &sensor)?;
+        }
+        self.residency.trim(map, keep_newest)?;
+        Ok(stale.len())
+    }
+}
+
+/// Points as `f64` vectors.
+fn as_vectors(points: &[[f32; 3]]) -> Vec<Vec3> {
+    points
+        .iter()
+        .map(|p| Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64))
+        .collect()
+}
