@@ -784,7 +784,7 @@ pub fn refine(
         settled |= step < SETTLED_STEP;
     }
     let (h, sigma_sq, inliers, supporting) = last.expect("at least one iteration ran");
-    check_plausible(initial, &rotation, &translation, config)?;
+    check_plausible(initial, &rotation, &translation, prior, config)?;
     // The residuals of neighbouring points are not independent (see `design_effect`).
     let pose = (rotation.matrix().cast::<f32>(), translation.cast::<f32>());
     let scale = annealed_scale(config, iterations, settled);
@@ -851,17 +851,23 @@ fn solve_step(
 }
 
 /// Refuses a refined pose (`rotation`, `translation`) that moved further from `initial` than
-/// the configuration finds plausible.
+/// the configuration finds plausible. A translation within three σ of the `prior`'s offset is
+/// plausible however far it moved: along a direction the surfaces leave free (a corridor's
+/// axis) the prior, not the surfaces, sets the position, and it may lie farther from the grid's
+/// optimum than the refinement is otherwise trusted to move.
 fn check_plausible(
     initial: &Isometry3<f64>,
     rotation: &Rotation3<f64>,
     translation: &Vec3,
+    prior: Option<&OffsetPrior>,
     config: &RefineConfig,
 ) -> Result<()> {
     let rotation_change = (rotation * initial.rotation.to_rotation_matrix().transpose()).angle();
     let translation_change = (translation - initial.translation.vector).norm();
+    let vouched_for =
+        prior.is_some_and(|p| (translation - Vec3::from(p.offset)).norm() <= 3.0 * p.sigma_m);
     if rotation_change.to_degrees() > config.max_rotation_deg
-        || translation_change > config.max_translation_m
+        || (translation_change > config.max_translation_m && !vouched_for)
     {
         return Err(Error::RefinementFailed {
             reason: format!(
