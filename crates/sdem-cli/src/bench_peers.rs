@@ -191,6 +191,17 @@ impl Peers {
     /// error.
     pub(crate) fn run_pair(&self, dir: &Path, settings: &PeerSettings) -> Vec<PeerResult> {
         let names: Vec<&str> = METHODS.iter().map(|m| m.0).collect();
+        self.run_methods(dir, settings, &names)
+    }
+
+    /// Runs the methods `names` (register_pair.py's) on the pair in `dir`, as
+    /// [`Self::run_pair`]: one result per method, in that order.
+    pub(crate) fn run_methods(
+        &self,
+        dir: &Path,
+        settings: &PeerSettings,
+        names: &[&str],
+    ) -> Vec<PeerResult> {
         let output = Command::new(&self.python)
             .arg(&self.script)
             .arg(dir.join("query.ply"))

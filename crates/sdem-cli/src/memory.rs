@@ -39,7 +39,7 @@ mod tests {
             return; // Not Linux: nothing to check.
         }
         let before = peak_mib().unwrap();
-        // black_box: an allocation nothing reads may be left out by the optimizer.
+        // black_box: an optimizer may drop an allocation nothing reads, and the test with it.
         let block = std::hint::black_box(vec![1u8; 64 << 20]);
         let after = peak_mib().unwrap();
         assert!(after >= before + 60.0, "{before} MiB -> {after} MiB");

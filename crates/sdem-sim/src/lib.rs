@@ -28,5 +28,6 @@ pub mod faults;
 pub mod odometry;
 pub mod pose_graphs;
 pub mod routes;
+pub mod reviews;
 pub mod sim;
 pub mod suites;

@@ -340,10 +340,18 @@ pub const JUMP_RATIO: f64 = 4.0;
 /// One boundary point of `query` per cube, the cubes grown from `voxel_m` until at most `cap`
 /// remain (0: no cap); see [`search_points_of`].
 pub fn even_points(query: &Sdem, voxel_m: f64, cap: usize) -> Vec<[f32; 3]> {
+    let points = query.points();
+    (even_indices(query, voxel_m, cap).iter())
+        .map(|&i| points[i as usize])
+        .collect()
+}
+
+/// [`even_points`] as indices into `query.points()`, ascending.
+pub fn even_indices(query: &Sdem, voxel_m: f64, cap: usize) -> Vec<u32> {
     let mut voxel = voxel_m;
     let mut last: Option<(f64, usize)> = None;
     loop {
-        let points = search_points(query, voxel);
+        let points = search_indices(query, voxel);
         let n = points.len();
         if voxel <= 0.0 || cap == 0 || n <= cap {
             return points;
@@ -371,8 +379,16 @@ pub fn even_points(query: &Sdem, voxel_m: f64, cap: usize) -> Vec<[f32; 3]> {
 /// The query points the projective cost compares: one per cube of side `voxel_m` (the point
 /// nearest the cube's centre), or every boundary point for `voxel_m = 0`; in S-DEM cell order.
 pub fn search_points(query: &Sdem, voxel_m: f64) -> Vec<[f32; 3]> {
+    let points = query.points();
+    (search_indices(query, voxel_m).iter())
+        .map(|&i| points[i as usize])
+        .collect()
+}
+
+/// [`search_points`] as indices into `query.points()`, ascending.
+fn search_indices(query: &Sdem, voxel_m: f64) -> Vec<u32> {
     if voxel_m <= 0.0 {
-        return query.points().to_vec();
+        return (0..query.points().len() as u32).collect();
     }
     let v = voxel_m as f32;
     let points = query.points();
@@ -415,7 +431,7 @@ pub fn search_points(query: &Sdem, voxel_m: f64) -> Vec<[f32; 3]> {
     }
     let mut kept: Vec<u32> = chosen.values().map(|e| e.0).collect();
     kept.sort_unstable();
-    kept.iter().map(|&i| points[i as usize]).collect()
+    kept
 }
 
 /// Points per block of a capped evaluation: the sum is checked against the cap after each.

@@ -10,6 +10,8 @@ use crate::error::{Error, Result};
 use crate::geometry::{fast_atan2, floor_i64, Attitude, Vec3};
 use serde::{Deserialize, Serialize};
 
+mod cell_means;
+
 /// The angular grid of an S-DEM: resolution and extent, in degrees.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -439,6 +441,8 @@ pub struct Sdem {
     points: Vec<[f32; 3]>,
     /// The cell of each boundary point, ascending.
     cells: Vec<u32>,
+    /// Per boundary point, the mean of its cell's returns on the nearest surface.
+    surface_points: Vec<[f32; 3]>,
     /// The surface model, made on first use (a function of the fields above).
     surface: std::sync::OnceLock<CellSurfaces>,
     /// The refinement's surface normals with their radius in cells, made on first use.
@@ -456,6 +460,7 @@ impl PartialEq for Sdem {
             && self.attitude == other.attitude
             && self.cells == other.cells
             && self.points == other.points
+            && self.surface_points == other.surface_points
             && self
                 .ranges
                 .iter()
@@ -706,6 +711,9 @@ impl Sdem {
         const CHUNK: usize = 1024;
         let (mut xs, mut ys, mut zs) = ([0f32; CHUNK], [0f32; CHUNK], [0f32; CHUNK]);
         let (mut chunk_cells, mut chunk_ranges) = ([0u32; CHUNK], [0f32; CHUNK]);
+        // Every point's cell and range, for the cells' means.
+        let mut point_cells = Vec::with_capacity(points.len());
+        let mut point_ranges = Vec::with_capacity(points.len());
         for (k, chunk) in points.chunks(CHUNK).enumerate() {
             let n = chunk.len();
             for (i, p) in chunk.iter().enumerate() {
@@ -718,6 +726,8 @@ impl Sdem {
                 &mut chunk_cells[..n],
                 &mut chunk_ranges[..n],
             );
+            point_cells.extend_from_slice(&chunk_cells[..n]);
+            point_ranges.extend_from_slice(&chunk_ranges[..n]);
             for i in 0..n {
                 let (cell, r) = (chunk_cells[i], chunk_ranges[i]);
                 if cell == u32::MAX {
@@ -738,12 +748,15 @@ impl Sdem {
                 cells.push(cell as u32);
             }
         }
+        let surface_points =
+            cell_means::surface_points(points, &point_cells, &point_ranges, &ranges, &cells);
         Self {
             spec,
             config,
             ranges,
             points: kept_points,
             cells,
+            surface_points,
             surface: std::sync::OnceLock::new(),
             normals: std::sync::OnceLock::new(),
             tables: std::sync::OnceLock::new(),
@@ -792,6 +805,13 @@ impl Sdem {
     /// The boundary points (levelled frame), one per known cell, in cell order.
     pub fn points(&self) -> &[[f32; 3]] {
         &self.points
+    }
+
+    /// Per boundary point, the mean of its cell's returns on the nearest surface (those within
+    /// four times the scan's range noise behind the nearest): where the surface is, where the
+    /// nearest of several noisy returns lies in front of it. The refinement compares these.
+    pub fn surface_points(&self) -> &[[f32; 3]] {
+        &self.surface_points
     }
 
     /// The known cells, ascending; `cells()[i]` holds `points()[i]`.

@@ -33,6 +33,7 @@ use std::time::Instant;
 
 mod print;
 mod routes;
+mod real_geometry;
 
 /// Simulated pairs per suite [default], and with `--quick`.
 const SIMULATED_PAIRS: (usize, usize) = (200, 8);
@@ -66,6 +67,8 @@ pub enum Suite {
     /// a kidnapped robot, a half-blocked scanner, revisits the other way, a second run),
     /// relocalization in a saved map, and the KITTI frames beside KISS-ICP.
     Routes,
+    /// Real scans seen again from known poses, beside GICP from identity.
+    RealGeometry,
     /// The stop-and-go loop on long routes, as the map grows (see `cmd_bench_scale`).
     Scale,
 }
@@ -77,6 +80,7 @@ impl Suite {
             Suite::CompassNoise => "compass-noise",
             Suite::Lidar => "lidar",
             Suite::Routes => "routes",
+            Suite::RealGeometry => "real-geometry",
             Suite::Scale => "scale",
         }
     }
@@ -89,13 +93,19 @@ pub struct SuiteArgs {
     /// to ±30°, any heading, steps up to 1 m; 8 with --quick), compass-noise (the same pairs
     /// with readings off by σ 2° roll/pitch and σ 20° heading), lidar (KITTI frames, 20
     /// simulated spinning-LiDAR and 20 solid-state (70° field of view) pairs, no guess; on the
-    /// grid and scale derived from each scan), routes (the stop-and-go loop on six seeded
-    /// routes without and with odometry, relocalization at every stop of a saved map, and the
-    /// KITTI frames beside KISS-ICP; --quick: without odometry only, 8 relocalizations), scale
-    /// (the loop on long routes as the map grows: --sizes, --routes). The peers run beside it
-    /// when found.
+    /// grid and scale derived from each scan), real-geometry (real scans seen again from 50
+    /// known poses each, 3 with --quick: the 3DTK scans and KITTI frames, or --scan; beside
+    /// GICP), routes (the stop-and-go loop on six seeded routes without and with odometry,
+    /// relocalization at every stop of a saved map, and the KITTI frames beside KISS-ICP;
+    /// --quick: without odometry only, 8 relocalizations), scale (the loop on long routes as
+    /// the map grows: --sizes, --routes). The peers run beside it when found.
     #[arg(long, value_enum, conflicts_with = "faults")]
     pub suite: Option<Suite>,
+    /// With --suite real-geometry: a real scan to re-view (any point file sdem reads, in its
+    /// sensor's frame; repeat the flag) [default: the 3DTK scans and KITTI frames 0, 7 and 15
+    /// in ../shared/data beside the repository].
+    #[arg(long = "scan", value_name = "FILE", requires = "suite")]
+    pub scans: Vec<PathBuf>,
     /// With --suite lidar or routes: the KITTI folder (velodyne/, poses.txt, calib.txt) [default:
     /// ../shared/data/kitti-00-first16 beside the repository, skipped, saying so, when absent].
     #[arg(long, value_name = "DIR", requires = "suite")]
@@ -367,6 +377,9 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
     if args.kitti.is_some() && !matches!(suite, Suite::Lidar | Suite::Routes) {
         bail!("--kitti applies to --suite lidar and --suite routes only");
     }
+    if !args.scans.is_empty() && suite != Suite::RealGeometry {
+        bail!("--scan applies to --suite real-geometry only");
+    }
     let peers = bench_peers::find(args.peers.as_deref())?;
     if suite == Suite::Routes {
         return routes::run(args.kitti.as_deref(), &peers, common, say);
@@ -383,6 +396,7 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
             let spec = simulated_spec(suite.name(), config, args, common)?;
             parts.push(run_part(spec, &peers, common.json, say)?);
         }
+        Suite::RealGeometry => return real_geometry::run(args, common, &peers, say),
         Suite::Lidar => {
             let kitti = match &args.kitti {
                 Some(dir) => Ok(Kitti::read(dir)?),
