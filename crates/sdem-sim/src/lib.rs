@@ -27,7 +27,7 @@ pub mod experiment;
 pub mod faults;
 pub mod odometry;
 pub mod pose_graphs;
-pub mod routes;
 pub mod reviews;
+pub mod routes;
 pub mod sim;
 pub mod suites;

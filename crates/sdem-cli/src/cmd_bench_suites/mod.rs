@@ -32,8 +32,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod print;
-mod routes;
 mod real_geometry;
+mod routes;
 
 /// Simulated pairs per suite [default], and with `--quick`.
 const SIMULATED_PAIRS: (usize, usize) = (200, 8);
