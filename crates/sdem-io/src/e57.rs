@@ -15,7 +15,7 @@
 //! one that is zero or not finite is an error naming the scan.
 
 use super::write_atomic;
-use crate::error::{Error, Result};
+use crate::error::{one_line, Error, Result};
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use sdem::geometry::{Pose, Vec3};
 use std::io::{BufReader, Cursor, Read, Seek, SeekFrom};
@@ -302,14 +302,6 @@ fn transform_of(pose: &Pose) -> ::e57::Transform {
             z: t.z,
         },
     }
-}
-
-/// An error's text on one line.
-fn one_line(e: &impl std::fmt::Display) -> String {
-    e.to_string()
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 #[cfg(test)]

@@ -60,3 +60,13 @@ impl Error {
 
 /// The result of reading or writing a file.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// An error's text on one line: a message of another crate may spread over lines (ply-rs-bw's
+/// tabs), or quote a line break from the file it read (serde_json naming a damaged key), and an
+/// error of this crate is one line.
+pub(crate) fn one_line(e: &impl std::fmt::Display) -> String {
+    e.to_string()
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
+}

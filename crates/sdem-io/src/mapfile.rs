@@ -23,7 +23,7 @@
 use super::poses::to_rotation;
 use super::voxels::crc32;
 use super::{remove_stale_temporaries, write_atomic};
-use crate::error::{Error, Result};
+use crate::error::{one_line, Error, Result};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use sdem::geometry::{Attitude, Pose};
 use sdem::map::{LoopClosure, Map, Node};
@@ -417,7 +417,7 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
     let loop_closures = closures_from_records(&manifest_path, &body.loop_closures, nodes.len())?;
     body.config
         .validate()
-        .map_err(|e| bad(format!("invalid configuration: {e}")))?;
+        .map_err(|e| bad(format!("invalid configuration: {}", one_line(&e))))?;
     let node_files = NodeFiles {
         files: (body.nodes.iter())
             .map(|r| {
@@ -454,7 +454,7 @@ fn read_manifest(folder: &Path, manifest_path: &Path) -> Result<Body> {
         Error::parse(
             manifest_path,
             Some(e.line()),
-            format!("not a map manifest: {e}"),
+            format!("not a map manifest: {}", one_line(&e)),
         )
     })?;
     if manifest.format != MAP_FORMAT {
@@ -491,7 +491,7 @@ fn read_manifest(folder: &Path, manifest_path: &Path) -> Result<Body> {
             Error::parse(
                 manifest_path,
                 Some(e.line()),
-                format!("malformed map body: {e}"),
+                format!("malformed map body: {}", one_line(&e)),
             )
         })?
         .body;

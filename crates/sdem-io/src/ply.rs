@@ -8,7 +8,7 @@
 //! to accept the `nan` that scanners write for "no return".
 
 use super::{check_points_writable, read_bytes, write_atomic};
-use crate::error::{Error, Result};
+use crate::error::{one_line, Error, Result};
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{
     ElementDef, Encoding, Header, Property, PropertyAccess, PropertyType, ScalarType,
@@ -375,14 +375,6 @@ fn read_binary_vertices(
             let line = layout.element_line("vertex");
             truncated(path, line, "vertex", vertex.count, at(reader), &e)
         })
-}
-
-/// A message of `ply-rs-bw` (which spreads some over lines with tabs) on one line.
-fn one_line(e: &impl std::fmt::Display) -> String {
-    e.to_string()
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
 }
 
 /// The binary body ended (at byte offset `at`) inside the elements declared at `line`.
