@@ -69,7 +69,7 @@ pub enum Suite {
     Routes,
     /// Real scans seen again from known poses, beside GICP from identity.
     RealGeometry,
-    /// The stop-and-go loop on long routes, as the map grows (see `cmd_bench_scale`).
+    /// The stop-and-go loop on long routes as the map grows: time per stop, memory, ATE by size.
     Scale,
 }
 
