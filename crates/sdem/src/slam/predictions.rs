@@ -6,10 +6,14 @@
 //! tracks slipped, or that was carried, is better served by "it did not move" or by the place
 //! it came from. The loop tries them in order and takes the first trusted match
 //! ([`super::Slam::add_scan`]); the window grows around the best one when none is trusted.
+//! Where a match leaves a direction free, the prediction sets the position along it
+//! ([`take_prediction_along`]).
 
 use super::step::{HeadingPrior, PredictionSource};
 use super::{ScanInput, Slam};
+use crate::doubt::Doubt;
 use crate::geometry::{attitude_of, pose_from_parts, wrap_pi, Attitude, Pose, Vec3};
+use crate::localize::Diagnostics;
 
 /// Where a scan is expected before it is matched, and the search's window and prior around it.
 #[derive(Debug, Clone)]
@@ -215,4 +219,35 @@ impl Slam {
         });
         linked
     }
+}
+
+/// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): where `diagnostics` name
+/// a free direction (unit, world axes), moves `pose` along it to the `predicted` position's
+/// place, widens the covariance (world axes) there by the prediction's variance `sigma_m²`, and
+/// adds a doubt saying so.
+pub(super) fn take_prediction_along(
+    pose: &mut Pose,
+    diagnostics: &mut Diagnostics,
+    doubts: &mut Vec<Doubt>,
+    predicted: &Vec3,
+    sigma_m: f64,
+) {
+    let Some(flat) = diagnostics.flat_direction else {
+        return;
+    };
+    let v = Vec3::from(flat);
+    let t = pose.translation.vector;
+    let along = v.dot(&(predicted - t));
+    pose.translation.vector = t + v * along;
+    if let Some(c) = diagnostics.covariance.as_mut() {
+        for i in 0..3 {
+            for j in 0..3 {
+                c[i][j] += v[i] * v[j] * sigma_m.powi(2);
+            }
+        }
+    }
+    doubts.push(Doubt::TakenFromPrediction {
+        direction: flat,
+        shift_m: along,
+    });
 }

@@ -9,8 +9,8 @@
 //! there is the odometry's, and the pose-graph edge carries the odometry's uncertainty. A stop
 //! found nowhere starts a new map segment ([`super::Slam::add_scan`]).
 
+use super::predictions::take_prediction_along;
 use super::predictions::Prediction;
-use super::relocalize::take_prediction_along;
 use super::step::{Attempt, HeadingPrior, PredictionSource, StepStatus};
 use super::{ms, ScanInput, Slam, SlamOptions};
 use crate::doubt::Doubt;

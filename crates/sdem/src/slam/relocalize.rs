@@ -1,15 +1,13 @@
-//! Relocalization: finding where a scan was taken in a saved map, and the fusion of a match with
-//! a prediction along the direction the scans leave free.
+//! Relocalization: finding where a scan was taken in a saved map.
 
+use super::predictions::take_prediction_along;
 use super::recovery::{Located, MapSearch};
 use super::step::Attempt;
 use super::{ms, ScanInput, SlamOptions};
 use crate::doubt::Doubt;
 use crate::error::{Error, Result};
-use crate::geometry::{Attitude, Pose, Vec3};
-use crate::localize::{
-    localize, CostConfig, Diagnostics, LocalizeOptions, OffsetPrior, SearchWindow,
-};
+use crate::geometry::{Attitude, Vec3};
+use crate::localize::{localize, CostConfig, LocalizeOptions, OffsetPrior, SearchWindow};
 use crate::map::{world_from_query, Map};
 use crate::sdem::Sdem;
 use crate::search::HeadingWindow;
@@ -280,35 +278,4 @@ fn search_options(
         },
         ..config.localize.clone()
     }
-}
-
-/// Degeneracy-aware fusion (after Zhang, Kaess and Singh, ICRA 2016): where `diagnostics` name
-/// a free direction (unit, world axes), moves `pose` along it to the `predicted` position's
-/// place, widens the covariance (world axes) there by the prediction's variance `sigma_m²`, and
-/// adds a doubt saying so.
-pub(super) fn take_prediction_along(
-    pose: &mut Pose,
-    diagnostics: &mut Diagnostics,
-    doubts: &mut Vec<Doubt>,
-    predicted: &Vec3,
-    sigma_m: f64,
-) {
-    let Some(flat) = diagnostics.flat_direction else {
-        return;
-    };
-    let v = Vec3::from(flat);
-    let t = pose.translation.vector;
-    let along = v.dot(&(predicted - t));
-    pose.translation.vector = t + v * along;
-    if let Some(c) = diagnostics.covariance.as_mut() {
-        for i in 0..3 {
-            for j in 0..3 {
-                c[i][j] += v[i] * v[j] * sigma_m.powi(2);
-            }
-        }
-    }
-    doubts.push(Doubt::TakenFromPrediction {
-        direction: flat,
-        shift_m: along,
-    });
 }
