@@ -623,9 +623,9 @@ fn search_and_fit_normals<'r>(
     rayon::join(
         || run_search(evaluator, prepared, config, full_turn, cap, reserve_ratio),
         || {
-            config
-                .refine
-                .then(|| reference.surface_normals(config.refinement.normal_radius_cells))
+            config.refine.then(|| {
+                crate::refine::SurfaceNormals::of(reference, config.refinement.normal_radius_cells)
+            })
         },
     )
 }

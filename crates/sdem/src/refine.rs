@@ -10,7 +10,7 @@
 use crate::cost::OffsetPrior;
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
-use crate::sdem::{wrap_column, Sdem};
+use crate::sdem::{wrap_column, Derived, Sdem};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector6};
 use rayon::prelude::*;
@@ -182,6 +182,19 @@ pub struct SurfaceNormals {
 }
 
 impl SurfaceNormals {
+    /// The surface normals of `sdem` fitted over `radius_cells` ([`Self::new`]): made once, on
+    /// first use, and kept with the S-DEM for that radius; another radius is fitted anew.
+    pub fn of(sdem: &Sdem, radius_cells: usize) -> std::borrow::Cow<'_, SurfaceNormals> {
+        let (radius, normals) = sdem.derived(Derived::SurfaceNormals, || {
+            (radius_cells, SurfaceNormals::new(sdem, radius_cells))
+        });
+        if *radius == radius_cells {
+            std::borrow::Cow::Borrowed(normals)
+        } else {
+            std::borrow::Cow::Owned(SurfaceNormals::new(sdem, radius_cells))
+        }
+    }
+
     /// Fits a plane to each boundary point and its neighbours within `radius_cells` cells whose
     /// points lie close to it (so edges and occlusion boundaries do not blur the normal).
     pub fn new(sdem: &Sdem, radius_cells: usize) -> Self {

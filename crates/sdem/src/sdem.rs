@@ -445,10 +445,8 @@ pub struct Sdem {
     surface_points: Vec<[f32; 3]>,
     /// The surface model, made on first use (a function of the fields above).
     surface: std::sync::OnceLock<CellSurfaces>,
-    /// The refinement's surface normals with their radius in cells, made on first use.
-    normals: std::sync::OnceLock<(usize, crate::refine::SurfaceNormals)>,
-    /// The exact search's tables of this S-DEM as a reference, made on first use.
-    tables: std::sync::OnceLock<crate::bnb::RangeTables>,
+    /// What other modules derive from this S-DEM, made on first use ([`Sdem::derived`]).
+    derived: [DerivedSlot; 2],
     /// The attitude reading the points were levelled with (`world_from_sensor`'s rotation).
     attitude: Attitude,
 }
@@ -758,8 +756,7 @@ impl Sdem {
             cells,
             surface_points,
             surface: std::sync::OnceLock::new(),
-            normals: std::sync::OnceLock::new(),
-            tables: std::sync::OnceLock::new(),
+            derived: Default::default(),
             attitude,
         }
     }
@@ -829,34 +826,32 @@ impl Sdem {
         self.surface.get_or_init(|| CellSurfaces::new(self))
     }
 
-    /// The surface normals the refinement pairs points with, fitted over `radius_cells`
-    /// ([`crate::refine::SurfaceNormals::new`]): made once, on first use, and kept for that
-    /// radius, so that localizing several queries (or one query under several rotations)
-    /// against one reference fits them once.
-    pub fn surface_normals(
+    /// What the module owning `T` derives from this S-DEM in `slot`: made by `make` on first use
+    /// and kept with the S-DEM, so that localizing several queries (or one query under several
+    /// rotations) against one reference makes it once. Typed by its owner, so that this module
+    /// depends on none of them.
+    pub(crate) fn derived<T: std::any::Any + Send + Sync>(
         &self,
-        radius_cells: usize,
-    ) -> std::borrow::Cow<'_, crate::refine::SurfaceNormals> {
-        let (radius, normals) = self.normals.get_or_init(|| {
-            (
-                radius_cells,
-                crate::refine::SurfaceNormals::new(self, radius_cells),
-            )
-        });
-        if *radius == radius_cells {
-            std::borrow::Cow::Borrowed(normals)
-        } else {
-            std::borrow::Cow::Owned(crate::refine::SurfaceNormals::new(self, radius_cells))
-        }
+        slot: Derived,
+        make: impl FnOnce() -> T,
+    ) -> &T {
+        self.derived[slot as usize]
+            .get_or_init(|| std::sync::Arc::new(make()))
+            .downcast_ref::<T>()
+            .expect("each slot holds the one type its owner puts there")
     }
+}
 
-    /// The exact search's lookup tables of this S-DEM as the reference (made once, on first
-    /// use, like [`Self::surface_normals`]).
-    #[doc(hidden)]
-    pub fn range_tables(&self) -> &crate::bnb::RangeTables {
-        self.tables
-            .get_or_init(|| crate::bnb::RangeTables::new(self))
-    }
+/// One slot of data derived from an S-DEM and kept with it.
+type DerivedSlot = std::sync::OnceLock<std::sync::Arc<dyn std::any::Any + Send + Sync>>;
+
+/// The slots of [`Sdem::derived`], one per owner.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum Derived {
+    /// The refinement's surface normals with their radius ([`crate::refine::SurfaceNormals::of`]).
+    SurfaceNormals = 0,
+    /// The exact search's tables ([`crate::bnb::RangeTables::of`]).
+    RangeTables = 1,
 }
 
 /// `floor` to `i32` without a library call (see [`floor_i64`]); exact for the cell indices here.

@@ -346,7 +346,7 @@ impl<'a> Prepared<'a> {
             *horizontal.select_nth_unstable_by(k, f64::total_cmp).1
         };
         let (tables, groups) = rayon::join(
-            || correlator.reference().range_tables(),
+            || RangeTables::of(correlator.reference()),
             || QueryGroups::new(&points, 6),
         );
         Self {

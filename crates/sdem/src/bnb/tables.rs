@@ -2,7 +2,7 @@
 //! blocks of cells, and the cells' planes laid out row by row for the cone loop of the bound.
 
 use crate::sdem::wrap_column;
-use crate::sdem::Sdem;
+use crate::sdem::{Derived, Sdem};
 use rayon::prelude::*;
 
 /// The reference S-DEM's cells as the search reads them: each cell's plane (for the cone loop),
@@ -38,6 +38,11 @@ fn merge(a: (f32, f32), b: (f32, f32)) -> (f32, f32) {
 }
 
 impl RangeTables {
+    /// The tables of `sdem` as the reference: made once, on first use, and kept with it.
+    pub fn of(sdem: &Sdem) -> &RangeTables {
+        sdem.derived(Derived::RangeTables, || RangeTables::new(sdem))
+    }
+
     /// A sparse table (square windows of every power of two at every cell) took 7–8 ms a
     /// localization to build on the full sphere at 1° (eight levels of 130,000 entries), a
     /// tenth of a bench pair; the cone loop, once vectorized, no longer gained from asking it
