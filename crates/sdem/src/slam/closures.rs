@@ -20,8 +20,8 @@
 //! with it than with any of those, which are then withdrawn from the graph; otherwise it is
 //! rejected, saying with which closures it disagrees.
 
+use super::map_search::{Located, Matched};
 use super::predictions::Prediction;
-use super::recovery::{Located, Matched};
 use super::step::{Attempt, HeadingPrior, PredictionSource, SegmentJoin};
 use super::{ScanInput, Slam};
 use crate::error::Result;

@@ -45,6 +45,7 @@
 //! bounded as the map grows.
 
 mod closures;
+mod map_search;
 mod options;
 mod predictions;
 mod recovery;
@@ -70,8 +71,8 @@ use crate::map::{LoopClosure, Map, Node};
 use crate::posegraph::{Edge, EdgeKind};
 use crate::store::NodeStore;
 use crate::voxel::VoxelMap;
+use map_search::{Located, Matched};
 use nalgebra::{Matrix3, Matrix6};
-use recovery::{Located, Matched};
 use std::sync::Arc;
 use std::time::Instant;
 use upkeep::Upkeep;

@@ -1,7 +1,7 @@
 //! Relocalization: finding where a scan was taken in a saved map.
 
+use super::map_search::{Located, MapSearch};
 use super::predictions::take_prediction_along;
-use super::recovery::{Located, MapSearch};
 use super::step::Attempt;
 use super::{ms, ScanInput, SlamOptions};
 use crate::doubt::Doubt;
