@@ -121,13 +121,7 @@ impl PairConfig {
             ("compass_error_max_deg", self.compass_error_max_deg),
             ("min_clearance_m", self.min_clearance_m),
         ];
-        for (name, value) in fields {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(Error::Invalid(format!(
-                    "bench pairs: {name} is {value}; it must be a finite number >= 0"
-                )));
-            }
-        }
+        check_non_negative("bench pairs", &fields)?;
         if self.yaw_spread_deg >= 180.0 || self.compass_error_max_deg >= 180.0 {
             return Err(Error::Invalid(
                 "bench pairs: yaw_spread_deg and compass_error_max_deg must be below 180".into(),
@@ -515,6 +509,18 @@ pub fn localize_pair(
         time_ms,
         localization,
     })
+}
+
+/// Checks that each named field is a finite number ≥ 0; the error names `what` and the field.
+pub(crate) fn check_non_negative(what: &str, fields: &[(&str, f64)]) -> Result<()> {
+    for &(name, value) in fields {
+        if !(value.is_finite() && value >= 0.0) {
+            return Err(Error::Invalid(format!(
+                "{what}: {name} is {value}; it must be a finite number >= 0"
+            )));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

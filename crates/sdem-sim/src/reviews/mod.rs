@@ -360,13 +360,7 @@ impl ReviewConfig {
             ("compass_noise_deg", self.compass_noise_deg),
             ("min_clearance_m", self.min_clearance_m),
         ];
-        for (name, value) in fields {
-            if !(value.is_finite() && value >= 0.0) {
-                return Err(Error::Invalid(format!(
-                    "re-views: {name} is {value}; it must be a finite number >= 0"
-                )));
-            }
-        }
+        crate::benchmark::check_non_negative("re-views", &fields)?;
         if !(0.0..1.0).contains(&self.drop_fraction) {
             return Err(Error::Invalid(format!(
                 "re-views: drop_fraction is {}; it must lie in [0, 1)",
