@@ -7,8 +7,11 @@ use super::tables::RangeTables;
 use super::BranchAndBoundStats;
 use crate::cost::{Capped, Correlator};
 use crate::sdem::Sdem;
-use crate::search::{better, CandidateGrid, Scored};
+use crate::search::{better, CandidateGrid, Index, Scored};
 use rayon::prelude::*;
+
+/// The least candidates in a grid for [`BranchAndBound::polish`] to descend from the dive's.
+const POLISHED_GRID: usize = 4096;
 
 /// What the workers of [`BranchAndBound::best_first`] share.
 struct Shared {
@@ -95,6 +98,7 @@ impl<'a> BranchAndBound<'a> {
             current = open.next();
             queue.extend(open);
         }
+        self.polish(&mut progress);
         self.best_first(progress, queue)
     }
 
@@ -234,6 +238,86 @@ impl<'a> BranchAndBound<'a> {
             state.busy -= 1;
             wake.notify_all();
         }
+    }
+
+    /// Descends from the dive's candidate to a local minimum of the cost, which becomes the best
+    /// so far when lower. Every box the best-first loop bounds is then cut short against a
+    /// lower cost: on the 50 bench pairs the dive's candidate cost 1.4× the minimum on average
+    /// (1.0 on 24 pairs), after the descent 1.0 on 24 more; the bound's instructions fell by 6 %
+    /// for 2.6 % more in scoring candidates. Descents from the centres of the 4 or 16 open boxes
+    /// that cost least at their centres found the minimum more often (on 35 and 39 pairs) but
+    /// saved little more in bounds and cost 4 and 15 times as much in scoring.
+    ///
+    /// The candidates scored here lie in boxes still queued (or in boxes the dive already
+    /// scored), so what the best-first loop drops or sets aside is unchanged, and with it the
+    /// minimum and the runner-up's reserve. Grids of fewer than [`POLISHED_GRID`] candidates
+    /// are left as they are: their whole search scores a few dozen candidates, as many as a
+    /// descent.
+    fn polish(&self, progress: &mut Progress) {
+        if self.grid.counts.iter().product::<usize>() < POLISHED_GRID {
+            return;
+        }
+        let Some(dived) = progress.best else { return };
+        let mut correlator = self.correlator();
+        let mut scored = 0;
+        let found = self.descend(&mut correlator, self.grid.index(dived.1), &mut scored);
+        progress.stats.leaves_evaluated += scored;
+        let Some(found) = found else { return };
+        if better(&found, &dived) {
+            let at = self.grid.index(found.1);
+            let node = Node { lo: at, hi: at };
+            progress.absorb(self.grid, &[(node, None)], vec![Outcome::Leaf(found)]);
+        }
+    }
+
+    /// A local minimum of the cost over the grid's neighbours (steps of 4, 2, then 1 index along
+    /// each axis), from `start`; `scored` counts the candidates scored.
+    fn descend(
+        &self,
+        correlator: &mut Correlator<'a>,
+        start: Index,
+        scored: &mut usize,
+    ) -> Option<Scored> {
+        let counts = self.grid.counts;
+        let leaf = |idx: Index| Node { lo: idx, hi: idx };
+        *scored += 1;
+        let mut best = match self.try_leaf(correlator, &leaf(start), self.cap) {
+            Outcome::Leaf(s) => s,
+            _ => return None,
+        };
+        for stride in [4usize, 2, 1] {
+            loop {
+                let at = self.grid.index(best.1);
+                let mut moved = false;
+                for a in 0..4 {
+                    for up in [false, true] {
+                        let mut idx = at;
+                        if up {
+                            if at[a] + stride >= counts[a] {
+                                continue;
+                            }
+                            idx[a] += stride;
+                        } else {
+                            if at[a] < stride {
+                                continue;
+                            }
+                            idx[a] -= stride;
+                        }
+                        *scored += 1;
+                        if let Outcome::Leaf(s) = self.try_leaf(correlator, &leaf(idx), best.0) {
+                            if better(&s, &best) {
+                                best = s;
+                                moved = true;
+                            }
+                        }
+                    }
+                }
+                if !moved {
+                    break;
+                }
+            }
+        }
+        Some(best)
     }
 
     fn correlator(&self) -> Correlator<'a> {
