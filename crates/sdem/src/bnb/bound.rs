@@ -395,6 +395,7 @@ fn place_ball(
 /// beyond any grid), clamped there otherwise (NaN to −10⁸, outside every grid). The clamp spares the
 /// conversion its saturation checks, so the placement of a chunk of balls vectorizes.
 #[inline(always)]
+#[allow(clippy::manual_clamp)] // `f32::clamp` keeps NaN, which must not reach the conversion.
 fn floor_index(x: f32) -> i32 {
     let clamped = x.max(-1.0e8).min(1.0e8);
     // SAFETY: `clamped` is finite and well within i32's range.
