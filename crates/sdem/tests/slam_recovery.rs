@@ -223,6 +223,48 @@ fn a_second_run_starts_with_no_pose_and_is_relocalized_into_the_map() {
 }
 
 #[test]
+fn a_segment_from_another_place_is_not_joined_and_a_join_is_tried_only_as_it_moves_on() {
+    let (mut slam, _) = six_stop_map();
+    slam.begin_run();
+    // A second run 6 m and more from anything the map holds: five stops 35 cm apart, then
+    // three more where the fifth was (the robot waits).
+    let scene = sim::collapsed_building(SEED);
+    let far = sim::route_length_m(&scene).unwrap() - 2.0;
+    assert!(far > 8.0, "{far}");
+    let along: Vec<f64> = [0.0, 0.35, 0.7, 1.05, 1.4, 1.4, 1.4, 1.4]
+        .iter()
+        .map(|d| far + d)
+        .collect();
+    let second = stops(&along);
+    let mut tried = Vec::new();
+    for (i, stop) in second.iter().enumerate() {
+        let report = add(&mut slam, stop, i);
+        assert!(report.joined.is_empty(), "joined: {:?}", report.joined);
+        assert!(
+            report.loop_closures.iter().all(|c| !c.accepted),
+            "{:?}",
+            report.loop_closures
+        );
+        if i > 0 {
+            assert_eq!(report.status, StepStatus::Tracked, "{:?}", report.attempts);
+        }
+        // A tracked stop searches the whole map only to join its segment to another.
+        let searched = (report.attempts.iter())
+            .any(|a| a.source == PredictionSource::Relocalization && !a.accepted);
+        if i > 0 && searched {
+            tried.push(i);
+        }
+    }
+    let segments = slam.segments();
+    assert_eq!(segments.len(), 2, "{segments:?}");
+    assert!(!segments[1].in_world);
+    // Tried again as the robot moves on, not at every stop, and not again where it waits.
+    assert!(!tried.is_empty());
+    assert!(tried.windows(2).all(|w| w[1] >= w[0] + 2), "{tried:?}");
+    assert!(tried.iter().filter(|&&i| i > 4).count() <= 1, "{tried:?}");
+}
+
+#[test]
 fn a_place_descriptor_recognises_a_place_whichever_way_the_robot_faced() {
     let scan = stops(&[0.35]).remove(0);
     let points: Vec<[f32; 3]> = (scan.sweep.points_in_sensor().iter())

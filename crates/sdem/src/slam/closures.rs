@@ -1,12 +1,13 @@
-//! Loop closure in any direction, checked against the other closures; and the joining of
-//! segments.
+//! Loop closure in any direction, checked against the other closures; then, in a map of several
+//! segments, a join with another segment ([`super::joins`]).
 //!
 //! **Proposal.** Within a segment, where poses are known, the older nodes near the new one are
 //! scored by how many of its scan's cells their points explain at the current estimates
 //! ([`crate::map::Map::overlaps_among`]): that counts what both saw, whichever way each scan
 //! faced, so a robot coming back the other way (its scanner seeing only its front half) is
 //! matched with the nodes that looked where it looks now. Across segments, whose relative place
-//! is unknown, nodes are proposed by their place descriptors over every heading.
+//! is unknown, nodes are proposed by their place descriptors over every heading
+//! ([`super::joins`]).
 //!
 //! **Verification.** The exact search over every heading, with the runner-up search, against
 //! the candidate and its neighbours merged ([`crate::map::verify_loop_closure`]).
@@ -20,19 +21,14 @@
 //! with it than with any of those, which are then withdrawn from the graph; otherwise it is
 //! rejected, saying with which closures it disagrees.
 
-use super::map_search::{Located, Matched};
-use super::predictions::Prediction;
-use super::step::{Attempt, HeadingPrior, PredictionSource, SegmentJoin};
-use super::{ScanInput, Slam};
+use super::step::{Attempt, SegmentJoin};
+use super::Slam;
 use crate::error::Result;
-use crate::geometry::{attitude_of, Attitude};
+use crate::geometry::attitude_of;
 use crate::map::{verify_loop_closure_against, LoopClosure};
-use crate::posegraph::{Edge, EdgeKind};
+use crate::posegraph::EdgeKind;
 use crate::sdem::Sdem;
 use nalgebra::Matrix6;
-
-/// Nodes of other segments tried per stop for a join.
-const JOIN_CANDIDATES: usize = 3;
 
 /// Drift the graph may hold between two nodes: translation, metres per metre apart.
 const DRIFT_PER_M: f64 = 0.01;
@@ -259,176 +255,12 @@ impl Slam {
             }
         }
     }
-
-    /// Node `to` against the nodes of the other segments: first those near where its segment
-    /// believes it is (a segment started where a match failed is placed where the loop last
-    /// believed the robot was, so the two frames are nearly one), searched in the widest window
-    /// with the runner-up search; then, without a prior, those whose places look alike. A
-    /// confident match joins the two segments.
-    fn join_elsewhere(&mut self, to: usize, closing: &mut Closing) -> Result<()> {
-        let near = self.join_near(to, &mut closing.attempts)?;
-        let found = match near {
-            Some(m) => Some(m),
-            None => self.join_by_place(to, &mut closing.attempts)?,
-        };
-        let Some(matched) = found else {
-            return Ok(());
-        };
-        let link = matched.references[0].0;
-        let world_from_to = matched.world_from_sensor;
-        let covariance = matched
-            .diagnostics
-            .covariance
-            .map(|c| Matrix6::from_fn(|i, j| c[i][j]));
-        let edge = Edge {
-            from: link,
-            to,
-            from_from_to: self.map.nodes[link].world_from_sensor.inverse() * world_from_to,
-            information: self.edge_information(covariance.as_ref(), &world_from_to, 1.0),
-            kind: EdgeKind::LoopClosure,
-        };
-        let mut closure = LoopClosure::unchecked(link, to);
-        closure.accepted = true;
-        closure.cost = Some(matched.cost);
-        closure.inlier_fraction = Some(matched.diagnostics.inlier_fraction);
-        closure.from_from_to = Some(edge.from_from_to);
-        closure.covariance = covariance;
-        let join = self.join_segments(edge, &world_from_to)?;
-        closure.correction_m = Some(join.moved_m);
-        self.unplaced_segments.retain(|&s| s != join.absorbed);
-        self.measured_segments.retain(|&s| s != join.absorbed);
-        self.loop_closures.push(closure.clone());
-        self.closure_pool.push(closure.clone());
-        closing.changed = Some(join.into);
-        closing.checked.push(closure);
-        closing.joined.push(join);
-        Ok(())
-    }
-
-    /// [`Self::join_elsewhere`]'s search near the node's believed place; `None` when its
-    /// segment was started with no prior at all, or nothing there matches with confidence.
-    fn join_near(&self, to: usize, attempts: &mut Vec<Attempt>) -> Result<Option<Matched>> {
-        let node = &self.map.nodes[to];
-        let segment = node.segment;
-        let recovery = &self.config.recovery;
-        let others = |id: usize| {
-            let n = &self.map.nodes[id];
-            n.segment != segment
-                && !self.unplaced_segments.contains(&n.segment)
-                && (n.position() - node.position()).norm() <= recovery.other_nodes_radius_m
-        };
-        if self.unplaced_segments.contains(&segment) {
-            return Ok(None);
-        }
-        let near: Vec<usize> = (0..self.map.nodes.len()).filter(|&id| others(id)).collect();
-        if near.is_empty() {
-            return Ok(None);
-        }
-        let points = node.sensor_points();
-        let scan = self.scan_of(to, &points);
-        // A segment placed by the odometry is searched for in the window a prediction without
-        // odometry gets, where a match may share little with the map; another, in the widest.
-        let measured = self.measured_segments.contains(&segment);
-        let (window_half, heading_half, gate) = if measured {
-            let c = &self.config;
-            (c.window_half_no_odometry_m, c.heading_half_compass_deg, 0.0)
-        } else {
-            (
-                recovery.max_window_half_m,
-                recovery.max_heading_half_deg,
-                0.3,
-            )
-        };
-        let prediction = Prediction {
-            source: PredictionSource::WiderWindow,
-            position: node.position(),
-            attitude: attitude_of(&node.world_from_sensor),
-            heading_prior: HeadingPrior::LastNode,
-            heading_half,
-            window_half,
-            prior_sigma_m: f64::INFINITY,
-            motion_sigma_m: f64::INFINITY,
-            measured: false,
-        };
-        let query = Sdem::from_points(&points, &prediction.attitude, &self.config.sdem)?;
-        let tolerance = 0.2 + prediction.window_half[0].max(prediction.window_half[1]);
-        let scored = (self.map).overlaps_among(
-            near.iter().copied(),
-            &query,
-            &prediction.position,
-            f64::INFINITY,
-            tolerance,
-        );
-        let Some(&(first, cells)) = scored.first() else {
-            return Ok(None);
-        };
-        if cells < self.config.min_reference_overlap_cells {
-            return Ok(None);
-        }
-        let other = self.map.nodes[first].segment;
-        let references: Vec<(usize, usize)> = (scored.into_iter())
-            .filter(|&(id, c)| {
-                self.map.nodes[id].segment == other && c >= self.config.min_reference_overlap_cells
-            })
-            .take(2 * self.config.max_reference_nodes)
-            .collect();
-        let search = self.search();
-        let start = std::time::Instant::now();
-        let mut attempt = Attempt::new(&prediction, &references);
-        let found = search.match_prediction(&scan, &query, &prediction, references, true, gate);
-        let outcome = match found {
-            Ok(mut matched) => {
-                let reason = search.verdict(&mut matched, false, true, false);
-                attempt.record(&matched, reason);
-                attempt.accepted.then_some(matched)
-            }
-            Err(e) if e.is_no_match() => {
-                attempt.reason = e.to_string();
-                None
-            }
-            Err(e) => return Err(e),
-        };
-        attempt.time_ms = start.elapsed().as_secs_f64() * 1e3;
-        attempts.push(attempt);
-        Ok(outcome)
-    }
-
-    /// [`Self::join_elsewhere`]'s search without a prior, by place descriptor.
-    fn join_by_place(&self, to: usize, attempts: &mut Vec<Attempt>) -> Result<Option<Matched>> {
-        let segment = self.map.nodes[to].segment;
-        let points = self.map.nodes[to].sensor_points();
-        let scan = self.scan_of(to, &points);
-        let keep = |id: usize| self.map.nodes[id].segment != segment;
-        let found = self
-            .search()
-            .find_in_map(&scan, keep, Some(JOIN_CANDIDATES), attempts)?;
-        Ok(match found {
-            Some(Located::Found { matched, .. }) => Some(matched),
-            _ => None,
-        })
-    }
-
-    /// Node `node`'s scan (its boundary points, `points`) as the loop takes a scan: its roll
-    /// and pitch as its segment's estimate has them, with its reading's σ.
-    fn scan_of<'p>(&self, node: usize, points: &'p [crate::geometry::Vec3]) -> ScanInput<'p> {
-        let n = &self.map.nodes[node];
-        let a = attitude_of(&n.world_from_sensor);
-        ScanInput {
-            scan_index: n.scan_index,
-            points_in_sensor: points,
-            attitude: Some(n.attitude_reading.map_or(a, |r| Attitude {
-                sigma: r.sigma,
-                ..a
-            })),
-            odometry: None,
-        }
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{pose_from_parts, Pose, Vec3};
+    use crate::geometry::{pose_from_parts, Attitude, Pose, Vec3};
     use crate::map::Node;
     use crate::slam::SlamOptions;
 

@@ -38,13 +38,14 @@
 //! Each step reports its status ([`StepStatus`]: tracked, recovered and how, relocalized, a
 //! new segment, doubtful), every search it tried ([`Attempt`]) and its doubts.
 //!
-//! The module's files: this one holds the loop, `predictions`, `recovery`, `segments` and
-//! `closures` its stages, `options` the configuration, `step` what a step reports,
+//! The module's files: this one holds the loop, `predictions`, `recovery`, `segments`,
+//! `closures` and `joins` its stages, `options` the configuration, `step` what a step reports,
 //! `relocalize` finding a scan in a saved map, `trajectory` the errors of an estimated
 //! trajectory against a reference one, `upkeep` what keeps the work per stop and the memory
 //! bounded as the map grows.
 
 mod closures;
+mod joins;
 mod map_search;
 mod options;
 mod predictions;
@@ -132,6 +133,9 @@ pub struct Slam {
     /// Segments whose first node was placed by the odometry's motion from the last one: their
     /// frames are the world's to within the odometry's error.
     measured_segments: Vec<usize>,
+    /// The nodes a join of their segment with another was tried from (the tries are bounded:
+    /// `joins`).
+    join_tries: Vec<usize>,
     /// The run the next scans belong to.
     run: usize,
     /// The robot's last stop, when its place in the map is known to the loop (`None` at the
@@ -162,6 +166,7 @@ impl Slam {
             closure_pool: Vec::new(),
             unplaced_segments: Vec::new(),
             measured_segments: Vec::new(),
+            join_tries: Vec::new(),
             run: 0,
             last_node: None,
             last_scan_index: None,
@@ -449,6 +454,9 @@ impl Slam {
                 } else if measured {
                     self.measured_segments.push(node_id);
                 }
+                // The whole map was searched for this scan: its join is tried from the next
+                // nodes of its segment, once they have moved on (`joins`).
+                self.join_tries.push(node_id);
                 (StepStatus::NewSegment, best, node_id, guess)
             }
         };
