@@ -73,9 +73,9 @@ impl Slam {
         let places = match self.upkeep.closure_paused(to) {
             true => Vec::new(),
             false => {
-                let near = self.nodes_near(to, self.config.loop_closure.search_radius_m);
+                let near = self.loop_candidate_nodes(to);
                 self.upkeep.bring(&mut self.map, &near)?;
-                self.loop_candidates(to)?
+                self.loop_candidates(to, &near)?
             }
         };
         for place in places {
@@ -103,21 +103,28 @@ impl Slam {
         Ok(closing)
     }
 
-    /// The places to close a loop with at node `to`: the older nodes of its segment near it
-    /// (not among its recent nodes) that explain enough of its scan's cells at the current
-    /// estimates, most first; each place is such a node with the others of them within
-    /// `reference_radius_m` of it (at most `reference_nodes`), and no two places start within
-    /// that radius of each other; at most `max_candidates` places.
-    fn loop_candidates(&self, to: usize) -> Result<Vec<Vec<usize>>> {
-        let config = &self.config.loop_closure;
+    /// The older nodes of node `to`'s segment near it (not among its recent nodes) that may
+    /// close a loop with it: within `search_radius_m`, at most
+    /// [`super::GrowthOptions::closure_candidate_nodes`], the nearest.
+    fn loop_candidate_nodes(&self, to: usize) -> Vec<usize> {
         let node = &self.map.nodes[to];
         let recent = self.recent_nodes(node.segment, to);
-        let near: Vec<usize> = (self.map.nodes.iter())
-            .filter(|n| n.segment == node.segment && n.node_id < to)
-            .filter(|n| !recent.contains(&n.node_id))
-            .filter(|n| (n.position() - node.position()).norm() <= config.search_radius_m)
-            .map(|n| n.node_id)
-            .collect();
+        self.candidates_near(
+            (node.segment, &node.position()),
+            self.config.loop_closure.search_radius_m,
+            self.config.growth.closure_candidate_nodes,
+            |id| id < to && !recent.contains(&id),
+        )
+    }
+
+    /// The places to close a loop with at node `to`: of the nodes `near` (see
+    /// [`Self::loop_candidate_nodes`]), those that explain enough of its scan's cells at the
+    /// current estimates, most first; each place is such a node with the others of them within
+    /// `reference_radius_m` of it (at most `reference_nodes`), and no two places start within
+    /// that radius of each other; at most `max_candidates` places.
+    fn loop_candidates(&self, to: usize, near: &[usize]) -> Result<Vec<Vec<usize>>> {
+        let config = &self.config.loop_closure;
+        let node = &self.map.nodes[to];
         if near.is_empty() {
             return Ok(Vec::new());
         }

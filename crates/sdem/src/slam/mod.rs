@@ -425,8 +425,10 @@ impl Slam {
         self.check_order(scan)?;
         let node_id = self.map.nodes.len();
         if let Some(last) = self.last_node {
-            let near = self.nodes_near(last, self.config.recovery.other_nodes_radius_m);
-            self.upkeep.bring(&mut self.map, &near)?;
+            // The local map; the segment's other nodes come back only when a search needs
+            // them (recovery, loop closure).
+            let recent = self.recent_nodes(self.map.nodes[last].segment, last);
+            self.upkeep.bring(&mut self.map, &recent)?;
         }
         let mut attempts = Vec::new();
         let located = self.locate(scan, self.last_node, &mut attempts)?;

@@ -37,7 +37,7 @@ impl Slam {
     /// the best against the whole segment, a wider window, every heading (without a compass)
     /// and the whole map in turn. Every search tried goes to `attempts`.
     pub(super) fn locate(
-        &self,
+        &mut self,
         scan: &ScanInput,
         last: Option<usize>,
         attempts: &mut Vec<Attempt>,
@@ -92,6 +92,8 @@ impl Slam {
         // The best prediction (the first when nothing matched) against the whole segment, then
         // in the widest window.
         let base = best.as_ref().map_or(&predictions[0], |b| &b.1).clone();
+        let near = self.segment_candidates(segment, &base.position);
+        self.upkeep.bring(&mut self.map, &near)?;
         let recovery = &self.config.recovery;
         // With a compass, the widest heading window is what a compass disturbed by steel may
         // be off by; without one, the configured widest.
@@ -272,12 +274,7 @@ impl Slam {
         segment: usize,
         last: usize,
     ) -> Vec<(usize, usize)> {
-        let radius = self.config.recovery.other_nodes_radius_m;
-        let near: Vec<usize> = (self.map.nodes.iter())
-            .filter(|n| n.segment == segment)
-            .filter(|n| (n.position() - prediction.position).norm() <= radius)
-            .map(|n| n.node_id)
-            .collect();
+        let near = self.segment_candidates(segment, &prediction.position);
         // Counted with the window's tolerance: the prediction may be that far off.
         let tolerance = 0.2 + prediction.window_half[0].max(prediction.window_half[1]);
         let references: Vec<(usize, usize)> = (self.map)
@@ -301,6 +298,14 @@ impl Slam {
             );
         }
         references
+    }
+
+    /// The nodes of `segment` within [`super::RecoveryOptions::other_nodes_radius_m`] of
+    /// `position`, at most [`super::GrowthOptions::recovery_candidate_nodes`], the nearest.
+    fn segment_candidates(&self, segment: usize, position: &Vec3) -> Vec<usize> {
+        let radius = self.config.recovery.other_nodes_radius_m;
+        let limit = self.config.growth.recovery_candidate_nodes;
+        self.candidates_near((segment, position), radius, limit, |_| true)
     }
 
     /// Of `candidates`, the nodes whose points explain at least

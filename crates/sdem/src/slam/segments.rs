@@ -63,15 +63,25 @@ impl Slam {
         self.map.nodes.first().map_or(0, |n| n.segment)
     }
 
-    /// The nodes of `node`'s segment whose origins lie within `radius_m` of its (`node`
-    /// among them).
-    pub(super) fn nodes_near(&self, node: usize, radius_m: f64) -> Vec<usize> {
-        let n = &self.map.nodes[node];
-        (self.map.nodes.iter())
-            .filter(|m| m.segment == n.segment)
-            .filter(|m| (m.position() - n.position()).norm() <= radius_m)
-            .map(|m| m.node_id)
-            .collect()
+    /// The nodes of `segment` that `keep` keeps whose origins lie within `radius_m` of
+    /// `position`: the `limit` nearest, nearest first (ties by id). Where a route passes a
+    /// place lap after lap the nodes there grow with the laps; the ones a step weighs do not.
+    pub(super) fn candidates_near(
+        &self,
+        (segment, position): (usize, &crate::geometry::Vec3),
+        radius_m: f64,
+        limit: usize,
+        keep: impl Fn(usize) -> bool,
+    ) -> Vec<usize> {
+        let mut near: Vec<(usize, f64)> = (self.upkeep.nodes_within(position, radius_m))
+            .into_iter()
+            .filter(|&id| self.map.nodes[id].segment == segment && keep(id))
+            .map(|id| (id, (self.map.nodes[id].position() - position).norm()))
+            .filter(|&(_, d)| d <= radius_m)
+            .collect();
+        near.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+        near.truncate(limit);
+        near.into_iter().map(|(id, _)| id).collect()
     }
 
     /// The nodes of `segment`, in order.

@@ -46,6 +46,13 @@ pub struct GrowthOptions {
     pub solve_margin_nodes: usize,
     /// A solve that would free more than this share of the nodes solves the whole graph.
     pub whole_solve_fraction: f64,
+    /// At most this many older nodes near a new one are weighed as its loop-closure
+    /// candidates (their points brought back and scored), the nearest: on a route that passes
+    /// a place lap after lap the nodes there grow with the laps, the work of a stop does not.
+    pub closure_candidate_nodes: usize,
+    /// At most this many nodes near a prediction are weighed as references when the recent
+    /// nodes do not see the scan (recovery), the nearest.
+    pub recovery_candidate_nodes: usize,
 }
 
 impl Default for GrowthOptions {
@@ -58,6 +65,8 @@ impl Default for GrowthOptions {
             closure_interval: 4,
             solve_margin_nodes: 10,
             whole_solve_fraction: 0.5,
+            closure_candidate_nodes: 24,
+            recovery_candidate_nodes: 96,
         }
     }
 }
@@ -68,6 +77,14 @@ impl GrowthOptions {
         let bad = |why: String| Err(crate::error::Error::Invalid(format!("growth: {why}")));
         if self.resident_nodes == 0 {
             return bad("resident_nodes must be at least 1".into());
+        }
+        for (name, v) in [
+            ("closure_candidate_nodes", self.closure_candidate_nodes),
+            ("recovery_candidate_nodes", self.recovery_candidate_nodes),
+        ] {
+            if v == 0 {
+                return bad(format!("{name} must be at least 1"));
+            }
         }
         for (name, v) in [
             ("refuse_tolerance_m", self.refuse_tolerance_m),
@@ -234,6 +251,12 @@ impl Upkeep {
             self.index.moved(id, pose.translation.vector);
         }
         Ok((solve, max_shift))
+    }
+
+    /// The nodes whose positions lie within `radius_m` of `position` (any segment), by id:
+    /// from the index, the work of the nodes near the place.
+    pub(super) fn nodes_within(&self, position: &Vec3, radius_m: f64) -> Vec<usize> {
+        self.index.within(position, radius_m)
     }
 
     /// Moves every node's position in the index (after a solve of the whole graph elsewhere).
