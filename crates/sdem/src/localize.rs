@@ -727,6 +727,14 @@ fn refine_best(
             &config.refinement,
         ) {
             Ok(r) => {
+                // The covariance of the residuals' spread, widened by the bias of how the
+                // two scans sample their surfaces (`refine::discrepancy`).
+                let r = crate::refine::discrepancy::with_sampling_bias(
+                    r,
+                    reference,
+                    query,
+                    &config.refinement,
+                );
                 rotation = r.reference_level_from_query_level.rotation;
                 let t = r.reference_level_from_query_level.translation.vector;
                 refinement = Some(r);

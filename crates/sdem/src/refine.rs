@@ -16,6 +16,8 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuatern
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub mod discrepancy;
+
 /// Settings of the refinement.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
