@@ -128,7 +128,7 @@ fn re_views_of_a_real_scan_localize_within_the_measured_bound() {
 /// Where the first KITTI frame lies beside the repository.
 fn kitti_frame() -> Option<PathBuf> {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/kitti-00-first16/000000.bin");
+        .join("../../../shared/data/kitti-00-first16/velodyne/000000.bin");
     path.is_file().then_some(path)
 }
 
@@ -139,7 +139,9 @@ fn kitti_frame() -> Option<PathBuf> {
 #[test]
 fn the_covariance_covers_the_error_on_re_views_of_a_real_lidar_frame() {
     let Some(scan) = kitti_frame() else {
-        eprintln!("skipped: no ../shared/data/kitti-00-first16/000000.bin beside the repository");
+        eprintln!(
+            "skipped: no ../shared/data/kitti-00-first16/velodyne/000000.bin beside the repository"
+        );
         return;
     };
     let dir = tempfile::tempdir().unwrap();
