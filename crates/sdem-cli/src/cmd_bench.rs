@@ -96,6 +96,13 @@ struct PairsReport {
     rotation_error_deg: Stats,
     time_ms: Stats,
     success_rate_2cm: f64,
+    /// Localizations without a doubt.
+    trusted: usize,
+    /// The normalized estimation error squared (six axes) of the reported covariance: a χ² with
+    /// 6 degrees of freedom (median 5.3) when the covariance is honest.
+    nees: Option<Stats>,
+    /// The share of them below χ²₆'s 95 % bound, 12.59 (0.95 when honest).
+    nees_below_95: Option<f64>,
     failures: Vec<String>,
 }
 
@@ -210,6 +217,7 @@ fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
     config.heading.half_range_deg = heading_deg;
     let sdem_config = SdemConfig::default();
     let (mut tally, mut failures) = (Tally::default(), Vec::new());
+    let (mut trusted, mut nees) = (0, Vec::new());
     let bar = crate::progress::bar(
         count as u64,
         args.json,
@@ -219,6 +227,10 @@ fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
         bar.inc(1);
         match localize_pair(pair, &sdem_config, &config) {
             Ok(result) => {
+                trusted += usize::from(result.localization.trusted);
+                nees.extend(result.localization.covariance.as_ref().and_then(|c| {
+                    sdem_sim::benchmark::nees(&pair.truth, &result.estimate, c).map(|n| n.0)
+                }));
                 if tally.record(Some(&result)) {
                     failures.push(format!(
                         "pair {i}: error {:.1} mm, {:.2}°",
@@ -244,9 +256,16 @@ fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
         rotation_error_deg: tally.rotation_error_deg(),
         time_ms: tally.time_ms(),
         success_rate_2cm: tally.success_rate(),
+        trusted,
+        nees_below_95: (!nees.is_empty())
+            .then(|| nees.iter().filter(|&&n| n < CHI2_95_6).count() as f64 / nees.len() as f64),
+        nees: (!nees.is_empty()).then(|| summarize(&nees)),
         failures,
     }
 }
+
+/// χ² with 6 degrees of freedom: 95 % of its values lie below this.
+const CHI2_95_6: f64 = 12.592;
 
 fn print_exact(e: &ExactReport) {
     let heading = if e.heading_window_deg > 0.0 {
@@ -386,7 +405,21 @@ fn print_pairs(p: &PairsReport, n: &PairsReport) {
         "   time per localization  median {:.0} ms, 95th percentile {:.0} ms",
         p.time_ms.median, p.time_ms.p95
     );
-    println!("   success (< 2 cm)   {:.1} %", p.success_rate_2cm * 100.0);
+    println!(
+        "   success (< 2 cm)   {:.1} %, {} of {} trusted",
+        p.success_rate_2cm * 100.0,
+        p.trusted,
+        p.count
+    );
+    if let (Some(nees), Some(below)) = (&p.nees, p.nees_below_95) {
+        println!(
+            "   NEES (6 axes)      median {:.1}, 95th percentile {:.1}, {:.0} % below 12.59 \
+             (5.3 and 95 % when the covariance is honest)",
+            nees.median,
+            nees.p95,
+            below * 100.0
+        );
+    }
     for f in &p.failures {
         println!("   failed: {f}");
     }

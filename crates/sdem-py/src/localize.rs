@@ -334,7 +334,8 @@ impl Localization {
 
     /// Covariance of the pose over ``[x, y, z, rx, ry, rz]`` in the query sensor's frame
     /// (metres along its axes, then small rotations in radians about them), ``(6, 6)``
-    /// float64; from the refinement's curvature with independent residuals, so optimistic.
+    /// float64; from the refinement's curvature, widened by the residuals' correlation and the
+    /// bias of how the two scans sample their surfaces.
     /// ``None`` without a 6-DoF refinement.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {

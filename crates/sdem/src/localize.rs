@@ -227,7 +227,8 @@ pub struct Localization {
     pub reference_from_query: Pose,
     /// Covariance of the pose over `[x, y, z, rx, ry, rz]` in the query sensor's frame: metres
     /// along its axes, then small rotations (radians) about them. From the curvature of the
-    /// refinement's cost with independent residuals, so optimistic; `None` without a 6-DoF
+    /// refinement's cost, widened by the residuals' correlation and by the bias of how the two
+    /// scans sample their surfaces ([`crate::refine::discrepancy`]); `None` without a 6-DoF
     /// refinement. ([`Diagnostics::covariance`] is the same on the levelled reference's axes.)
     pub covariance: Option<Matrix6<f64>>,
     /// The lowest cost (eq. 1, m²) found more than [`LocalizeOptions::peak_radius_m`] from the
@@ -293,8 +294,9 @@ pub struct Diagnostics {
     /// Its heading correction, degrees.
     pub runner_up_heading_deg: Option<f64>,
     /// Covariance of `[x, y, z, roll, pitch, yaw]` (metres, radians; rotations about the
-    /// reference's levelled axes) from the curvature of the refinement's cost, assuming
-    /// independent residuals (optimistic); `None` without a 6-DoF refinement.
+    /// reference's levelled axes) from the curvature of the refinement's cost, widened by the
+    /// residuals' correlation and the scans' sampling bias ([`crate::refine::discrepancy`]);
+    /// `None` without a 6-DoF refinement.
     pub covariance: Option<[[f64; 6]; 6]>,
     /// The translational direction the scans constrain least (unit vector, levelled reference
     /// axes).
@@ -727,6 +729,14 @@ fn refine_best(
             &config.refinement,
         ) {
             Ok(r) => {
+                // The covariance of the residuals' spread, widened by the bias of how the
+                // two scans sample their surfaces (`refine::discrepancy`).
+                let r = crate::refine::discrepancy::with_sampling_bias(
+                    r,
+                    reference,
+                    query,
+                    &config.refinement,
+                );
                 rotation = r.reference_level_from_query_level.rotation;
                 let t = r.reference_level_from_query_level.translation.vector;
                 refinement = Some(r);

@@ -16,6 +16,8 @@ use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuatern
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+pub mod discrepancy;
+
 /// Settings of the refinement.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -132,7 +134,8 @@ pub struct Refinement {
     pub rms_m: f64,
     /// Information matrix of `[x, y, z, rx, ry, rz]` (metres, radians; rotation about the
     /// reference levelled frame's axes), `JᵀWJ / (σ² d)`: `d` the residuals' [`design_effect`]
-    /// (their correlation between neighbours).
+    /// (their correlation between neighbours). [`crate::localize`] divides it further by the
+    /// sampling bias measured by refining the other way ([`discrepancy::with_sampling_bias`]).
     pub information: Matrix6<f64>,
     /// The reference normals (levelled frame) of the last iteration's residuals within the
     /// robust kernel (weight at least ½), each with the square of its point's range: the

@@ -52,7 +52,7 @@ pub struct SlamOptions {
     /// wider and against more nodes, with the runner-up search.
     pub min_tracking_inlier_fraction: f64,
     /// Floor on the standard deviation of an edge's translation, metres: the matcher's
-    /// covariance assumes independent residuals and is optimistic.
+    /// covariance is the two scans' alone, and a match can still be off by more.
     pub edge_sigma_floor_m: f64,
     /// Floor on the standard deviation of an edge's rotation, degrees.
     pub edge_sigma_floor_deg: f64,
