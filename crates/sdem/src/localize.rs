@@ -448,6 +448,7 @@ pub(crate) fn localize_below(
         &mut evaluator,
         prepared.as_ref(),
         reference,
+        query,
         config,
         full_turn,
         cap.min(config.cost.max_match_cost()),
@@ -610,12 +611,14 @@ fn validate(config: &LocalizeOptions) -> Result<()> {
 type SearchResult = (Option<Scored>, BranchAndBoundStats, Option<bnb::Reserve>);
 
 /// Runs the search for the best candidate and, when a refinement is asked for, fits the
-/// reference's surface normals meanwhile: they depend on the reference alone, so they are
-/// fitted while the search runs, on the cores its sequential steps leave idle.
+/// reference's and the query's surface normals meanwhile (the refinement reads the first, its
+/// run the other way the second): they depend on their scan alone, so they are fitted while the
+/// search runs, on the cores its sequential steps leave idle.
 fn search_and_fit_normals<'r>(
     evaluator: &mut Evaluator,
     prepared: Option<&bnb::Prepared>,
     reference: &'r Sdem,
+    query: &Sdem,
     config: &LocalizeOptions,
     full_turn: bool,
     cap: f64,
@@ -627,7 +630,14 @@ fn search_and_fit_normals<'r>(
         || run_search(evaluator, prepared, config, full_turn, cap, reserve_ratio),
         || {
             config.refine.then(|| {
-                crate::refine::SurfaceNormals::of(reference, config.refinement.normal_radius_cells)
+                // The query's too: the refinement the other way reads them (they stay with
+                // the query, as a reference's stay with it).
+                let radius = config.refinement.normal_radius_cells;
+                let (normals, _) = rayon::join(
+                    || crate::refine::SurfaceNormals::of(reference, radius),
+                    || crate::refine::SurfaceNormals::of(query, radius),
+                );
+                normals
             })
         },
     )

@@ -706,6 +706,21 @@ pub fn refine(
     prior: Option<&OffsetPrior>,
     config: &RefineConfig,
 ) -> Result<Refinement> {
+    refine_from(reference, normals, query, initial, prior, config, false)
+}
+
+/// [`refine`], from an `initial` estimate that is already `settled` (a refinement's own result,
+/// seen from the other scan): then the kernel starts at its scale and the gate narrow, with no
+/// annealing from wide to pull the estimate away and back.
+pub(crate) fn refine_from(
+    reference: &Sdem,
+    normals: &SurfaceNormals,
+    query: &Sdem,
+    initial: &Isometry3<f64>,
+    prior: Option<&OffsetPrior>,
+    config: &RefineConfig,
+    settled: bool,
+) -> Result<Refinement> {
     if reference.grid() != query.grid() {
         return Err(Error::Invalid(
             "refinement needs both S-DEMs on one grid".into(),
@@ -735,7 +750,7 @@ pub fn refine(
     // the estimate moves little (see [`REASSOCIATE_STEP`]).
     let mut pairs = vec![u32::MAX; query_points.len()];
     let mut associate = true;
-    let mut settled = false;
+    let mut settled = settled;
     for iteration in 0..config.max_iterations.max(1) {
         iterations = iteration + 1;
         let fresh = associate;

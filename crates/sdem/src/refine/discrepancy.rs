@@ -16,7 +16,7 @@
 //! of the covariance `Σ` itself: `B = γ Σ` with `E[δᵀ Σ⁻¹ δ] = 2 γ · 6`. The covariance
 //! reported becomes `(1 + γ) Σ`: its shape, and so every doubt read from its shape, unchanged.
 
-use super::{refine, RefineConfig, Refinement, SurfaceNormals};
+use super::{refine_from, RefineConfig, Refinement, SurfaceNormals};
 use crate::sdem::Sdem;
 use nalgebra::{Matrix6, Vector6};
 
@@ -62,7 +62,7 @@ pub fn with_sampling_bias(
 ) -> Refinement {
     let normals = SurfaceNormals::of(query, config.normal_radius_cells);
     let start = forward.reference_level_from_query_level.inverse();
-    let Ok(backward) = refine(query, &normals, reference, &start, None, config) else {
+    let Ok(backward) = refine_from(query, &normals, reference, &start, None, config, true) else {
         return forward;
     };
     let delta = discrepancy(
