@@ -102,8 +102,18 @@ fn re_views_of_a_real_scan_localize_within_the_measured_bound() {
         eprintln!("skipped: no ../shared/data/3dtk-dat/scan000.3d beside the repository");
         return;
     };
+    let report = three_re_views(&scan);
+    for r in records(&report, 3) {
+        let t = r["translation_error_mm"].as_f64().unwrap();
+        let d = r["rotation_error_deg"].as_f64().unwrap();
+        assert!(t <= 2.0 && d <= 0.05, "{t} mm, {d}°: {r}");
+    }
+}
+
+/// The real-geometry suite's report on 3 re-views of `scan`, without the peers.
+fn three_re_views(scan: &Path) -> Value {
     let dir = tempfile::tempdir().unwrap();
-    let report = run_json(
+    run_json(
         dir.path(),
         &[
             "bench",
@@ -117,12 +127,7 @@ fn re_views_of_a_real_scan_localize_within_the_measured_bound() {
             "0",
             "--json",
         ],
-    );
-    for r in records(&report, 3) {
-        let t = r["translation_error_mm"].as_f64().unwrap();
-        let d = r["rotation_error_deg"].as_f64().unwrap();
-        assert!(t <= 2.0 && d <= 0.05, "{t} mm, {d}°: {r}");
-    }
+    )
 }
 
 /// Where the first KITTI frame lies beside the repository.
@@ -144,22 +149,7 @@ fn the_covariance_covers_the_error_on_re_views_of_a_real_lidar_frame() {
         );
         return;
     };
-    let dir = tempfile::tempdir().unwrap();
-    let report = run_json(
-        dir.path(),
-        &[
-            "bench",
-            "--suite",
-            "real-geometry",
-            "--scan",
-            scan.to_str().unwrap(),
-            "--pairs",
-            "3",
-            "--peer-pairs",
-            "0",
-            "--json",
-        ],
-    );
+    let report = three_re_views(&scan);
     let mut nees: Vec<f64> = records(&report, 3)
         .iter()
         .map(|r| r["nees"].as_f64().unwrap())
