@@ -1,35 +1,14 @@
 //! On a route that passes the same places lap after lap, the nodes near the robot grow with
 //! the laps; the nodes one stop brings back from the store to weigh do not.
 
-use sdem::map::Node;
+mod common;
+
+use common::Memory;
 use sdem::sensor::SensorConfig;
 use sdem::slam::*;
-use sdem::store::NodeStore;
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim::{long_run, LongRoute};
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
-
-/// A store in memory that counts the nodes it gave back.
-#[derive(Debug, Default)]
-struct Memory {
-    kept: Mutex<HashMap<usize, Vec<[f32; 3]>>>,
-    fetches: Mutex<usize>,
-}
-
-impl NodeStore for Memory {
-    fn keep(&self, node: &Node) -> sdem::Result<()> {
-        let mut kept = self.kept.lock().unwrap();
-        kept.entry(node.node_id)
-            .or_insert_with(|| node.points_in_sensor.clone());
-        Ok(())
-    }
-
-    fn fetch(&self, node_id: usize) -> sdem::Result<Vec<[f32; 3]>> {
-        *self.fetches.lock().unwrap() += 1;
-        Ok(self.kept.lock().unwrap()[&node_id].clone())
-    }
-}
+use std::sync::Arc;
 
 #[test]
 fn the_nodes_a_stop_brings_back_stay_bounded_as_laps_pass_the_same_place() {

@@ -1,36 +1,15 @@
 //! The loop with its far nodes parked in a store maps exactly as the loop with every node in
 //! memory, while at most `growth.resident_nodes` nodes hold their points.
 
+mod common;
+
+use common::Memory;
 use sdem::geometry::Pose;
-use sdem::map::Node;
 use sdem::sensor::SensorConfig;
 use sdem::slam::*;
-use sdem::store::NodeStore;
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim;
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
-
-/// A store in memory that counts the nodes it gave back.
-#[derive(Debug, Default)]
-struct Memory {
-    kept: Mutex<HashMap<usize, Vec<[f32; 3]>>>,
-    fetches: Mutex<usize>,
-}
-
-impl NodeStore for Memory {
-    fn keep(&self, node: &Node) -> sdem::Result<()> {
-        let mut kept = self.kept.lock().unwrap();
-        kept.entry(node.node_id)
-            .or_insert_with(|| node.points_in_sensor.clone());
-        Ok(())
-    }
-
-    fn fetch(&self, node_id: usize) -> sdem::Result<Vec<[f32; 3]>> {
-        *self.fetches.lock().unwrap() += 1;
-        Ok(self.kept.lock().unwrap()[&node_id].clone())
-    }
-}
+use std::sync::Arc;
 
 /// Maps the loop of the simulated collapsed building (seed 1), with `store` attached when
 /// given; returns the loop and the most nodes that held their points after a step.
