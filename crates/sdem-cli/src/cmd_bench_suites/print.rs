@@ -233,7 +233,7 @@ fn print_peers(peers: &PeersReport) {
 
 /// A figure with `decimals`; `inf` where a pair without a pose (an error) reaches it, `-` for
 /// none.
-fn figure(value: f64, decimals: usize) -> String {
+pub(super) fn figure(value: f64, decimals: usize) -> String {
     if value.is_finite() {
         format!("{value:.decimals$}")
     } else if value == f64::INFINITY {

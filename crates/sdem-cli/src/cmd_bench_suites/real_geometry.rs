@@ -10,6 +10,7 @@
 //! gives both errors per scan, sdem's over GICP's on each view, the targets met, and the NEES
 //! of the covariance sdem reports.
 
+use super::print::figure;
 use super::{Common, SuiteArgs};
 use crate::bench_peers::{self, PeerResult, PeerSettings, Peers};
 use crate::output::{elapsed_ms, print_json};
@@ -682,16 +683,5 @@ fn print_misses(records: &[ReviewRecord]) {
     }
     if missed.len() > 10 {
         println!("  ... {} more (see --json)", missed.len() - 10);
-    }
-}
-
-/// A figure with `decimals`; `inf` for an error (no pose), `-` for none.
-fn figure(value: f64, decimals: usize) -> String {
-    if value.is_finite() {
-        format!("{value:.decimals$}")
-    } else if value == f64::INFINITY {
-        "inf".to_string()
-    } else {
-        "-".to_string()
     }
 }
