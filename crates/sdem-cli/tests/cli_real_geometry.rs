@@ -51,12 +51,12 @@ fn records(report: &Value, expected: usize) -> Vec<Value> {
 /// A user's scan (any point file) is modelled, re-viewed by a scanner like its own (a front-half
 /// scan: the tilting one) and localized; without the peers the report says so and compares
 /// nothing.
-#[test]
-fn a_users_scan_is_re_viewed_and_localized() {
-    let dir = tempfile::tempdir().unwrap();
-    let scan = room_scan(dir.path());
-    let report = run_json(
-        dir.path(),
+/// The real-geometry suite's report on `pairs` re-views of `scan`, without the peers, run in
+/// `dir`.
+fn re_views(dir: &Path, scan: &Path, pairs: usize) -> Value {
+    let pairs = pairs.to_string();
+    run_json(
+        dir,
         &[
             "bench",
             "--suite",
@@ -64,12 +64,19 @@ fn a_users_scan_is_re_viewed_and_localized() {
             "--scan",
             scan.to_str().unwrap(),
             "--pairs",
-            "2",
+            &pairs,
             "--peer-pairs",
             "0",
             "--json",
         ],
-    );
+    )
+}
+
+#[test]
+fn a_users_scan_is_re_viewed_and_localized() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = room_scan(dir.path());
+    let report = re_views(dir.path(), &scan, 2);
     assert_eq!(report["suite"], "real-geometry");
     assert_eq!(report["peers"], "--peer-pairs 0");
     let scans = report["scans"].as_array().unwrap();
@@ -102,32 +109,13 @@ fn re_views_of_a_real_scan_localize_within_the_measured_bound() {
         eprintln!("skipped: no ../shared/data/3dtk-dat/scan000.3d beside the repository");
         return;
     };
-    let report = three_re_views(&scan);
+    let dir = tempfile::tempdir().unwrap();
+    let report = re_views(dir.path(), &scan, 3);
     for r in records(&report, 3) {
         let t = r["translation_error_mm"].as_f64().unwrap();
         let d = r["rotation_error_deg"].as_f64().unwrap();
         assert!(t <= 2.0 && d <= 0.05, "{t} mm, {d}°: {r}");
     }
-}
-
-/// The real-geometry suite's report on 3 re-views of `scan`, without the peers.
-fn three_re_views(scan: &Path) -> Value {
-    let dir = tempfile::tempdir().unwrap();
-    run_json(
-        dir.path(),
-        &[
-            "bench",
-            "--suite",
-            "real-geometry",
-            "--scan",
-            scan.to_str().unwrap(),
-            "--pairs",
-            "3",
-            "--peer-pairs",
-            "0",
-            "--json",
-        ],
-    )
 }
 
 /// Where the first KITTI frame lies beside the repository.
@@ -149,7 +137,8 @@ fn the_covariance_covers_the_error_on_re_views_of_a_real_lidar_frame() {
         );
         return;
     };
-    let report = three_re_views(&scan);
+    let dir = tempfile::tempdir().unwrap();
+    let report = re_views(dir.path(), &scan, 3);
     let mut nees: Vec<f64> = records(&report, 3)
         .iter()
         .map(|r| r["nees"].as_f64().unwrap())
