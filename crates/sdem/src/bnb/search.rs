@@ -7,7 +7,7 @@ use super::tables::RangeTables;
 use super::BranchAndBoundStats;
 use crate::cost::{Capped, Correlator};
 use crate::sdem::Sdem;
-use crate::search::{better, CandidateGrid, Index, Scored};
+use crate::search::{better, CandidateGrid, Scored};
 use rayon::prelude::*;
 
 /// The least candidates in a grid for [`BranchAndBound::polish`] to descend from the dive's.
@@ -260,9 +260,8 @@ impl<'a> BranchAndBound<'a> {
         let Some(dived) = progress.best else { return };
         let mut correlator = self.correlator();
         let mut scored = 0;
-        let found = self.descend(&mut correlator, self.grid.index(dived.1), &mut scored);
+        let found = self.descend(&mut correlator, dived, &mut scored);
         progress.stats.leaves_evaluated += scored;
-        let Some(found) = found else { return };
         if better(&found, &dived) {
             let at = self.grid.index(found.1);
             let node = Node { lo: at, hi: at };
@@ -271,40 +270,28 @@ impl<'a> BranchAndBound<'a> {
     }
 
     /// A local minimum of the cost over the grid's neighbours (steps of 4, 2, then 1 index along
-    /// each axis), from `start`; `scored` counts the candidates scored.
+    /// each axis), from the scored candidate `start`; `scored` counts the candidates scored.
     fn descend(
         &self,
         correlator: &mut Correlator<'a>,
-        start: Index,
+        start: Scored,
         scored: &mut usize,
-    ) -> Option<Scored> {
+    ) -> Scored {
         let counts = self.grid.counts;
-        let leaf = |idx: Index| Node { lo: idx, hi: idx };
-        *scored += 1;
-        let mut best = match self.try_leaf(correlator, &leaf(start), self.cap) {
-            Outcome::Leaf(s) => s,
-            _ => return None,
-        };
+        let mut best = start;
         for stride in [4usize, 2, 1] {
             loop {
                 let at = self.grid.index(best.1);
                 let mut moved = false;
                 for a in 0..4 {
-                    for up in [false, true] {
+                    let below = at[a].checked_sub(stride);
+                    let above = Some(at[a] + stride).filter(|&i| i < counts[a]);
+                    for i in below.into_iter().chain(above) {
                         let mut idx = at;
-                        if up {
-                            if at[a] + stride >= counts[a] {
-                                continue;
-                            }
-                            idx[a] += stride;
-                        } else {
-                            if at[a] < stride {
-                                continue;
-                            }
-                            idx[a] -= stride;
-                        }
+                        idx[a] = i;
                         *scored += 1;
-                        if let Outcome::Leaf(s) = self.try_leaf(correlator, &leaf(idx), best.0) {
+                        let leaf = Node { lo: idx, hi: idx };
+                        if let Outcome::Leaf(s) = self.try_leaf(correlator, &leaf, best.0) {
                             if better(&s, &best) {
                                 best = s;
                                 moved = true;
@@ -317,7 +304,7 @@ impl<'a> BranchAndBound<'a> {
                 }
             }
         }
-        Some(best)
+        best
     }
 
     fn correlator(&self) -> Correlator<'a> {
