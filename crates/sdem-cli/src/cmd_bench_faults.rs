@@ -182,6 +182,7 @@ fn reason_kind(doubt: &Doubt) -> &'static str {
         Doubt::FewInliers { .. } => "thin match",
         Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. } => "other",
         Doubt::AttitudeCorrected { .. } => "attitude corrected",
+        Doubt::UnrefutedRotation { .. } => "rotation undecided",
     }
 }
 

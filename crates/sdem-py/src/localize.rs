@@ -151,7 +151,8 @@ pub fn attitude_from(
 /// difference (``heading`` gives only the step); a match that tilts one scan against the other
 /// beyond what the readings allow carries the doubt ``attitude_corrected``. Otherwise (a scan
 /// without a reading, or readings too uncertain) the rotation is searched too; a rotation that
-/// compares almost as well as the one returned is the doubt ``another_rotation``.
+/// compares almost as well as the one returned is the doubt ``another_rotation``, and one that
+/// agrees as well where the scans overlap, but overlaps less, the doubt ``unrefuted_rotation``.
 ///
 /// Args:
 ///     reference: the scan the pose is expressed in.
@@ -419,6 +420,8 @@ impl Localization {
 ///   ``three_sigma_deg``).
 /// - ``another_rotation``: another rotation compares almost as well (``angle_deg``, ``cost``,
 ///   ``best_cost``).
+/// - ``unrefuted_rotation``: another rotation agrees as well where the scans overlap, but
+///   overlaps less (``angle_deg``, ``overlap_fraction``, ``best_overlap_fraction``).
 /// - ``taken_from_prediction``: along a free direction the position is the prediction's
 ///   (``direction``, ``shift_m``).
 ///

@@ -92,6 +92,21 @@ pub enum Doubt {
         /// The optimum's cost, m².
         best_cost: f64,
     },
+    /// The attitude was unknown, and the scans agree as well turned by another rotation
+    /// wherever they overlap there: it only overlaps less. Eq. (1) counts a direction one scan
+    /// does not see as a mismatch, so it prefers the rotation that shows more of the scene in
+    /// common; a scanner that sees the front half of the sphere, turned round in a corridor,
+    /// sees less of what the other saw at its true heading than at the mirrored one. Seeing less
+    /// is no evidence against a rotation: the scans cannot tell the two apart.
+    UnrefutedRotation {
+        /// The angle between the two rotations, degrees.
+        angle_deg: f64,
+        /// The share of the query's compared points that the reference sees at the other
+        /// rotation's best placement.
+        overlap_fraction: f64,
+        /// The same share at the optimum.
+        best_overlap_fraction: f64,
+    },
     /// Along a direction the scans leave free, the position was taken from the prediction
     /// (odometry or the last motion), not from the scans.
     TakenFromPrediction {
@@ -115,6 +130,16 @@ impl Doubt {
         )
     }
 
+    /// Whether this doubt says the scans allow another rotation than the one returned
+    /// ([`Doubt::AnotherRotation`], [`Doubt::UnrefutedRotation`]): a search that refines the
+    /// pose afterwards, within the rotation found, keeps it.
+    pub fn is_other_rotation(&self) -> bool {
+        matches!(
+            self,
+            Doubt::AnotherRotation { .. } | Doubt::UnrefutedRotation { .. }
+        )
+    }
+
     /// A short name for the kind, as the JSON's `kind` field spells it.
     pub fn kind(&self) -> &'static str {
         match self {
@@ -127,6 +152,7 @@ impl Doubt {
             Doubt::OnWindowEdge => "on_window_edge",
             Doubt::AttitudeCorrected { .. } => "attitude_corrected",
             Doubt::AnotherRotation { .. } => "another_rotation",
+            Doubt::UnrefutedRotation { .. } => "unrefuted_rotation",
             Doubt::TakenFromPrediction { .. } => "taken_from_prediction",
         }
     }
@@ -222,7 +248,21 @@ impl fmt::Display for Doubt {
                 best_cost,
             } => write!(
                 f,
-                "the scans compare almost as well turned {angle_deg:.0}° from the pose found                  ({cost:.3e} m² against {best_cost:.3e} m²): the scene looks alike turned"
+                "the scans compare almost as well turned {angle_deg:.0}° from the pose found \
+                 ({cost:.3e} m² against {best_cost:.3e} m²): the scene looks alike turned"
+            ),
+            Doubt::UnrefutedRotation {
+                angle_deg,
+                overlap_fraction,
+                best_overlap_fraction,
+            } => write!(
+                f,
+                "turned {angle_deg:.0}° from the pose found the scans agree as well where they \
+                 overlap, but overlap less ({:.0} % of the query's points against {:.0} %): \
+                 the scans cannot tell the two rotations apart (a corridor seen from its other \
+                 end)",
+                overlap_fraction * 100.0,
+                best_overlap_fraction * 100.0
             ),
             Doubt::TakenFromPrediction {
                 direction: v,
@@ -317,6 +357,15 @@ mod tests {
                 true,
             ),
             (
+                Doubt::UnrefutedRotation {
+                    angle_deg: 180.0,
+                    overlap_fraction: 0.25,
+                    best_overlap_fraction: 0.9,
+                },
+                "unrefuted_rotation",
+                true,
+            ),
+            (
                 Doubt::AttitudeCorrected {
                     tilt_deg: 4.0,
                     three_sigma_deg: 2.1,
@@ -349,7 +398,8 @@ mod tests {
                 Doubt::RunnerUp { .. }
                 | Doubt::FlatCovariance { .. }
                 | Doubt::Unconstrained { .. }
-                | Doubt::AnotherRotation { .. } => 3,
+                | Doubt::AnotherRotation { .. }
+                | Doubt::UnrefutedRotation { .. } => 3,
                 Doubt::FlatCost { .. } => 4,
             };
             assert_eq!(fields, expected, "{json}");

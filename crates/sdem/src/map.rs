@@ -696,10 +696,9 @@ pub(crate) fn search_coarse_to_fine(
             }
         }
     }
-    found.doubts.extend(
-        (coarse.doubts.into_iter())
-            .filter(|d| matches!(d, crate::doubt::Doubt::AnotherRotation { .. })),
-    );
+    found
+        .doubts
+        .extend((coarse.doubts.into_iter()).filter(|d| d.is_other_rotation()));
     Ok(found)
 }
 

@@ -3,8 +3,9 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use sdem::geometry::{pose_error, Pose};
-use sdem::{Attitude, LocalizeOptions, Scan, SearchWindow};
+use sdem::{Attitude, Doubt, LocalizeOptions, Scan, SearchWindow};
 use sdem_sim::benchmark::{bench_pairs, BenchPair, PairConfig};
+use sdem_sim::suites::{SuiteConfig, SuiteGenerator, SuiteScene};
 
 fn points(v: &[sdem::geometry::Vec3]) -> Vec<Point3<f64>> {
     v.iter().map(|p| Point3::from(*p)).collect()
@@ -111,5 +112,42 @@ fn a_floor_alone_without_attitude_is_never_a_confident_pose() {
     match sdem::localize(&reference, &query, &LocalizeOptions::default()) {
         Ok(found) => assert!(!found.trusted && !found.doubts.is_empty()),
         Err(e) => assert!(e.is_no_match(), "{e}"),
+    }
+}
+
+#[test]
+fn a_corridor_seen_turned_round_leaves_the_heading_undecided() {
+    // Two corridor pairs of the `unlevelled` suite (seed 1), both without attitude, each query
+    // turned about 60–100° from the reference. A front-half scanner in a corridor sees it alike
+    // from either end: in pair 94 the true heading shows more of what the reference saw, in
+    // pair 190 the mirrored one (a half turn off, eq. 1 lower there than at the truth). Where
+    // the two headings overlap, both agree: the scans cannot decide, and both say so.
+    let suite = SuiteGenerator::new(1, SuiteConfig::unlevelled()).unwrap();
+    let options = LocalizeOptions {
+        window: SuiteConfig::unlevelled().search_window(),
+        step_m: sdem_sim::benchmark::PAIRS_STEP_M,
+        ..Default::default()
+    };
+    for (index, right) in [(94, true), (190, false)] {
+        let pair = &suite.pairs(index..index + 1).unwrap()[0];
+        assert_eq!(pair.scene, SuiteScene::Corridor);
+        let reference = Scan::from_points(&points(&pair.reference_points), None).unwrap();
+        let query = Scan::from_points(&points(&pair.query_points), None).unwrap();
+        let found = sdem::localize(&reference, &query, &options).unwrap();
+        assert_eq!(
+            is_right(&pair.truth, &found.reference_from_query),
+            right,
+            "pair {index}"
+        );
+        let other = found
+            .doubts
+            .iter()
+            .find_map(|d| match d {
+                Doubt::UnrefutedRotation { angle_deg, .. } => Some(*angle_deg),
+                _ => None,
+            })
+            .unwrap_or_else(|| panic!("pair {index}: {:?}", found.doubts));
+        assert!((other - 180.0).abs() < 5.0, "pair {index}: {other}°");
+        assert!(!found.trusted);
     }
 }

@@ -33,6 +33,7 @@ DoubtKind = Literal[
     "on_window_edge",
     "attitude_corrected",
     "another_rotation",
+    "unrefuted_rotation",
     "taken_from_prediction",
 ]
 

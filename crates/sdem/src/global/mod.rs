@@ -94,8 +94,12 @@ const MAX_HEADINGS: usize = 6;
 /// (an optimum on this window's edge is searched again centred on it). ±2° found the same 25
 /// of 40 `unlevelled` pairs in 1.3–1.5 times the time.
 pub const HYPOTHESIS_HEADING_DEG: f64 = 1.2;
-/// Two headings farther apart than this are different answers, for the doubt
-/// [`Doubt::AnotherRotation`].
+/// Rotations searched only to be ranked or judged, not to give the pose, are searched on a grid
+/// this coarse, metres (or the caller's step, if coarser): 4 cm is within the 5 cm truncation,
+/// so the compared points that match still count as matching.
+const SCREENING_STEP_M: f64 = 0.04;
+/// Two rotations farther apart than this are different answers, for the doubts
+/// [`Doubt::AnotherRotation`] and [`Doubt::UnrefutedRotation`].
 const OTHER_ROTATION: f64 = 5.0 * PI / 180.0;
 
 /// A scan as the global search sees it: its oriented cells (sensor frame) and the attitude
@@ -242,7 +246,8 @@ fn search_headings(
         ..full.clone()
     };
     let mut best: Option<(f64, Localization)> = None;
-    let mut others: Vec<(f64, f64)> = Vec::new();
+    // Every other hypothesis that found a match: its heading and what it found.
+    let mut others: Vec<(f64, Localization)> = Vec::new();
     let mut first_error = None;
     for &(h, _) in &hypotheses {
         let query_sdem = match turned(h) {
@@ -263,11 +268,14 @@ fn search_headings(
         };
         match outcome {
             Ok(None) => {}
-            Ok(Some(found)) => match &best {
-                Some((_, b)) if found.cost >= b.cost => others.push((h, found.cost)),
-                Some((bh, b)) => {
+            Ok(Some(found)) => match best.take() {
+                Some(b) if found.cost >= b.1.cost => {
+                    others.push((h, found));
+                    best = Some(b);
+                }
+                Some(b) => {
                     // Better than the best so far: searched in full, the old best a rival.
-                    others.push((*bh, b.cost));
+                    others.push(b);
                     let found = localize(&reference_sdem, &query_sdem, &full)?;
                     best = Some((h, found));
                 }
@@ -293,27 +301,89 @@ fn search_headings(
         let centred = wrap_pi(best_heading + found.grid_heading);
         if let Ok(again) = turned(centred).and_then(|q| localize(&reference_sdem, &q, &full)) {
             if again.cost <= found.cost {
-                others.push((best_heading, found.cost));
-                (best_heading, found) = (centred, again);
+                others.push((best_heading, std::mem::replace(&mut found, again)));
+                best_heading = centred;
             }
         }
     }
     let found_heading = wrap_pi(best_heading + found.heading_correction);
-    let rival = others
+    // A scanner turned round sees what the other did not: the half turn is judged by what the
+    // scans show where they overlap ([`unrefuted`]). If no hypothesis near it found a match
+    // (eq. 1 counts what only one scan sees as a mismatch, so the cap above leaves it out),
+    // it is searched for the best match there is, on the screening grid.
+    let half_turn = wrap_pi(found_heading + PI);
+    let judged = (others.iter())
+        .any(|(h, _)| wrap_pi(h - half_turn).abs() <= 2.0 * HYPOTHESIS_HEADING_DEG.to_radians());
+    if half_turn.abs() <= prior.heading_half_range && !judged {
+        let coarse = LocalizeOptions {
+            step_m: screening.step_m.max(SCREENING_STEP_M),
+            ..screening.clone()
+        };
+        let cap = options.cost.max_match_cost();
+        if let Ok(Some(turned_found)) =
+            turned(half_turn).and_then(|q| localize_below(&reference_sdem, &q, &coarse, cap))
+        {
+            others.push((half_turn, turned_found));
+        }
+    }
+    let rivals: Vec<(f64, &Localization)> = others
         .iter()
-        .filter(|(h, _)| wrap_pi(h - found_heading).abs() > OTHER_ROTATION)
-        .filter(|(_, cost)| *cost < options.ambiguous_cost_ratio * found.cost)
-        .min_by(|a, b| a.1.total_cmp(&b.1));
-    if let Some(&(h, cost)) = rival {
+        .map(|(h, f)| (wrap_pi(h + f.heading_correction - found_heading).abs(), f))
+        .collect();
+    let rival = (rivals.iter())
+        .filter(|(angle, f)| {
+            *angle > OTHER_ROTATION && f.cost < options.ambiguous_cost_ratio * found.cost
+        })
+        .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
+    if let Some(&(angle, f)) = rival {
         found.doubts.push(Doubt::AnotherRotation {
-            angle_deg: wrap_pi(h - found_heading).abs().to_degrees(),
-            cost,
+            angle_deg: angle.to_degrees(),
+            cost: f.cost,
             best_cost: found.cost,
         });
-        found.diagnostics.ambiguous = true;
-        found.trusted = false;
+    } else if let Some(doubt) = unrefuted(&found, rivals.iter().copied()) {
+        found.doubts.push(doubt);
     }
+    found.diagnostics.ambiguous |= found.doubts.iter().any(Doubt::is_other_rotation);
+    found.trusted = found.doubts.is_empty();
     Ok(found)
+}
+
+/// The share of the compared points that the match puts beyond the truncation: where the
+/// scans overlap, how much they contradict it.
+fn mismatch(found: &Localization) -> f64 {
+    let d = &found.diagnostics;
+    if d.overlap_fraction > 0.0 {
+        (1.0 - d.inlier_fraction / d.overlap_fraction).max(0.0)
+    } else {
+        1.0
+    }
+}
+
+/// [`Doubt::UnrefutedRotation`] for the rival (each with its angle from `found`'s rotation,
+/// radians) that overlaps most among those more than [`OTHER_ROTATION`] away that overlap less
+/// than `found` and contradict no more of their compared points: eq. (1) ranked them lower
+/// only for what the scans do not both see.
+fn unrefuted<'a>(
+    found: &Localization,
+    rivals: impl Iterator<Item = (f64, &'a Localization)>,
+) -> Option<Doubt> {
+    let best_overlap = found.diagnostics.overlap_fraction;
+    let best_mismatch = mismatch(found);
+    rivals
+        .filter(|(angle, f)| {
+            *angle > OTHER_ROTATION
+                && f.diagnostics.overlap_fraction < best_overlap
+                && mismatch(f) <= best_mismatch
+        })
+        .max_by(|a, b| {
+            (a.1.diagnostics.overlap_fraction).total_cmp(&b.1.diagnostics.overlap_fraction)
+        })
+        .map(|(angle, f)| Doubt::UnrefutedRotation {
+            angle_deg: angle.to_degrees(),
+            overlap_fraction: f.diagnostics.overlap_fraction,
+            best_overlap_fraction: best_overlap,
+        })
 }
 
 /// The hypotheses, and after them each one's half turn where the headings allow it and it is

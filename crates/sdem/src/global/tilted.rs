@@ -407,14 +407,8 @@ const MIN_RELATIVE_SCORE: f64 = 0.4;
 /// correlation's peaks lie within ±1° of the truth on the scenes measured, and the rest is the
 /// margin for a blunt peak.
 const HYPOTHESIS_HEADING_DEG: f64 = 5.0;
-/// The hypotheses are ranked by an exact search on a grid this coarse, metres (or the
-/// caller's step, if coarser).
-const SCREENING_STEP_M: f64 = 0.04;
 /// The final search, levelled by the refined rotation, covers this heading range, degrees.
 const FINAL_HEADING_DEG: f64 = 1.0;
-/// Two rotations farther apart than this are different answers, for the doubt
-/// [`Doubt::AnotherRotation`].
-const OTHER_ROTATION: f64 = 5.0 * PI / 180.0;
 
 /// Localizes `query` against `reference` when a scan could be levelled neither by its reading
 /// nor by its surfaces: the rotation hypotheses of [`rotation_hypotheses`], each searched
@@ -534,7 +528,7 @@ fn verify(v: Verifying, hypotheses: &[RotationHypothesis]) -> Result<Localizatio
     // of the others stops as soon as nothing in their window can.
     let screening = LocalizeOptions {
         window,
-        step_m: options.step_m.max(SCREENING_STEP_M),
+        step_m: options.step_m.max(super::SCREENING_STEP_M),
         heading: around_hypothesis,
         refine: false,
         runner_up: false,
@@ -590,18 +584,21 @@ fn verify(v: Verifying, hypotheses: &[RotationHypothesis]) -> Result<Localizatio
         ..options.clone()
     };
     let mut found = localize(reference_sdem, &levelled(&best_rotation)?, &final_options)?;
-    let rival = screened[1..]
-        .iter()
-        .filter(|(_, f)| level_rotation(f).angle_to(&best_rotation) > OTHER_ROTATION)
+    let rivals =
+        (screened[1..].iter()).map(|(_, f)| (level_rotation(f).angle_to(&best_rotation), f));
+    let rival = (rivals.clone())
+        .filter(|(angle, _)| *angle > super::OTHER_ROTATION)
         .find(|(_, f)| f.cost < options.ambiguous_cost_ratio * best_cost);
-    if let Some((_, f)) = rival {
+    if let Some((angle, f)) = rival {
         found.doubts.push(Doubt::AnotherRotation {
-            angle_deg: level_rotation(f).angle_to(&best_rotation).to_degrees(),
+            angle_deg: angle.to_degrees(),
             cost: f.cost,
             best_cost,
         });
-        found.diagnostics.ambiguous = true;
+    } else if let Some(doubt) = super::unrefuted(&found, rivals) {
+        found.doubts.push(doubt);
     }
+    found.diagnostics.ambiguous |= found.doubts.iter().any(Doubt::is_other_rotation);
     found.trusted = found.doubts.is_empty();
     Ok(found)
 }

@@ -246,7 +246,7 @@ impl MapSearch<'_> {
         matched.doubts.retain(|d| !matches!(d, Doubt::OnWindowEdge));
         matched.doubts.extend(
             (coarse.doubts.into_iter())
-                .filter(|d| matches!(d, Doubt::AnotherRotation { .. } | Doubt::OnWindowEdge)),
+                .filter(|d| d.is_other_rotation() || matches!(d, Doubt::OnWindowEdge)),
         );
         matched.predicted = prediction.pose();
         matched.localize_ms += coarse.localize_ms;
