@@ -19,7 +19,7 @@ use sdem::localize::{localize, HeadingWindow, LocalizeOptions, SearchMode, Searc
 use sdem::sdem::SdemConfig;
 use sdem_sim::benchmark::{
     bench_pairs, localize_config, localize_pair, paper_pair, summarize, BenchPair, PairConfig,
-    Stats, PAPER_MOVE_M,
+    Stats, CHI2_95_6, PAPER_MOVE_M,
 };
 use serde::Serialize;
 use std::time::Instant;
@@ -263,9 +263,6 @@ fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
         failures,
     }
 }
-
-/// χ² with 6 degrees of freedom: 95 % of its values lie below this.
-const CHI2_95_6: f64 = 12.592;
 
 fn print_exact(e: &ExactReport) {
     let heading = if e.heading_window_deg > 0.0 {

@@ -417,6 +417,13 @@ pub fn success_rate(errors: &[f64], threshold: f64) -> f64 {
     errors.iter().filter(|&&e| e < threshold).count() as f64 / errors.len() as f64
 }
 
+/// 95 % of a χ² with 6 degrees of freedom lie below this: the bound for [`nees`] over all six
+/// axes.
+pub const CHI2_95_6: f64 = 12.592;
+/// 95 % of a χ² with 3 degrees of freedom lie below this: the bound for [`nees`] over the
+/// translation.
+pub const CHI2_95_3: f64 = 7.815;
+
 /// The normalized estimation error squared of `estimate` against `truth` under a reported
 /// `covariance`: `eᵀ Σ⁻¹ e` over all six axes, and over the translation alone.
 ///

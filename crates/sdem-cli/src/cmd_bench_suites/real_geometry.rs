@@ -18,7 +18,7 @@ use anyhow::{bail, Context, Result};
 use nalgebra::Point3;
 use sdem::geometry::{pose_error, Vec3};
 use sdem::{LocalizeOptions, Scan, SdemConfig, SearchWindow};
-use sdem_sim::benchmark::{nees, summarize, Stats};
+use sdem_sim::benchmark::{nees, summarize, Stats, CHI2_95_3, CHI2_95_6};
 use sdem_sim::reviews::{
     review_pairs, ModelConfig, Review, ReviewConfig, ReviewScanner, SurfaceModel,
 };
@@ -39,10 +39,6 @@ const TARGET_RATIO: f64 = 1.2;
 const TARGET_FLOOR_MM: f64 = 1.0;
 /// … and a rotation error at most this, degrees.
 const TARGET_ROTATION_DEG: f64 = 0.05;
-/// 95 % of a χ² with 6 degrees of freedom lie below this (NEES over the six axes) …
-const CHI2_95_6: f64 = 12.592;
-/// … and of one with 3 below this (NEES over the translation).
-const CHI2_95_3: f64 = 7.815;
 /// Re-views made at once (each holds two views in memory).
 const CHUNK: usize = 4;
 /// The peers' method run.
