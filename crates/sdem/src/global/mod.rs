@@ -307,14 +307,17 @@ fn search_headings(
         }
     }
     let found_heading = wrap_pi(best_heading + found.heading_correction);
-    // A scanner turned round sees what the other did not: the half turn is judged by what the
-    // scans show where they overlap ([`unrefuted`]). If no hypothesis near it found a match
-    // (eq. 1 counts what only one scan sees as a mismatch, so the cap above leaves it out),
-    // it is searched for the best match there is, on the screening grid.
+    // A scanner that sees part of the way round, turned round, sees what the other did not:
+    // the half turn is judged by what the scans show where they overlap ([`unrefuted`]). If no
+    // hypothesis near it found a match (eq. 1 counts what only one scan sees as a mismatch, so
+    // the cap above leaves it out), it is searched for the best match there is, on the
+    // screening grid. Where either scan sees all round, turning the query round loses nothing
+    // of what the two can share, and eq. (1) judged the half turn already.
     let half_turn = wrap_pi(found_heading + PI);
     let judged = (others.iter())
         .any(|(h, _)| wrap_pi(h - half_turn).abs() <= 2.0 * HYPOTHESIS_HEADING_DEG.to_radians());
-    if half_turn.abs() <= prior.heading_half_range && !judged {
+    let partial_fields = !sees_all_round(reference.sdem()) && !sees_all_round(query.sdem());
+    if half_turn.abs() <= prior.heading_half_range && !judged && partial_fields {
         let coarse = LocalizeOptions {
             step_m: screening.step_m.max(SCREENING_STEP_M),
             ..screening.clone()
@@ -347,6 +350,23 @@ fn search_headings(
     found.diagnostics.ambiguous |= found.doubts.iter().any(Doubt::is_other_rotation);
     found.trusted = found.doubts.is_empty();
     Ok(found)
+}
+
+/// Sectors of azimuth this wide, degrees, each holding a return, make a scan that sees all
+/// round ([`sees_all_round`]): a spinning LiDAR does, a front-half or forward-looking scanner
+/// leaves half or more of them empty.
+const ROUND_SECTOR_DEG: f64 = 10.0;
+
+/// Whether `scan` has a return in every [`ROUND_SECTOR_DEG`] sector of azimuth.
+fn sees_all_round(scan: &Sdem) -> bool {
+    let sectors = (360.0 / ROUND_SECTOR_DEG).round() as usize;
+    let mut seen = vec![false; sectors];
+    for &cell in scan.cells() {
+        let (azimuth, _) = scan.grid().cell_center(cell as usize);
+        let sector = (azimuth.to_degrees().rem_euclid(360.0) / ROUND_SECTOR_DEG) as usize;
+        seen[sector.min(sectors - 1)] = true;
+    }
+    seen.into_iter().all(|s| s)
 }
 
 /// The share of the compared points that the match puts beyond the truncation: where the
