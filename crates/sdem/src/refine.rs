@@ -68,10 +68,11 @@ pub struct RefineConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Association {
-    /// The nearest reference point (with a normal) within `max_correspondence_m`, through a
-    /// spatial hash: robust on real scans, whose 1° cells far away hold unrelated surfaces. Only
-    /// query points inside the range gate of a cell the reference saw are paired (see
-    /// [`crate::sdem::CellSurfaces`]): from the truth, with lost returns at the ditch's mouth
+    /// The nearest reference point (with a normal) within `max_correspondence_m`, looked up
+    /// through the reference's cells near the query point's (or a k-d tree): robust on real
+    /// scans, whose 1° cells far away hold unrelated surfaces. Only query points inside the
+    /// range gate of a cell the reference saw are paired (see [`crate::sdem::CellSurfaces`]):
+    /// from the truth, with lost returns at the ditch's mouth
     /// (`sdem bench --faults` pair 45), the ungated pairing ran 18 cm off, the gated one 1 mm.
     Nearest,
     /// The reference point in the query point's S-DEM cell (the S-DEM *is* a projective

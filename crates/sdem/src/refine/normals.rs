@@ -234,8 +234,8 @@ impl Cone {
         let horizontal = (x[0] * x[0] + x[1] * x[1]).sqrt();
         let range = (horizontal * horizontal + x[2] * x[2]).sqrt();
         let sine = reach / range;
-        // The cap of angular radius α about a direction at elevation φ spans asin(sin α / cos φ)
-        // of azimuth each way.
+        // The cap of angular radius α about a direction at elevation φ spans
+        // asin(sin α / cos φ) of azimuth each way.
         let spread = reach / horizontal;
         if !(sine <= 0.5 && spread <= 0.5) {
             return None;
