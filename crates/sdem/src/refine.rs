@@ -10,13 +10,15 @@
 use crate::cost::OffsetPrior;
 use crate::error::{Error, Result};
 use crate::geometry::Vec3;
-use crate::sdem::{wrap_column, Derived, Sdem};
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::sdem::Sdem;
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, Translation3, UnitQuaternion, Vector6};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 pub mod discrepancy;
+mod normals;
+
+pub use normals::SurfaceNormals;
 
 /// Settings of the refinement.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -66,10 +68,11 @@ pub struct RefineConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Association {
-    /// The nearest reference point (with a normal) within `max_correspondence_m`, through a
-    /// spatial hash: robust on real scans, whose 1° cells far away hold unrelated surfaces. Only
-    /// query points inside the range gate of a cell the reference saw are paired (see
-    /// [`crate::sdem::CellSurfaces`]): from the truth, with lost returns at the ditch's mouth
+    /// The nearest reference point (with a normal) within `max_correspondence_m`, looked up
+    /// through the reference's cells near the query point's (or a k-d tree): robust on real
+    /// scans, whose 1° cells far away hold unrelated surfaces. Only query points inside the
+    /// range gate of a cell the reference saw are paired (see [`crate::sdem::CellSurfaces`]):
+    /// from the truth, with lost returns at the ditch's mouth
     /// (`sdem bench --faults` pair 45), the ungated pairing ran 18 cm off, the gated one 1 mm.
     Nearest,
     /// The reference point in the query point's S-DEM cell (the S-DEM *is* a projective
@@ -169,136 +172,6 @@ impl Refinement {
         } else {
             0.0
         }
-    }
-}
-
-/// Surface normals of an S-DEM's boundary points, from a plane fit over neighbouring cells.
-#[derive(Debug, Clone)]
-pub struct SurfaceNormals {
-    /// Per grid cell, the index into `Sdem::points()`, or `u32::MAX` when unknown.
-    point_of_cell: Vec<u32>,
-    /// Per boundary point, its unit normal facing the sensor, or NaN where none fits.
-    normals: Vec<[f32; 3]>,
-    /// The boundary points with a normal in a k-d tree (`None` when no point has one), and the
-    /// index into `Sdem::points()` of each of its items.
-    neighbours: Option<(ImmutableKdTree<f32, 3>, Vec<u32>)>,
-}
-
-impl SurfaceNormals {
-    /// The surface normals of `sdem` fitted over `radius_cells` ([`Self::new`]): made once, on
-    /// first use, and kept with the S-DEM for that radius; another radius is fitted anew.
-    pub fn of(sdem: &Sdem, radius_cells: usize) -> std::borrow::Cow<'_, SurfaceNormals> {
-        let (radius, normals) = sdem.derived(Derived::SurfaceNormals, || {
-            (radius_cells, SurfaceNormals::new(sdem, radius_cells))
-        });
-        if *radius == radius_cells {
-            std::borrow::Cow::Borrowed(normals)
-        } else {
-            std::borrow::Cow::Owned(SurfaceNormals::new(sdem, radius_cells))
-        }
-    }
-
-    /// Fits a plane to each boundary point and its neighbours within `radius_cells` cells whose
-    /// points lie close to it (so edges and occlusion boundaries do not blur the normal).
-    pub fn new(sdem: &Sdem, radius_cells: usize) -> Self {
-        let grid = sdem.grid();
-        let (n_az, n_el) = (grid.azimuth_cells() as i64, grid.elevation_cells() as i64);
-        let full_circle = (grid.resolution() * n_az as f64 - std::f64::consts::TAU).abs() < 1e-6;
-        let mut point_of_cell = vec![u32::MAX; grid.len()];
-        for (i, &c) in sdem.cells().iter().enumerate() {
-            point_of_cell[c as usize] = i as u32;
-        }
-        let k = radius_cells.max(1) as i64;
-        let points = sdem.surface_points();
-        let normals = sdem
-            .cells()
-            .par_iter()
-            .zip(points.par_iter())
-            .map(|(&cell, p)| {
-                let (ia, ie) = (cell as i64 % n_az, cell as i64 / n_az);
-                let centre = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                // Neighbours must lie within the patch the cells span at this range, plus noise.
-                let reach = 2.5 * k as f64 * grid.resolution() * centre.norm() + 0.02;
-                // A patch of (2k + 1)² cells spreads by about k/√3 cells each way. One spread
-                // by less than a fifth of a cell's width across its longer direction is a line
-                // (a floor seen at a grazing angle keeps only the neighbours beside it, not
-                // those beyond), and one narrower than MIN_PATCH_WIDTH_M is a cluster of returns
-                // (the floor straight below, where the cells meet at the pole): either way the
-                // range noise, not a surface, would set its "normal".
-                let min_width = (0.2 * grid.resolution() * centre.norm()).max(MIN_PATCH_WIDTH_M);
-                let reach_sq = reach * reach;
-                let mut sum = Vec3::zeros();
-                let mut outer = Matrix3::zeros();
-                let mut count = 0usize;
-                for de in -k..=k {
-                    let e = ie + de;
-                    if e < 0 || e >= n_el {
-                        continue;
-                    }
-                    for da in -k..=k {
-                        let mut a = ia + da;
-                        if full_circle {
-                            a = wrap_column(a as i32, n_az as i32) as i64;
-                        } else if a < 0 || a >= n_az {
-                            continue;
-                        }
-                        let j = point_of_cell[(e * n_az + a) as usize];
-                        if j == u32::MAX {
-                            continue;
-                        }
-                        let q = points[j as usize];
-                        // Relative to the centre: the sums stay small far from the sensor.
-                        let q = Vec3::new(q[0] as f64, q[1] as f64, q[2] as f64) - centre;
-                        if q.norm_squared() <= reach_sq {
-                            sum += q;
-                            outer += q * q.transpose();
-                            count += 1;
-                        }
-                    }
-                }
-                if count < 6 {
-                    return [f32::NAN; 3];
-                }
-                let mean = sum / count as f64;
-                let cov = outer / count as f64 - mean * mean.transpose();
-                // Not a surface patch (a line, a corner, a blob): no normal.
-                let Some(mut n) = plane_normal(&cov, min_width) else {
-                    return [f32::NAN; 3];
-                };
-                if n.dot(&centre) > 0.0 {
-                    n = -n;
-                }
-                [n.x as f32, n.y as f32, n.z as f32]
-            })
-            .collect::<Vec<[f32; 3]>>();
-        let with_normal: Vec<u32> = (0..points.len() as u32)
-            .filter(|&i| !normals[i as usize][0].is_nan())
-            .collect();
-        let neighbours = (!with_normal.is_empty()).then(|| {
-            let coordinates: Vec<[f32; 3]> =
-                with_normal.iter().map(|&i| points[i as usize]).collect();
-            (ImmutableKdTree::new_from_slice(&coordinates), with_normal)
-        });
-        Self {
-            point_of_cell,
-            normals,
-            neighbours,
-        }
-    }
-
-    /// The boundary point with a normal nearest to `x` within `max_distance`, by index into
-    /// `Sdem::points()`. A k-d tree (kiddo): the spatial hash of 10 cm cells it replaces scanned
-    /// the 27 cells around `x`, a few hundred points near the sensor, and took 50–74 ms of a
-    /// bench pair's refinement (18 iterations over 10,000 points); the tree 25–33 ms.
-    fn nearest(&self, x: [f32; 3], max_distance: f32) -> Option<u32> {
-        let (tree, index) = self.neighbours.as_ref()?;
-        let found = tree.nearest_one::<SquaredEuclidean>(&x);
-        (found.distance <= max_distance * max_distance).then(|| index[found.item as usize])
-    }
-
-    /// Number of boundary points with a normal.
-    pub fn count(&self) -> usize {
-        self.normals.iter().filter(|n| !n[0].is_nan()).count()
     }
 }
 
@@ -545,7 +418,15 @@ impl Pairing<'_> {
                                 .squared_distance(cell as usize, x, ranges[i])
                                 .is_some_and(f32::is_finite);
                         if seen {
-                            self.normals.nearest(x, max_distance as f32)
+                            let hint = pairs[i];
+                            (self.normals).nearest_in_cone(
+                                grid,
+                                reference_points,
+                                x,
+                                cell,
+                                hint,
+                                max_distance as f32,
+                            )
                         } else {
                             None
                         }

@@ -314,6 +314,11 @@ impl GridSpec {
         self.len() == 0
     }
 
+    /// True when the grid's columns run all the way round (column `azimuth_cells` is column 0).
+    pub fn is_full_circle(&self) -> bool {
+        self.full_circle
+    }
+
     /// Cell size, radians.
     pub fn resolution(&self) -> f64 {
         self.resolution as f64
@@ -351,6 +356,24 @@ impl GridSpec {
             return None;
         }
         Some((ie as u32 * self.azimuth_cells + ia as u32, range))
+    }
+
+    /// Where a point's direction falls on the grid, in cells: `(azimuth, elevation)` from the
+    /// grid's first column and row (their floors are [`Self::cell_of`]'s indices before the
+    /// columns wrap), or `None` at the origin.
+    #[inline]
+    pub fn position_in_cells(&self, p: [f32; 3]) -> Option<(f32, f32)> {
+        let horizontal_sq = p[0] * p[0] + p[1] * p[1];
+        let range_sq = horizontal_sq + p[2] * p[2];
+        if range_sq <= 0.0 || !range_sq.is_finite() {
+            return None;
+        }
+        let azimuth = fast_atan2(p[1], p[0]);
+        let elevation = fast_atan2(p[2], horizontal_sq.sqrt());
+        Some((
+            (azimuth - self.azimuth_min) * self.inv_resolution,
+            (elevation - self.elevation_min) * self.inv_resolution,
+        ))
     }
 
     /// [`Self::cell_of`] for many points at once, written so the compiler can vectorize it: the
