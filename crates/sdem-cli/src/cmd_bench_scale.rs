@@ -65,6 +65,8 @@ pub struct RouteReport {
     sizes: Vec<SizeReport>,
     /// Median time per stop of each lap, ms.
     lap_median_ms: Vec<f64>,
+    /// Median CPU time per stop of each lap, every thread together, ms (empty off Linux).
+    lap_cpu_median_ms: Vec<f64>,
     /// Every stop's time, ms (NaN for a failed stop), in stop order.
     time_per_stop_ms: Vec<f64>,
 }
@@ -76,6 +78,9 @@ pub struct SizeReport {
     /// The stops the time per stop is taken over, `[from, to)`.
     window: [usize; 2],
     time_per_stop_ms: Stats,
+    /// CPU time per stop over the same stops, every thread together, ms: unlike the wall
+    /// time, what other jobs take from the machine does not count (`None` off Linux).
+    cpu_per_stop_ms: Option<Stats>,
     localize_ms: Stats,
     /// Loop closure (the candidates' verification and the graph solve) at the stops that
     /// checked any, up to this size, ms.
@@ -111,6 +116,10 @@ pub struct FlatReport {
     /// The fourth lap's median over the first's (the target: ≤ 1.5).
     fourth_over_first: Option<f64>,
     last_over_first: f64,
+    /// The same two ratios of the CPU time per stop, which other jobs on the machine do not
+    /// move (`None` off Linux).
+    fourth_over_first_cpu: Option<f64>,
+    last_over_first_cpu: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -196,6 +205,8 @@ fn scratch_dir(route: LongRoute) -> Result<PathBuf> {
 /// What the loop did at each stop, as the figures need it.
 struct StopRecord {
     time_ms: f64,
+    /// CPU time of every thread, ms (`None` off Linux).
+    cpu_ms: Option<f64>,
     report: Option<StepReport>,
 }
 
@@ -228,14 +239,14 @@ fn map_route(
                 odom_from_sensor: odometry[index],
                 odom_from_previous_sensor: odometry[previous],
             });
-            let start = Instant::now();
+            let (start, cpu_start) = (Instant::now(), crate::cpu::used_ms());
             let step = slam.add_scan(&ScanInput {
                 scan_index: index,
                 points_in_sensor: &points,
                 attitude: Some(sim.sweep.mean_attitude()),
                 odometry,
             });
-            let time_ms = elapsed_ms(start);
+            let (time_ms, cpu_ms) = (elapsed_ms(start), crate::cpu::since_ms(cpu_start));
             let report = match step {
                 Ok(report) => {
                     mapped.push(index);
@@ -246,7 +257,11 @@ fn map_route(
                     return Err(e).with_context(|| format!("{}: stop {index}", run.route.name()))
                 }
             };
-            records.push(StopRecord { time_ms, report });
+            records.push(StopRecord {
+                time_ms,
+                cpu_ms,
+                report,
+            });
             bar.inc(1);
             if args.sizes.contains(&(index + 1)) {
                 let size = SizeInput {
@@ -282,6 +297,11 @@ impl SizeInput<'_> {
             .iter()
             .filter(|r| r.report.is_some())
             .map(|r| r.time_ms)
+            .collect();
+        let cpu: Option<Vec<f64>> = window
+            .iter()
+            .filter(|r| r.report.is_some())
+            .map(|r| r.cpu_ms)
             .collect();
         let reports = || self.records.iter().filter_map(|r| r.report.as_ref());
         let localize: Vec<f64> = window
@@ -322,6 +342,7 @@ impl SizeInput<'_> {
             nodes: slam.map.nodes.len(),
             window: [from, n],
             time_per_stop_ms: summarize(&times),
+            cpu_per_stop_ms: cpu.map(|c| summarize(&c)),
             localize_ms: summarize(&localize),
             loop_closure_ms: summarize(&closures),
             map_update_ms: summarize(&upkeep),
@@ -355,11 +376,15 @@ fn folder_bytes(dir: &Path) -> u64 {
 
 fn size_line(route: LongRoute, s: &SizeReport) -> String {
     format!(
-        "{}: {} nodes, time per stop median {:.0} ms, p95 {:.0} ms; ATE {:.2} cm; peak {} MiB",
+        "{}: {} nodes, time per stop median {:.0} ms, p95 {:.0} ms (CPU {} ms); ATE {:.2} cm; \
+         peak {} MiB",
         route.name(),
         s.nodes,
         s.time_per_stop_ms.median,
         s.time_per_stop_ms.p95,
+        s.cpu_per_stop_ms
+            .as_ref()
+            .map_or("?".to_string(), |c| format!("{:.0}", c.median)),
         s.ate_rmse_m * 100.0,
         s.peak_memory_mib
             .map_or("?".to_string(), |m| format!("{m:.0}"))
@@ -375,17 +400,20 @@ fn route_report(run: &LongRun, records: &[StopRecord], sizes: Vec<SizeReport>) -
     let checked = reports().map(|r| r.loop_closures.len()).sum::<usize>();
     let mut bounds = run.lap_starts.clone();
     bounds.push(records.len());
-    let lap_median_ms = bounds
-        .windows(2)
-        .filter(|w| w[1] > w[0])
-        .map(|w| {
-            let times: Vec<f64> = (records[w[0]..w[1]].iter())
-                .filter(|r| r.report.is_some())
-                .map(|r| r.time_ms)
-                .collect();
-            summarize(&times).median
-        })
-        .collect();
+    let lap_medians = |time: fn(&StopRecord) -> Option<f64>| -> Option<Vec<f64>> {
+        (bounds.windows(2))
+            .filter(|w| w[1] > w[0])
+            .map(|w| {
+                let times: Option<Vec<f64>> = (records[w[0]..w[1]].iter())
+                    .filter(|r| r.report.is_some())
+                    .map(time)
+                    .collect();
+                times.map(|t| summarize(&t).median)
+            })
+            .collect()
+    };
+    let lap_median_ms = lap_medians(|r| Some(r.time_ms)).unwrap_or_default();
+    let lap_cpu_median_ms = lap_medians(|r| r.cpu_ms).unwrap_or_default();
     RouteReport {
         route: run.route.name(),
         stops: records.len(),
@@ -399,6 +427,7 @@ fn route_report(run: &LongRun, records: &[StopRecord], sizes: Vec<SizeReport>) -
         loop_closures_rejected: checked - accepted,
         sizes,
         lap_median_ms,
+        lap_cpu_median_ms,
         time_per_stop_ms: records
             .iter()
             .map(|r| {
@@ -420,7 +449,11 @@ fn flat_report(route: &RouteReport) -> Option<FlatReport> {
         return None;
     }
     let fourth = laps.get(3).copied();
+    let cpu = &route.lap_cpu_median_ms;
+    let cpu_ratio = |lap: Option<&f64>| Some(lap? / cpu.first()?);
     Some(FlatReport {
+        fourth_over_first_cpu: cpu_ratio(cpu.get(3)),
+        last_over_first_cpu: cpu_ratio(cpu.last()),
         first_lap_median_ms: first,
         fourth_lap_median_ms: fourth,
         last_lap_median_ms: last,

@@ -21,6 +21,7 @@ mod cmd_localize;
 mod cmd_simulate;
 mod cmd_slam;
 mod cmd_view;
+mod cpu;
 mod export_e57;
 mod export_mcap;
 mod memory;

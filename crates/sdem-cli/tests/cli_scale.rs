@@ -146,7 +146,18 @@ fn the_scale_bench_reports_each_size_and_plots_time_per_stop() {
         assert!(number(size, "ate_rmse_m").is_finite(), "{size}");
         if cfg!(target_os = "linux") {
             assert!(number(size, "peak_memory_mib") > 0.0, "{size}");
+            // Each stop localizes, so it takes CPU time; the p95 bounds the median.
+            let cpu = &size["cpu_per_stop_ms"];
+            assert!(number(cpu, "median") > 0.0 && number(cpu, "p95") >= number(cpu, "median"));
         }
+    }
+    if cfg!(target_os = "linux") {
+        // Two laps of the room (30 stops each): the second's CPU time per stop against the first's.
+        assert!(
+            number(&report["flat"], "last_over_first_cpu") > 0.0,
+            "{}",
+            report["flat"]
+        );
     }
     // The second lap begins at stop 30: by stop 36 a loop was closed and solved.
     assert!(

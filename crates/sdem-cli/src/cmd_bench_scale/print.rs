@@ -19,6 +19,11 @@ pub(super) fn print_report(report: &Report) {
             "   median time per stop: first lap {:.0} ms{fourth}, last lap {:.0} ms ({:.2}x)",
             flat.first_lap_median_ms, flat.last_lap_median_ms, flat.last_over_first
         );
+        if let Some(last) = flat.last_over_first_cpu {
+            let fourth = (flat.fourth_over_first_cpu)
+                .map_or(String::new(), |f| format!("fourth lap {f:.2}x the first, "));
+            println!("   CPU time per stop: {fourth}last lap {last:.2}x the first");
+        }
     }
     for route in &report.routes {
         print_route(route);
@@ -42,9 +47,10 @@ fn print_route(route: &RouteReport) {
         route.failed_stops.len()
     );
     println!(
-        "   {:>6}  {:>17}  {:>9}  {:>17}  {:>17}  {:>9}  {:>13}  {:>12}",
+        "   {:>6}  {:>17}  {:>9}  {:>9}  {:>17}  {:>17}  {:>9}  {:>13}  {:>12}",
         "nodes",
         "per stop med/p95",
+        "CPU med",
         "localize",
         "closure med/p95",
         "solve med/max",
@@ -66,9 +72,12 @@ fn print_size(s: &SizeReport) {
         }
     };
     println!(
-        "   {:>6}  {:>17}  {:>6.0} ms  {:>17}  {:>17}  {:>9}  {:>13}  {:>12}",
+        "   {:>6}  {:>17}  {:>9}  {:>6.0} ms  {:>17}  {:>17}  {:>9}  {:>13}  {:>12}",
         s.nodes,
         pair(s.time_per_stop_ms.median, s.time_per_stop_ms.p95),
+        s.cpu_per_stop_ms
+            .as_ref()
+            .map_or("-".to_string(), |c| format!("{:.0} ms", c.median)),
         s.localize_ms.median,
         pair(s.loop_closure_ms.median, s.loop_closure_ms.p95),
         pair(s.solve_ms.median, s.solve_ms.max),
