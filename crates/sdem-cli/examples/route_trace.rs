@@ -32,6 +32,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
+/// The process's CPU time, as `sdem bench --suite scale` reads it.
+#[path = "../src/cpu.rs"]
+mod cpu;
+
 /// The map folder as the node store, counting the nodes it gives back.
 #[derive(Debug)]
 struct CountingStore {
@@ -109,18 +113,6 @@ fn step_error(estimate: (&Pose, &Pose), truth: (&Pose, &Pose)) -> [f64; 5] {
     [e.x, e.y, e.z, yaw, wrap_deg(turn)]
 }
 
-/// CPU time of every thread of this process so far, ms.
-fn cpu_ms() -> f64 {
-    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
-        return f64::NAN;
-    };
-    let ns: f64 = (tasks.flatten())
-        .filter_map(|t| std::fs::read_to_string(t.path().join("schedstat")).ok())
-        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
-        .sum();
-    ns / 1e6
-}
-
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
@@ -171,7 +163,7 @@ fn main() -> anyhow::Result<()> {
                 odom_from_sensor: odometry[i],
                 odom_from_previous_sensor: odometry[p],
             });
-            let (fetched_before, cpu_before, start) = (fetched(), cpu_ms(), Instant::now());
+            let (fetched_before, cpu_before, start) = (fetched(), cpu::used_ms(), Instant::now());
             let step = slam.add_scan(&ScanInput {
                 scan_index: i,
                 points_in_sensor: &points,
@@ -179,7 +171,7 @@ fn main() -> anyhow::Result<()> {
                 odometry,
             });
             let wall = start.elapsed().as_secs_f64() * 1e3;
-            let cpu = cpu_ms() - cpu_before;
+            let cpu = cpu::since_ms(cpu_before).unwrap_or(f64::NAN);
             let report = match step {
                 Ok(report) => report,
                 Err(e) => {
