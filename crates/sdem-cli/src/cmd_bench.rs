@@ -18,8 +18,8 @@ use sdem::geometry::Vec3;
 use sdem::localize::{localize, HeadingWindow, LocalizeOptions, SearchMode, SearchWindow};
 use sdem::sdem::SdemConfig;
 use sdem_sim::benchmark::{
-    bench_pairs, localize_config, localize_pair, paper_pair, summarize, BenchPair, PairConfig,
-    Stats, CHI2_95_6, PAPER_MOVE_M,
+    bench_pairs, localize_config, localize_pair, paper_pair, share_below, summarize, BenchPair,
+    PairConfig, Stats, CHI2_95_6, PAPER_MOVE_M,
 };
 use serde::Serialize;
 use std::time::Instant;
@@ -257,8 +257,7 @@ fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
         time_ms: tally.time_ms(),
         success_rate_2cm: tally.success_rate(),
         trusted,
-        nees_below_95: (!nees.is_empty())
-            .then(|| nees.iter().filter(|&&n| n < CHI2_95_6).count() as f64 / nees.len() as f64),
+        nees_below_95: share_below(&nees, CHI2_95_6),
         nees: (!nees.is_empty()).then(|| summarize(&nees)),
         failures,
     }

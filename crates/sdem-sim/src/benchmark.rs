@@ -424,6 +424,13 @@ pub const CHI2_95_6: f64 = 12.592;
 /// translation.
 pub const CHI2_95_3: f64 = 7.815;
 
+/// The share of `nees` values below `bound` ([`CHI2_95_6`] or [`CHI2_95_3`]: 0.95 when the
+/// covariances are honest); `None` for no values.
+pub fn share_below(nees: &[f64], bound: f64) -> Option<f64> {
+    (!nees.is_empty())
+        .then(|| nees.iter().filter(|&&n| n < bound).count() as f64 / nees.len() as f64)
+}
+
 /// The normalized estimation error squared of `estimate` against `truth` under a reported
 /// `covariance`: `eᵀ Σ⁻¹ e` over all six axes, and over the translation alone.
 ///

@@ -18,7 +18,7 @@ use anyhow::{bail, Context, Result};
 use nalgebra::Point3;
 use sdem::geometry::{pose_error, Vec3};
 use sdem::{LocalizeOptions, Scan, SdemConfig, SearchWindow};
-use sdem_sim::benchmark::{nees, summarize, Stats, CHI2_95_3, CHI2_95_6};
+use sdem_sim::benchmark::{nees, share_below, summarize, Stats, CHI2_95_3, CHI2_95_6};
 use sdem_sim::reviews::{
     review_pairs, ModelConfig, Review, ReviewConfig, ReviewScanner, SurfaceModel,
 };
@@ -483,9 +483,6 @@ fn summarize_records(group: &str, records: &[ReviewRecord]) -> Summary {
     });
     let nees_all = values(&|r| r.nees);
     let nees_translation = values(&|r| r.nees_translation);
-    let share_below = |v: &[f64], limit: f64| {
-        v.iter().filter(|&&x| x <= limit).count() as f64 / v.len().max(1) as f64
-    };
     Summary {
         group: group.to_string(),
         reviews: records.len(),
@@ -510,8 +507,8 @@ fn summarize_records(group: &str, records: &[ReviewRecord]) -> Summary {
             })
             .count(),
         median_no_worse,
-        nees_below_95: share_below(&nees_all, CHI2_95_6),
-        nees_translation_below_95: share_below(&nees_translation, CHI2_95_3),
+        nees_below_95: share_below(&nees_all, CHI2_95_6).unwrap_or(0.0),
+        nees_translation_below_95: share_below(&nees_translation, CHI2_95_3).unwrap_or(0.0),
         nees: summarize(&nees_all),
         nees_translation: summarize(&nees_translation),
     }
