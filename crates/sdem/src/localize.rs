@@ -326,6 +326,18 @@ pub struct Diagnostics {
     pub ambiguous: bool,
 }
 
+impl Diagnostics {
+    /// The share of the compared cells within the truncation (inliers over overlap): how well
+    /// the scans agree where they both see; 0 when no cell was compared.
+    pub fn shared_inlier_fraction(&self) -> f64 {
+        if self.overlap_fraction > 0.0 {
+            self.inlier_fraction / self.overlap_fraction
+        } else {
+            0.0
+        }
+    }
+}
+
 /// Which refinement produced the final estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

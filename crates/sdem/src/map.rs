@@ -711,11 +711,7 @@ fn rejection(
 ) -> Option<String> {
     let d = &found.diagnostics;
     // A scan that shares little with the place, but that little with confidence.
-    let shared = if d.overlap_fraction > 0.0 {
-        d.inlier_fraction / d.overlap_fraction
-    } else {
-        0.0
-    };
+    let shared = d.shared_inlier_fraction();
     let partial = shared >= config.min_shared_inlier_fraction
         && (shared * found.overlap as f64).round() as usize >= config.min_shared_inliers;
     let why: Vec<String> = (found.doubts.iter())

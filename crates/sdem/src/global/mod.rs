@@ -316,8 +316,8 @@ fn search_headings(
     let half_turn = wrap_pi(found_heading + PI);
     let judged = (others.iter())
         .any(|(h, _)| wrap_pi(h - half_turn).abs() <= 2.0 * HYPOTHESIS_HEADING_DEG.to_radians());
-    let partial_fields = !sees_all_round(reference.sdem()) && !sees_all_round(query.sdem());
-    if half_turn.abs() <= prior.heading_half_range && !judged && partial_fields {
+    let partial_fields = || !sees_all_round(reference.sdem()) && !sees_all_round(query.sdem());
+    if half_turn.abs() <= prior.heading_half_range && !judged && partial_fields() {
         let coarse = LocalizeOptions {
             step_m: screening.step_m.max(SCREENING_STEP_M),
             ..screening.clone()
@@ -370,14 +370,9 @@ fn sees_all_round(scan: &Sdem) -> bool {
 }
 
 /// The share of the compared points that the match puts beyond the truncation: where the
-/// scans overlap, how much they contradict it.
+/// scans overlap, how much they contradict it (1 where none compared).
 fn mismatch(found: &Localization) -> f64 {
-    let d = &found.diagnostics;
-    if d.overlap_fraction > 0.0 {
-        (1.0 - d.inlier_fraction / d.overlap_fraction).max(0.0)
-    } else {
-        1.0
-    }
+    (1.0 - found.diagnostics.shared_inlier_fraction()).max(0.0)
 }
 
 /// [`Doubt::UnrefutedRotation`] for the rival (each with its angle from `found`'s rotation,

@@ -303,11 +303,7 @@ impl MapSearch<'_> {
     ) -> Option<String> {
         let recovery = &self.config.recovery;
         let d = &matched.diagnostics;
-        let shared = if d.overlap_fraction > 0.0 {
-            d.inlier_fraction / d.overlap_fraction
-        } else {
-            0.0
-        };
+        let shared = d.shared_inlier_fraction();
         let inliers = (shared * matched.overlap as f64).round() as usize;
         let shared_holds = checked
             && !no_prior
