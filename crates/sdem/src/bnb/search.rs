@@ -254,7 +254,7 @@ impl<'a> BranchAndBound<'a> {
     /// are left as they are: their whole search scores a few dozen candidates, as many as a
     /// descent.
     fn polish(&self, progress: &mut Progress) {
-        if self.grid.counts.iter().product::<usize>() < POLISHED_GRID {
+        if self.grid.len() < POLISHED_GRID {
             return;
         }
         let Some(dived) = progress.best else { return };
