@@ -83,7 +83,9 @@ impl SurfaceNormals {
                 let min_width = (0.2 * grid.resolution() * centre.norm()).max(MIN_PATCH_WIDTH_M);
                 let reach_sq = reach * reach;
                 let mut sum = Vec3::zeros();
-                let mut outer = Matrix3::zeros();
+                // The outer products' sums, upper triangle (xx, xy, xz, yy, yz, zz): the lower
+                // is the same products.
+                let mut outer = [0f64; 6];
                 let mut count = 0usize;
                 for de in -k..=k {
                     let e = ie + de;
@@ -106,7 +108,12 @@ impl SurfaceNormals {
                         let q = Vec3::new(q[0] as f64, q[1] as f64, q[2] as f64) - centre;
                         if q.norm_squared() <= reach_sq {
                             sum += q;
-                            outer += q * q.transpose();
+                            outer[0] += q.x * q.x;
+                            outer[1] += q.x * q.y;
+                            outer[2] += q.x * q.z;
+                            outer[3] += q.y * q.y;
+                            outer[4] += q.y * q.z;
+                            outer[5] += q.z * q.z;
                             count += 1;
                         }
                     }
@@ -115,6 +122,8 @@ impl SurfaceNormals {
                     return [f32::NAN; 3];
                 }
                 let mean = sum / count as f64;
+                let [xx, xy, xz, yy, yz, zz] = outer;
+                let outer = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
                 let cov = outer / count as f64 - mean * mean.transpose();
                 // Not a surface patch (a line, a corner, a blob): no normal.
                 let Some(mut n) = plane_normal(&cov, min_width) else {
