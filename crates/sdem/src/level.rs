@@ -14,7 +14,7 @@
 //! large tilted slab in rubble) is returned as a rival, not hidden.
 
 use crate::geometry::{Attitude, Vec3};
-use crate::sdem::{wrap_column, Sdem};
+use crate::sdem::{patch_moments, Sdem};
 use nalgebra::{Matrix3, Rotation3, SymmetricEigen};
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -56,9 +56,7 @@ pub const MIN_INCIDENCE_COSINE: f64 = 0.2;
 pub fn oriented_cells(sdem: &Sdem) -> Vec<OrientedCell> {
     const K: i64 = 2;
     let spec = sdem.grid();
-    let (n_az, n_el) = (spec.azimuth_cells() as i64, spec.elevation_cells() as i64);
     let res = spec.resolution();
-    let full_circle = (n_az as f64 * res - 2.0 * PI).abs() < 1e-6;
     let mut index = vec![u32::MAX; spec.len()];
     for (i, &c) in sdem.cells().iter().enumerate() {
         index[c as usize] = i as u32;
@@ -68,45 +66,14 @@ pub fn oriented_cells(sdem: &Sdem) -> Vec<OrientedCell> {
         .par_iter()
         .zip(points.par_iter())
         .filter_map(|(&cell, p)| {
-            let (e0, a0) = (cell as i64 / n_az, cell as i64 % n_az);
             let centre = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
             let range = centre.norm();
             if range < 1e-6 {
                 return None;
             }
             let reach = 6.0 * K as f64 * res * range + 0.02;
-            let reach_sq = reach * reach;
-            let mut sum = Vec3::zeros();
-            let mut outer = Matrix3::zeros();
-            let mut count = 0usize;
-            for e in (e0 - K).max(0)..=(e0 + K).min(n_el - 1) {
-                for da in -K..=K {
-                    let a = a0 + da;
-                    let a = if full_circle {
-                        wrap_column(a as i32, n_az as i32) as i64
-                    } else if a < 0 || a >= n_az {
-                        continue;
-                    } else {
-                        a
-                    };
-                    let j = index[(e * n_az + a) as usize];
-                    if j == u32::MAX {
-                        continue;
-                    }
-                    let q = points[j as usize];
-                    let q = Vec3::new(q[0] as f64, q[1] as f64, q[2] as f64) - centre;
-                    if q.norm_squared() <= reach_sq {
-                        sum += q;
-                        outer += q * q.transpose();
-                        count += 1;
-                    }
-                }
-            }
-            if count < 8 {
-                return None;
-            }
-            let mean = sum / count as f64;
-            let cov = outer / count as f64 - mean * mean.transpose();
+            let patch = patch_moments(spec, &index, points, (cell, &centre), K, reach);
+            let cov = patch.covariance(8)?;
             let eigen = SymmetricEigen::new(cov);
             let mut order = [0usize, 1, 2];
             order.sort_by(|&i, &j| eigen.eigenvalues[i].total_cmp(&eigen.eigenvalues[j]));

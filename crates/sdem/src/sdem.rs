@@ -11,6 +11,9 @@ use crate::geometry::{fast_atan2, floor_i64, Attitude, Vec3};
 use serde::{Deserialize, Serialize};
 
 mod cell_means;
+mod patch;
+
+pub(crate) use patch::patch_moments;
 
 /// The angular grid of an S-DEM: resolution and extent, in degrees.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

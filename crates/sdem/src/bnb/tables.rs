@@ -51,7 +51,7 @@ impl RangeTables {
         let grid = reference.grid();
         let (n_az, n_el) = (grid.azimuth_cells(), grid.elevation_cells());
         let config = reference.config();
-        let full_circle = (config.azimuth_max_deg - config.azimuth_min_deg - 360.0).abs() < 1e-9;
+        let full_circle = grid.is_full_circle();
         let width = if full_circle { 2 * n_az } else { n_az };
         let cells = &reference.surfaces().cells;
         let block_columns = width.div_ceil(BLOCK);

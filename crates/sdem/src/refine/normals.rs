@@ -9,9 +9,8 @@
 
 use super::{plane_normal, MIN_PATCH_WIDTH_M};
 use crate::geometry::Vec3;
-use crate::sdem::{wrap_column, Derived, GridSpec, Sdem};
+use crate::sdem::{patch_moments, wrap_column, Derived, GridSpec, Sdem};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
-use nalgebra::Matrix3;
 use rayon::prelude::*;
 
 /// A cone spanning more cells than this is left to the k-d tree.
@@ -57,8 +56,6 @@ impl SurfaceNormals {
     /// points lie close to it (so edges and occlusion boundaries do not blur the normal).
     pub fn new(sdem: &Sdem, radius_cells: usize) -> Self {
         let grid = sdem.grid();
-        let (n_az, n_el) = (grid.azimuth_cells() as i64, grid.elevation_cells() as i64);
-        let full_circle = (grid.resolution() * n_az as f64 - std::f64::consts::TAU).abs() < 1e-6;
         let mut point_of_cell = vec![u32::MAX; grid.len()];
         for (i, &c) in sdem.cells().iter().enumerate() {
             point_of_cell[c as usize] = i as u32;
@@ -70,7 +67,6 @@ impl SurfaceNormals {
             .par_iter()
             .zip(points.par_iter())
             .map(|(&cell, p)| {
-                let (ia, ie) = (cell as i64 % n_az, cell as i64 / n_az);
                 let centre = Vec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
                 // Neighbours must lie within the patch the cells span at this range, plus noise.
                 let reach = 2.5 * k as f64 * grid.resolution() * centre.norm() + 0.02;
@@ -81,50 +77,10 @@ impl SurfaceNormals {
                 // (the floor straight below, where the cells meet at the pole): either way the
                 // range noise, not a surface, would set its "normal".
                 let min_width = (0.2 * grid.resolution() * centre.norm()).max(MIN_PATCH_WIDTH_M);
-                let reach_sq = reach * reach;
-                let mut sum = Vec3::zeros();
-                // The outer products' sums, upper triangle (xx, xy, xz, yy, yz, zz): the lower
-                // is the same products.
-                let mut outer = [0f64; 6];
-                let mut count = 0usize;
-                for de in -k..=k {
-                    let e = ie + de;
-                    if e < 0 || e >= n_el {
-                        continue;
-                    }
-                    for da in -k..=k {
-                        let mut a = ia + da;
-                        if full_circle {
-                            a = wrap_column(a as i32, n_az as i32) as i64;
-                        } else if a < 0 || a >= n_az {
-                            continue;
-                        }
-                        let j = point_of_cell[(e * n_az + a) as usize];
-                        if j == u32::MAX {
-                            continue;
-                        }
-                        let q = points[j as usize];
-                        // Relative to the centre: the sums stay small far from the sensor.
-                        let q = Vec3::new(q[0] as f64, q[1] as f64, q[2] as f64) - centre;
-                        if q.norm_squared() <= reach_sq {
-                            sum += q;
-                            outer[0] += q.x * q.x;
-                            outer[1] += q.x * q.y;
-                            outer[2] += q.x * q.z;
-                            outer[3] += q.y * q.y;
-                            outer[4] += q.y * q.z;
-                            outer[5] += q.z * q.z;
-                            count += 1;
-                        }
-                    }
-                }
-                if count < 6 {
+                let patch = patch_moments(grid, &point_of_cell, points, (cell, &centre), k, reach);
+                let Some(cov) = patch.covariance(6) else {
                     return [f32::NAN; 3];
-                }
-                let mean = sum / count as f64;
-                let [xx, xy, xz, yy, yz, zz] = outer;
-                let outer = Matrix3::new(xx, xy, xz, xy, yy, yz, xz, yz, zz);
-                let cov = outer / count as f64 - mean * mean.transpose();
+                };
                 // Not a surface patch (a line, a corner, a blob): no normal.
                 let Some(mut n) = plane_normal(&cov, min_width) else {
                     return [f32::NAN; 3];
