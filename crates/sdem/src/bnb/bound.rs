@@ -5,7 +5,7 @@ use super::queue::{Node, PointHint};
 use super::search::BranchAndBound;
 use super::tables::{PlaneRows, RangeTables, LANES};
 use crate::geometry::{fast_atan2, Vec3, FAST_ATAN2_MAX_ERROR};
-use crate::sdem::wrap_column;
+use crate::sdem::{floor_clamped, wrap_column};
 use crate::search::CandidateGrid;
 use nalgebra::Vector3;
 
@@ -381,26 +381,14 @@ fn place_ball(
         far,
         spread,
         cells: [
-            floor_index((lowest - margin - tables.elevation_min) * tables.inv_resolution),
-            floor_index((highest + margin - tables.elevation_min) * tables.inv_resolution),
-            floor_index(az - db),
-            floor_index(az + db),
-            floor_index(el),
-            floor_index(az),
+            floor_clamped((lowest - margin - tables.elevation_min) * tables.inv_resolution),
+            floor_clamped((highest + margin - tables.elevation_min) * tables.inv_resolution),
+            floor_clamped(az - db),
+            floor_clamped(az + db),
+            floor_clamped(el),
+            floor_clamped(az),
         ],
     }
-}
-
-/// `floor(x)` as a cell index: equal to [`crate::sdem::floor_i32`] for every `x` within ±10⁸ (far
-/// beyond any grid), clamped there otherwise (NaN to −10⁸, outside every grid). The clamp spares the
-/// conversion its saturation checks, so the placement of a chunk of balls vectorizes.
-#[inline(always)]
-#[allow(clippy::manual_clamp)] // `f32::clamp` keeps NaN, which must not reach the conversion.
-fn floor_index(x: f32) -> i32 {
-    let clamped = x.max(-1.0e8).min(1.0e8);
-    // SAFETY: `clamped` is finite and well within i32's range.
-    let i = unsafe { clamped.to_int_unchecked::<i32>() };
-    i - ((i as f32) > clamped) as i32
 }
 
 /// Which of the child boxes' four order classes an unsaturated ball's bound `lb` (below `τ²`)
@@ -675,36 +663,6 @@ mod tests {
     use super::*;
     use crate::geometry::FAST_ATAN2_MAX_ERROR;
     use rand::SeedableRng;
-
-    /// The clamped conversion agrees with the cell binning's floor wherever a cone's cells can
-    /// lie, and sends what cannot be a cell (NaN, ±∞, beyond ±10⁸) outside every grid.
-    #[test]
-    fn floor_index_is_the_binnings_floor_within_its_range() {
-        use crate::sdem::floor_i32;
-        let mut values = vec![
-            0.0f32,
-            -0.0,
-            0.5,
-            -0.5,
-            1.0,
-            -1.0,
-            359.999,
-            -1e-7,
-            1e-7,
-            99_999_999.0,
-        ];
-        values.extend((-20_000..20_000).map(|i| i as f32 * 0.137));
-        values.extend((-200..200).map(|i| i as f32));
-        for x in values {
-            assert_eq!(floor_index(x), floor_i32(x), "{x}");
-        }
-        for x in [f32::NAN, f32::NEG_INFINITY, -1e12] {
-            assert_eq!(floor_index(x), -100_000_000, "{x}");
-        }
-        for x in [f32::INFINITY, 1e12] {
-            assert_eq!(floor_index(x), 100_000_000, "{x}");
-        }
-    }
 
     /// Every position a member can take over a box (the translation box's corners and inside,
     /// plus a horizontal arc and an offset of up to the spread in any direction) lies in the

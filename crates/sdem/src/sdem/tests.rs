@@ -10,12 +10,47 @@ fn wrap_column_is_rem_euclid() {
     }
 }
 
+/// The clamped conversion agrees with the cell binning's floor wherever a cone's cells can
+/// lie, and sends what cannot be a cell (NaN, ±∞, beyond ±10⁸) outside every grid.
+#[test]
+fn floor_clamped_is_the_binnings_floor_within_its_range() {
+    use super::floor_i32;
+    let mut values = vec![
+        0.0f32,
+        -0.0,
+        0.5,
+        -0.5,
+        1.0,
+        -1.0,
+        359.999,
+        -1e-7,
+        1e-7,
+        99_999_999.0,
+    ];
+    values.extend((-20_000..20_000).map(|i| i as f32 * 0.137));
+    values.extend((-200..200).map(|i| i as f32));
+    for x in values {
+        assert_eq!(super::floor_clamped(x), floor_i32(x), "{x}");
+    }
+    for x in [f32::NAN, f32::NEG_INFINITY, -1e12] {
+        assert_eq!(super::floor_clamped(x), -100_000_000, "{x}");
+    }
+    for x in [f32::INFINITY, 1e12] {
+        assert_eq!(super::floor_clamped(x), 100_000_000, "{x}");
+    }
+}
+
 #[test]
 fn batch_binning_equals_cell_of() {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     for config in [
         super::SdemConfig::default(),
+        // A full circle whose last column is narrower than the others.
+        super::SdemConfig {
+            resolution_deg: 0.7,
+            ..Default::default()
+        },
         super::SdemConfig {
             resolution_deg: 0.7,
             azimuth_min_deg: -90.0,
