@@ -6,7 +6,7 @@
 //!   map.json            the manifest: format, version, the configuration, every node's pose,
 //!                       attitude reading and points file with its CRC-32, the pose-graph
 //!                       edges, the accepted loop closures, and a CRC-32 of all that
-//!   nodes/000000.pts    one node's S-DEM boundary points, sensor frame (immutable)
+//!   nodes/000000.pts    one node's points (one per S-DEM cell), sensor frame (immutable)
 //! ```
 //! `NNNNNN.pts`: the 8 bytes `SDEMPTS1`, a little-endian `u32` format version (1), a `u64` point
 //! count, that many `f32` triples `x y z` (metres, sensor frame), and a `u32` CRC-32 of every

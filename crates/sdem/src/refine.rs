@@ -632,6 +632,8 @@ pub(crate) fn refine_from(
     let mut pairs = vec![u32::MAX; query_points.len()];
     let mut associate = true;
     let mut settled = settled;
+    // The estimates at which the pairs were found afresh once settled (see `returned_to`).
+    let mut paired_at: Vec<(Rotation3<f64>, Vec3)> = Vec::new();
     for iteration in 0..config.max_iterations.max(1) {
         iterations = iteration + 1;
         let fresh = associate;
@@ -665,6 +667,16 @@ pub(crate) fn refine_from(
         // where they say nothing, and a pose graph holds the odometry as its own edge.
         last = Some((h, sigma_sq, inliers, supporting));
         let delta = solve_step(h, g, &translation, prior, config)?;
+        if fresh && settled {
+            // Back where the pairs were found before: the same pairs again, the same steps, a
+            // cycle between pairings. The estimate is as good as it gets; it stays here, with
+            // the pairs that are its own.
+            if returned_to(&paired_at, &rotation, &translation, config.converged_step) {
+                converged = true;
+                break;
+            }
+            paired_at.push((rotation, translation));
+        }
         let omega = Vec3::new(delta[3], delta[4], delta[5]);
         let step_rotation = Rotation3::new(omega);
         rotation = step_rotation * rotation;
@@ -713,6 +725,26 @@ pub(crate) fn refine_from(
         rms_m: sigma_sq.sqrt(),
         information: h / (sigma_sq * deff),
         supporting_normals: supporting,
+    })
+}
+
+/// True when the estimate (`rotation`, `translation`) lies within `tolerance` (metres, and
+/// radians) of one of `earlier`: the pairs found afresh at it will be the ones found there.
+///
+/// A refinement whose steps are below [`REASSOCIATE_STEP`] keeps its pairs until a step falls
+/// below [`RefineConfig::converged_step`], then pairs afresh; where a point's pair changes with
+/// that (a point on the edge of its gate, between two nearest points), the new pairs may step it
+/// back past the threshold, and the old ones forward again. On a 4-stop simulated run one
+/// step's refinement cycled so between two pairings 16 µm and 0.001° apart until it ran out of
+/// iterations.
+fn returned_to(
+    earlier: &[(Rotation3<f64>, Vec3)],
+    rotation: &Rotation3<f64>,
+    translation: &Vec3,
+    tolerance: f64,
+) -> bool {
+    earlier.iter().any(|(r, t)| {
+        (t - translation).norm() < tolerance && (r * rotation.transpose()).angle() < tolerance
     })
 }
 
