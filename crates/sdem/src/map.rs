@@ -316,7 +316,8 @@ impl Map {
     }
 
     /// The merged virtual S-DEM of `node_ids` seen from `origin` (world frame), with world axes:
-    /// every node's points carried into the world and binned around `origin`, nearest per cell (paper Sec. III-C's virtual S-DEM, over several nodes).
+    /// every node's points carried into the world and binned around `origin`, nearest per cell
+    /// (paper Sec. III-C's virtual S-DEM, over several nodes).
     ///
     /// # Errors
     /// An unknown node id, or an invalid S-DEM configuration.
