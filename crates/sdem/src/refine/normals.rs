@@ -31,9 +31,12 @@ pub struct SurfaceNormals {
     pub(super) point_of_cell: Vec<u32>,
     /// Per boundary point, its unit normal facing the sensor, or NaN where none fits.
     pub(super) normals: Vec<[f32; 3]>,
-    /// The boundary points with a normal in a k-d tree (`None` when no point has one), and the
-    /// index into `Sdem::points()` of each of its items.
-    neighbours: Option<(ImmutableKdTree<f32, 3>, Vec<u32>)>,
+    /// The boundary points with a normal, and the index into `Sdem::points()` of each.
+    with_normal: (Vec<[f32; 3]>, Vec<u32>),
+    /// Those points in a k-d tree, built on the first lookup that needs it (most pairings never
+    /// do: on KITTI frames building a tree for every S-DEM was 13 % of `sdem slam`'s
+    /// instructions); `None` when no point has a normal.
+    neighbours: std::sync::OnceLock<Option<ImmutableKdTree<f32, 3>>>,
     /// Per grid cell, its surface point when it has a normal, else NaN (see `nearest`).
     paired_of_cell: Vec<[f32; 3]>,
 }
@@ -94,11 +97,7 @@ impl SurfaceNormals {
         let with_normal: Vec<u32> = (0..points.len() as u32)
             .filter(|&i| !normals[i as usize][0].is_nan())
             .collect();
-        let neighbours = (!with_normal.is_empty()).then(|| {
-            let coordinates: Vec<[f32; 3]> =
-                with_normal.iter().map(|&i| points[i as usize]).collect();
-            (ImmutableKdTree::new_from_slice(&coordinates), with_normal)
-        });
+        let coordinates: Vec<[f32; 3]> = with_normal.iter().map(|&i| points[i as usize]).collect();
         let paired_of_cell = (point_of_cell.iter())
             .map(|&j| match normals.get(j as usize) {
                 Some(n) if !n[0].is_nan() => points[j as usize],
@@ -108,7 +107,8 @@ impl SurfaceNormals {
         Self {
             point_of_cell,
             normals,
-            neighbours,
+            with_normal: (coordinates, with_normal),
+            neighbours: std::sync::OnceLock::new(),
             paired_of_cell,
         }
     }
@@ -179,7 +179,13 @@ impl SurfaceNormals {
     /// `Sdem::points()`, from the k-d tree (kiddo). A spatial hash of 10 cm cells, scanning the
     /// 27 cells around `x` (a few hundred points near the sensor), took twice the tree's time.
     pub(super) fn nearest(&self, x: [f32; 3], max_distance: f32) -> Option<u32> {
-        let (tree, index) = self.neighbours.as_ref()?;
+        let (coordinates, index) = &self.with_normal;
+        let tree = self
+            .neighbours
+            .get_or_init(|| {
+                (!coordinates.is_empty()).then(|| ImmutableKdTree::new_from_slice(coordinates))
+            })
+            .as_ref()?;
         let found = tree.nearest_one::<SquaredEuclidean>(&x);
         (found.distance <= max_distance * max_distance).then(|| index[found.item as usize])
     }
