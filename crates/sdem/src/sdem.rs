@@ -334,16 +334,9 @@ impl GridSpec {
     /// virtual S-DEM at the reference's own origin reproduces the reference bit for bit.
     #[inline]
     pub fn cell_of(&self, p: [f32; 3]) -> Option<(u32, f32)> {
-        let horizontal_sq = p[0] * p[0] + p[1] * p[1];
-        let range_sq = horizontal_sq + p[2] * p[2];
-        if range_sq <= 0.0 || !range_sq.is_finite() {
-            return None;
-        }
-        let range = range_sq.sqrt();
-        let azimuth = fast_atan2(p[1], p[0]);
-        let elevation = fast_atan2(p[2], horizontal_sq.sqrt());
-        let mut ia = floor_i64((azimuth - self.azimuth_min) * self.inv_resolution);
-        let ie = floor_i64((elevation - self.elevation_min) * self.inv_resolution);
+        let (range, elevation, [fa, fe]) = self.locate(p)?;
+        let mut ia = floor_i64(fa);
+        let ie = floor_i64(fe);
         if self.full_circle {
             ia = wrap_column(ia as i32, self.azimuth_cells as i32) as i64;
         } else if ia < 0 || ia >= self.azimuth_cells as i64 {
@@ -366,6 +359,15 @@ impl GridSpec {
     /// columns wrap), or `None` at the origin.
     #[inline]
     pub fn position_in_cells(&self, p: [f32; 3]) -> Option<(f32, f32)> {
+        self.locate(p).map(|(_, _, [fa, fe])| (fa, fe))
+    }
+
+    /// A point's range, its elevation (radians) and its direction's position in cells (azimuth,
+    /// elevation; see [`Self::position_in_cells`]), or `None` at the origin or for a point that
+    /// is not finite. [`Self::cells_of`] repeats these operations, in this order, for many
+    /// points at once.
+    #[inline(always)]
+    fn locate(&self, p: [f32; 3]) -> Option<(f32, f32, [f32; 2])> {
         let horizontal_sq = p[0] * p[0] + p[1] * p[1];
         let range_sq = horizontal_sq + p[2] * p[2];
         if range_sq <= 0.0 || !range_sq.is_finite() {
@@ -374,8 +376,12 @@ impl GridSpec {
         let azimuth = fast_atan2(p[1], p[0]);
         let elevation = fast_atan2(p[2], horizontal_sq.sqrt());
         Some((
-            (azimuth - self.azimuth_min) * self.inv_resolution,
-            (elevation - self.elevation_min) * self.inv_resolution,
+            range_sq.sqrt(),
+            elevation,
+            [
+                (azimuth - self.azimuth_min) * self.inv_resolution,
+                (elevation - self.elevation_min) * self.inv_resolution,
+            ],
         ))
     }
 
