@@ -246,4 +246,38 @@ fn bad_suite_flags_are_clear_errors() {
     assert!(e.contains("register_pair.py"), "{e}");
     let e = run_err(d, &["bench", "--suite", "unlevelled", "--pairs", "0"]);
     assert!(e.contains("--pairs"), "{e}");
+    // A route the suite does not have, or a route for a suite without routes.
+    let e = run_err(d, &["bench", "--suite", "routes", "--route", "stairs"]);
+    assert!(e.contains("stairs") && e.contains("second-run"), "{e}");
+    let e = run_err(d, &["bench", "--suite", "lidar", "--route", "revisit"]);
+    assert!(e.contains("--route applies to"), "{e}");
+}
+
+#[test]
+fn the_routes_suite_runs_only_the_routes_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = common::run_json(
+        dir.path(),
+        &[
+            "bench",
+            "--suite",
+            "routes",
+            "--route",
+            "half-blocked",
+            "--quick",
+            "--seed",
+            "3",
+            "--json",
+        ],
+    );
+    assert_eq!(report["suite"], "routes", "{report}");
+    assert_eq!(report["seed"], 3, "{report}");
+    let routes = report["routes"].as_array().unwrap();
+    assert_eq!(routes.len(), 1, "{report}");
+    assert_eq!(routes[0]["route"], "half-blocked", "{report}");
+    assert_eq!(routes[0]["odometry"], false, "{report}");
+    assert!(routes[0]["stops"].as_u64().unwrap() > 1, "{report}");
+    // Neither the relocalization (it maps `revisit`) nor the KITTI frames were asked for.
+    assert!(report["relocalization"].is_null(), "{report}");
+    assert!(report["kitti"].is_null(), "{report}");
 }

@@ -128,8 +128,10 @@ pub struct SuiteArgs {
         requires = "suite"
     )]
     pub sizes: Vec<usize>,
-    /// With --suite scale: the routes (repeat or separate by commas) [default: room-laps,
-    /// floor, wings; room-laps with --quick].
+    /// With --suite scale or routes: the routes (repeat or separate by commas) [scale's
+    /// default: room-laps, floor, wings; room-laps with --quick. routes' default: all six
+    /// (long-steps, turn-around, kidnapped, half-blocked, revisit, second-run) and the KITTI
+    /// frames; naming routes leaves the KITTI frames out].
     #[arg(
         long = "route",
         value_name = "ROUTE",
@@ -365,8 +367,11 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
     if suite == Suite::Scale {
         return crate::cmd_bench_scale::run(&scale_args(args, common)?, say);
     }
-    if !args.sizes.is_empty() || !args.routes.is_empty() {
-        bail!("--sizes and --route apply to --suite scale only");
+    if !args.sizes.is_empty() {
+        bail!("--sizes applies to --suite scale only");
+    }
+    if !args.routes.is_empty() && suite != Suite::Routes {
+        bail!("--route applies to --suite scale and --suite routes only");
     }
     if common.pairs == Some(0) {
         bail!("--pairs must be at least 1");
@@ -382,7 +387,8 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
     }
     let peers = bench_peers::find(args.peers.as_deref())?;
     if suite == Suite::Routes {
-        return routes::run(args.kitti.as_deref(), &peers, common, say);
+        let only = routes::parse_routes(&args.routes)?;
+        return routes::run(&only, args.kitti.as_deref(), &peers, common, say);
     }
     let mut parts = Vec::new();
     match suite {

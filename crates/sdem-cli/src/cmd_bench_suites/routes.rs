@@ -74,8 +74,31 @@ struct KittiPart {
     kiss_icp_missing: Option<String>,
 }
 
-/// Runs the suite and prints its report.
+/// The routes named by `--route` (empty: every route).
+///
+/// # Errors
+/// A name that is not a route's, with the names there are.
+pub(super) fn parse_routes(names: &[String]) -> Result<Vec<RouteKind>> {
+    (names.iter())
+        .map(|name| {
+            RouteKind::ALL
+                .into_iter()
+                .find(|k| k.name() == name.trim())
+                .with_context(|| {
+                    let known: Vec<&str> = RouteKind::ALL.iter().map(|k| k.name()).collect();
+                    format!(
+                        "--route {name}: no such route of --suite routes (its routes: {})",
+                        known.join(", ")
+                    )
+                })
+        })
+        .collect()
+}
+
+/// Runs the suite on the routes of `only` (every route, and the KITTI frames, when empty) and
+/// prints its report.
 pub(super) fn run(
+    only: &[RouteKind],
     kitti_folder: Option<&Path>,
     peers: &std::result::Result<Peers, String>,
     common: &super::Common,
@@ -90,7 +113,10 @@ pub(super) fn run(
     } else {
         &[false, true]
     };
-    for kind in RouteKind::ALL {
+    for kind in RouteKind::ALL
+        .into_iter()
+        .filter(|k| only.is_empty() || only.contains(k))
+    {
         let drawn =
             route(kind, common.seed, &config).with_context(|| format!("route {}", kind.name()))?;
         for &with_odometry in odometry {
@@ -122,7 +148,12 @@ pub(super) fn run(
             routes.push(outcome);
         }
     }
-    let kitti = kitti_part(kitti_folder, peers, say)?;
+    let kitti = if only.is_empty() {
+        kitti_part(kitti_folder, peers, say)?
+    } else {
+        say("kitti: left out (--route names the routes)");
+        None
+    };
     let report = Report {
         suite: "routes",
         seed: common.seed,
