@@ -63,7 +63,7 @@ pub use step::{
     Attempt, HeadingPrior, OptimizationSummary, PredictionSource, Recovery, SegmentJoin, Step,
     StepReport, StepStatus,
 };
-pub use trajectory::{trajectory_errors, TrajectoryErrors};
+pub use trajectory::{alignment, trajectory_errors, TrajectoryErrors};
 pub use upkeep::GrowthOptions;
 
 use crate::error::{Error, Result};

@@ -89,6 +89,28 @@ pub fn trajectory_errors(reference: &[Pose], estimate: &[Pose]) -> Result<Trajec
     })
 }
 
+/// The rigid motion that carries `estimate`'s positions onto `reference`'s best in the
+/// least-squares sense (Umeyama, no scale; the alignment of [`TrajectoryErrors::ate_rmse_m`]):
+/// the truth's view of the frame an estimate is in. A second run's stops are scored in the
+/// first run's frame by the alignment of the first run's stops alone.
+///
+/// # Errors
+/// Different lengths or no pose.
+pub fn alignment(reference: &[Pose], estimate: &[Pose]) -> Result<Pose> {
+    if estimate.len() != reference.len() || estimate.is_empty() {
+        return Err(Error::Invalid(format!(
+            "cannot align {} estimated poses with {} reference poses",
+            estimate.len(),
+            reference.len()
+        )));
+    }
+    let p: Vec<Vec3> = estimate.iter().map(|t| t.translation.vector).collect();
+    let q: Vec<Vec3> = reference.iter().map(|t| t.translation.vector).collect();
+    let (rotation, translation) = umeyama(&p, &q);
+    let rotation = nalgebra::UnitQuaternion::from_matrix(&rotation);
+    Ok(Pose::from_parts(translation.into(), rotation))
+}
+
 /// The rotation and translation that carry `from` onto `to` best in the least-squares sense
 /// (Umeyama 1991, without scale).
 fn umeyama(from: &[Vec3], to: &[Vec3]) -> (Matrix3<f64>, Vec3) {
@@ -112,4 +134,33 @@ fn umeyama(from: &[Vec3], to: &[Vec3]) -> (Matrix3<f64>, Vec3) {
     }
     let rotation = u * d * v_t;
     (rotation, mean_to - rotation * mean_from)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    #[test]
+    fn the_alignment_is_the_motion_between_the_frames() {
+        // A winding trajectory, and the same one seen from a frame turned by 7° and shifted.
+        let truth: Vec<Pose> = (0..12)
+            .map(|i| {
+                let t = i as f64 * 0.4;
+                Pose::from_parts(
+                    Translation3::new(t, (t * 0.9).sin(), 0.1 * t),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, 0.3 * t),
+                )
+            })
+            .collect();
+        let frame = Pose::from_parts(
+            Translation3::new(0.5, -1.2, 0.3),
+            UnitQuaternion::from_euler_angles(0.01, -0.02, 7f64.to_radians()),
+        );
+        let estimate: Vec<Pose> = truth.iter().map(|p| frame.inverse() * p).collect();
+        let found = alignment(&truth, &estimate).unwrap();
+        let (dt, dr) = crate::geometry::pose_error(&frame, &found);
+        assert!(dt < 1e-9 && dr < 1e-9, "{dt} m, {dr} rad off");
+        assert!(alignment(&truth, &estimate[..3]).is_err());
+    }
 }
