@@ -34,7 +34,9 @@ pub struct RouteStopOutcome {
     pub status: StepStatus,
     /// The segment it ended in.
     pub segment: usize,
-    /// Its position's error at the end, in the world frame (no alignment), metres.
+    /// Its position's error at the end, in the world frame (no alignment), metres; a second
+    /// run's stop's in the first run's frame (the estimate aligned to the truth by the first
+    /// run's stops alone).
     pub error_m: f64,
     /// Wall time of its step, ms.
     pub time_ms: f64,
@@ -116,7 +118,7 @@ pub fn run_route(
     let poses = slam.poses();
     let errors = trajectory_errors(&truth, &poses)?;
     let scored_run = runs.len() - 1;
-    let stops_detail: Vec<RouteStopOutcome> = (reports.iter())
+    let mut stops_detail: Vec<RouteStopOutcome> = (reports.iter())
         .zip(&errors.unaligned_position_errors_m)
         .map(|((run, index, event, report), &error_m)| RouteStopOutcome {
             run: *run,
@@ -128,11 +130,13 @@ pub fn run_route(
             time_ms: report.time_ms,
         })
         .collect();
-    let max_error_m = if route.kind == RouteKind::SecondRun {
-        second_run_max_error(&truth, &poses, &stops_detail, scored_run)?
-    } else {
-        stops_detail.iter().map(|s| s.error_m).fold(0.0, f64::max)
-    };
+    if route.kind == RouteKind::SecondRun {
+        measure_in_first_runs_frame(&truth, &poses, &mut stops_detail, scored_run)?;
+    }
+    let max_error_m = (stops_detail.iter())
+        .filter(|s| route.kind != RouteKind::SecondRun || s.run == scored_run)
+        .map(|s| s.error_m)
+        .fold(0.0, f64::max);
     let mut statuses = BTreeMap::new();
     for (_, _, _, report) in &reports {
         *statuses
@@ -163,28 +167,28 @@ pub fn run_route(
     Ok((outcome, slam))
 }
 
-/// The largest error of a second run's stops (run `scored_run`) in the first run's frame: the
-/// estimate carried onto the truth by the alignment of the earlier runs' stops alone, so that
-/// where the first run's frame lies (its first stop's compass reading) does not count, only
-/// where the second run lies in it.
-fn second_run_max_error(
+/// Measures the errors of a second run's stops (run `scored_run`) in the first run's frame:
+/// the estimate carried onto the truth by the alignment of the earlier runs' stops alone, so
+/// that where the first run's frame lies (its first stop's compass reading) does not count,
+/// only where the second run lies in it.
+fn measure_in_first_runs_frame(
     truth: &[Pose],
     poses: &[Pose],
-    stops: &[RouteStopOutcome],
+    stops: &mut [RouteStopOutcome],
     scored_run: usize,
-) -> Result<f64> {
+) -> Result<()> {
     let earlier: Vec<usize> = (0..stops.len())
         .filter(|&i| stops[i].run < scored_run)
         .collect();
     let pick = |v: &[Pose]| earlier.iter().map(|&i| v[i]).collect::<Vec<Pose>>();
     let frame = alignment(&pick(truth), &pick(poses))?;
-    Ok((0..stops.len())
-        .filter(|&i| stops[i].run == scored_run)
-        .map(|i| {
+    for (i, stop) in stops.iter_mut().enumerate() {
+        if stop.run == scored_run {
             let placed = frame * poses[i];
-            (placed.translation.vector - truth[i].translation.vector).norm()
-        })
-        .fold(0.0, f64::max))
+            stop.error_m = (placed.translation.vector - truth[i].translation.vector).norm();
+        }
+    }
+    Ok(())
 }
 
 /// Loop closures accepted, rejected, and accepted but false (against the truth), over every

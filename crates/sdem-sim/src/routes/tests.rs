@@ -110,3 +110,30 @@ fn a_second_run_starts_inside_the_first_runs_map() {
     assert_eq!(r.run.events[0], StopEvent::Start);
     assert!(r.run.stops[0].world_from_sensor.translation.vector.norm() > 0.5);
 }
+
+/// Seed 6's second run starts facing back along the first run, in a stretch that looks nearly
+/// the same turned by a quarter. Each place searched only within ±1 m of its node, its first
+/// stop was relocalized 1.4 m and 90° off with no doubt: the true pose lay outside every window
+/// tried, so no rival showed. Every stop the loop puts into the world's frame must lie where the
+/// truth does, in the first run's frame (its stops alone align it to the truth).
+#[test]
+fn a_second_run_facing_back_is_never_placed_wrong_in_the_first_runs_frame() {
+    let r = route(RouteKind::SecondRun, 6, &RouteConfig::default()).unwrap();
+    let (outcome, _) = run_route(&r, false, &sdem::slam::SlamOptions::default()).unwrap();
+    let world = outcome.stops_detail[0].segment;
+    let placed: Vec<&RouteStopOutcome> = (outcome.stops_detail.iter())
+        .filter(|s| s.run == 1 && s.segment == world)
+        .collect();
+    assert!(
+        !placed.is_empty(),
+        "no stop of the second run was placed: {outcome:?}"
+    );
+    for stop in placed {
+        assert!(
+            stop.error_m < 0.05,
+            "second run's stop {}: {} m off",
+            stop.index,
+            stop.error_m
+        );
+    }
+}

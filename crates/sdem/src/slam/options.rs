@@ -123,7 +123,9 @@ pub struct RecoveryOptions {
     /// this many nodes are tried, those whose place descriptors look most like the scan's
     /// first, each searched over every heading.
     pub relocalize_candidates: usize,
-    /// … within this half-size around each node, metres.
+    /// … within this half-size around each node, metres: as wide as the widest recovery
+    /// window, since a robot facing the other way from the nodes that saw what it sees stands
+    /// up to a few metres from them (a second run facing back along the first).
     pub relocalize_window_half_m: [f64; 3],
     /// … and a node's place is the node and up to this many nodes of its segment within
     /// `relocalize_radius_m`, merged.
@@ -149,7 +151,7 @@ impl Default for RecoveryOptions {
             max_heading_half_deg: 60.0,
             every_heading_nodes: 3,
             relocalize_candidates: 6,
-            relocalize_window_half_m: [1.0, 1.0, 0.3],
+            relocalize_window_half_m: [2.2, 2.2, 0.3],
             relocalize_place_nodes: 3,
             relocalize_radius_m: 1.5,
             other_nodes_radius_m: 6.0,
