@@ -578,7 +578,7 @@ fn write_outputs(args: &Args, slam: &mut Slam, steps: &[Value]) -> Result<Output
     write_poses(&args.out.join("poses.txt"), &poses)?;
     let cloud = slam.merged_cloud()?;
     write_points_ply(&args.out.join("map.ply"), &cloud)?;
-    let voxels = slam.voxels();
+    let voxels = slam.voxels()?;
     let voxel_counts = voxels.counts();
     write_voxel_map(&args.out.join("map.sdemvox"), &voxels)?;
     drop(voxels);

@@ -202,7 +202,7 @@ fn near_a_surface(scene: &sim::Scene, p: &Vec3, h: f64) -> bool {
 fn the_fused_map_holds_the_scene_and_free_space() {
     let run = loop_run();
     let scene = &run.scene;
-    let voxels = &run.slam.voxels();
+    let voxels = &run.slam.voxels().unwrap();
     let s = voxels.voxel_m();
     let scene_from_map = run.scene_from_map();
     let in_scene =

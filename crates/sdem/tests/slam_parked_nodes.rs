@@ -83,9 +83,50 @@ fn a_loop_with_its_far_nodes_parked_maps_as_one_with_every_node_in_memory() {
             .collect()
     };
     assert_eq!(closed(&parked), closed(&whole));
-    assert_eq!(parked.voxels().counts(), whole.voxels().counts());
+    assert_eq!(
+        parked.voxels().unwrap().counts(),
+        whole.voxels().unwrap().counts()
+    );
     assert_eq!(
         parked.merged_cloud().unwrap().len(),
         whole.merged_cloud().unwrap().len()
     );
+}
+
+/// Every voxel of a map, sorted: two maps compare voxel by voxel.
+fn voxels_of(slam: &Slam) -> Vec<(sdem::voxel::VoxelKey, f32)> {
+    let mut voxels: Vec<_> = slam.voxels().unwrap().iter().collect();
+    voxels.sort_by_key(|a| a.0);
+    voxels
+}
+
+#[test]
+fn a_map_fused_when_it_is_settled_is_the_map_fused_stop_by_stop() {
+    // Every node a solve moved is fused again when the map is settled (a µm tolerance: a
+    // rotation compared with itself can read a few nrad), so both maps hold every node's scan
+    // at its final pose; the counts do not depend on the order.
+    let mut eager = SlamOptions::default();
+    eager.growth.fuse_each_stop = true;
+    eager.growth.refuse_tolerance_m = 1e-6;
+    eager.growth.refuse_tolerance_deg = 1e-4;
+    let lazy = SlamOptions {
+        growth: GrowthOptions {
+            fuse_each_stop: false,
+            ..eager.growth.clone()
+        },
+        ..eager.clone()
+    };
+    let ((mut eager, _), (mut lazy, _)) =
+        rayon::join(|| map_loop(eager, None), || map_loop(lazy, None));
+    assert!(!eager.loop_closures.is_empty(), "no solve moved a node");
+    // Read before it is settled, the lazy map fuses its nodes into a copy.
+    let unsettled = voxels_of(&lazy);
+    let fused = lazy.settle_map().unwrap();
+    assert_eq!(fused, lazy.map.nodes.len(), "every node fused when settled");
+    assert_eq!(lazy.settle_map().unwrap(), 0, "nothing left to fuse");
+    eager.settle_map().unwrap();
+    let settled = voxels_of(&lazy);
+    assert!(settled.len() > 1000, "{} voxels", settled.len());
+    assert_eq!(unsettled, settled);
+    assert_eq!(voxels_of(&eager), settled);
 }

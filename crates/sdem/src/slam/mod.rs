@@ -27,8 +27,11 @@
 //! 4. **Close loops** (`closures`): older nodes that see what the new one sees are verified
 //!    with the exact search over every heading, checked for consistency with the other
 //!    closures, and the pose graph is optimized (robust Cauchy kernel): over the part of it
-//!    the closure touches when the map is one segment, else the closure's segment alone; the
-//!    nodes that moved are fused again into the voxel map, a few per stop.
+//!    the closure touches when the map is one segment, else the closure's segment alone.
+//!
+//! The fused voxel map is only read by the loop's outputs: it is brought up to date when the
+//! map is settled for a view or a save ([`Slam::settle_map`]), or at every stop with
+//! [`GrowthOptions::fuse_each_stop`].
 //!
 //! As the map grows the work per stop stays bounded (`upkeep`): the fused map takes a moved
 //! node's scan out and puts it back instead of fusing every scan again, the graph is solved
@@ -246,8 +249,8 @@ impl Slam {
     }
 
     /// Adds the next stop's scan: predicts its pose, localizes it against the map, adds it as
-    /// a node, closes loops and updates the fused map: the loop `sdem slam` runs, one stop at a
-    /// time.
+    /// a node and closes loops (and fuses it into the voxel map with
+    /// [`GrowthOptions::fuse_each_stop`]): the loop `sdem slam` runs, one stop at a time.
     ///
     /// # Arguments
     /// * `points_in_sensor` — the scan, sensor frame, metres (NaN points are skipped).
@@ -325,7 +328,9 @@ impl Slam {
         self.map.nodes.iter().map(|n| n.world_from_sensor).collect()
     }
 
-    /// Indexes every node afresh and fuses those of the world's segment, on the current poses.
+    /// Indexes every node afresh and starts the fused map again on the current poses: the
+    /// nodes of the world's segment are fused now with [`GrowthOptions::fuse_each_stop`], else
+    /// when the map is settled ([`Slam::settle_map`]) or read ([`Slam::voxels`]).
     ///
     /// # Errors
     /// [`Error::NodeStore`] when a parked node's points cannot be read back.
@@ -336,16 +341,22 @@ impl Slam {
     /// The fused occupancy map of the world's segment: every node's scan, each at the pose it
     /// was fused at, which lies within [`GrowthOptions::refuse_tolerance_m`] and
     /// `refuse_tolerance_deg` of its current one once [`Slam::settle_map`] has run (after a
-    /// loop closure, the moved nodes are fused again a few per stop).
-    pub fn voxels(&self) -> VoxelMap {
-        self.upkeep.fusion.to_voxel_map()
+    /// loop closure, the moved nodes are fused again when the map is settled, or a few per
+    /// stop with [`GrowthOptions::fuse_each_stop`]). Nodes not fused yet are fused into a copy
+    /// at their current poses; [`Slam::settle_map`] fuses them for good.
+    ///
+    /// # Errors
+    /// [`Error::NodeStore`] when a parked node's points cannot be read back.
+    pub fn voxels(&self) -> Result<VoxelMap> {
+        self.upkeep.voxels(&self.map)
     }
 
-    /// Fuses again every node a solve moved beyond the tolerances, so that [`Slam::voxels`]
-    /// and [`Slam::merged_cloud`] show the map on the current poses.
+    /// Fuses every node of the world's segment not fused yet, and again every node a solve
+    /// moved beyond the tolerances, so that [`Slam::voxels`] and [`Slam::merged_cloud`] show
+    /// the map on the current poses without fusing into a copy.
     ///
     /// # Returns
-    /// The nodes fused again.
+    /// The nodes fused, for the first time or again.
     ///
     /// # Errors
     /// [`Error::NodeStore`] when a parked node's points cannot be read back.
@@ -396,7 +407,7 @@ impl Slam {
     /// # Errors
     /// [`Error::NodeStore`] when a parked node's points cannot be read back.
     pub fn merged_cloud(&self) -> Result<Vec<Vec3>> {
-        let voxels = self.voxels();
+        let voxels = self.voxels()?;
         let mut merged = voxels.occupied_centroids();
         let world = self.world_segment();
         for node in self.map.nodes.iter().filter(|n| n.segment == world) {

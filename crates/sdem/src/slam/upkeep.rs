@@ -16,7 +16,7 @@ use crate::index::NodeIndex;
 use crate::map::{Descriptor, Map};
 use crate::posegraph::{optimize_local, Edge, LocalSolve, OptimizeConfig, PoseGraph};
 use crate::store::{NodeStore, Residency};
-use crate::voxel::{VoxelConfig, VoxelFusion};
+use crate::voxel::{VoxelConfig, VoxelFusion, VoxelMap};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -53,6 +53,18 @@ pub struct GrowthOptions {
     /// At most this many nodes near a prediction are weighed as references when the recent
     /// nodes do not see the scan (recovery), the nearest.
     pub recovery_candidate_nodes: usize,
+    /// Fuse each new node into the voxel map at its own stop, and the nodes a solve moved a
+    /// few per stop ([`Self::refuse_per_stop`]), so that the fused map is current after every
+    /// step. Off (the default), the loop spends no time on the fused map, which only its
+    /// outputs read: nodes are fused when the map is settled ([`Slam::settle_map`], before
+    /// it is saved or viewed), and [`Slam::voxels`] and [`Slam::merged_cloud`] fuse the
+    /// waiting ones into a copy. The map is the same either way: its counts do not depend
+    /// on the order nodes are fused in.
+    ///
+    /// [`Slam::settle_map`]: super::Slam::settle_map
+    /// [`Slam::voxels`]: super::Slam::voxels
+    /// [`Slam::merged_cloud`]: super::Slam::merged_cloud
+    pub fuse_each_stop: bool,
 }
 
 impl Default for GrowthOptions {
@@ -67,6 +79,7 @@ impl Default for GrowthOptions {
             whole_solve_fraction: 0.5,
             closure_candidate_nodes: 24,
             recovery_candidate_nodes: 96,
+            fuse_each_stop: false,
         }
     }
 }
@@ -133,10 +146,11 @@ impl Upkeep {
     }
 
     /// Indexes node `node_id`, which has just joined `map` with its points, and fuses it when
-    /// it is in the world's segment (another segment's frame is not the world's).
+    /// it is in the world's segment (another segment's frame is not the world's) and
+    /// [`GrowthOptions::fuse_each_stop`] asks for it.
     pub(super) fn node_added(&mut self, map: &Map, node_id: usize) -> Result<()> {
         let node = &map.nodes[node_id];
-        let fuse = in_world(map, node_id);
+        let fuse = self.options.fuse_each_stop && in_world(map, node_id);
         self.enter(
             node_id,
             &node.world_from_sensor,
@@ -145,25 +159,30 @@ impl Upkeep {
         )
     }
 
-    /// Indexes every node of `map` afresh, and fuses those of the world's segment (a restored
-    /// map).
+    /// Indexes every node of `map` afresh (a restored map) and starts the fused map again: the
+    /// nodes of the world's segment are fused now with [`GrowthOptions::fuse_each_stop`], else
+    /// when the map is settled.
     pub(super) fn rebuild(&mut self, map: &mut Map) -> Result<()> {
         self.index = NodeIndex::new();
         self.fusion = VoxelFusion::new(*self.fusion.config())?;
         for id in 0..map.nodes.len() {
             let points = self.residency.points_of(map, id)?.into_owned();
-            let fuse = in_world(map, id);
+            let fuse = self.options.fuse_each_stop && in_world(map, id);
             self.enter(id, &map.nodes[id].world_from_sensor, &points, fuse)?;
         }
         Ok(())
     }
 
     /// The nodes `ids` were moved into the world's segment (a segment joined to it): they
-    /// move in the index and are fused at their new poses.
+    /// move in the index and, with [`GrowthOptions::fuse_each_stop`], are fused at their new
+    /// poses.
     pub(super) fn joined(&mut self, map: &mut Map, ids: &[usize]) -> Result<()> {
         for &id in ids {
             self.index.moved(id, map.nodes[id].position());
-            if in_world(map, id) && self.fusion.fused_pose(id).is_none() {
+            if self.options.fuse_each_stop
+                && in_world(map, id)
+                && self.fusion.fused_pose(id).is_none()
+            {
                 let sensor = as_vectors(&self.residency.points_of(map, id)?);
                 self.fusion
                     .add(id, &map.nodes[id].world_from_sensor, &sensor)?;
@@ -267,14 +286,26 @@ impl Upkeep {
     }
 
     /// The end of a step: fuses again up to [`GrowthOptions::refuse_per_stop`] of the nodes a
-    /// solve moved (`all`: every one), then parks the least recently used nodes beyond the
-    /// resident limit (never the `keep_newest` newest). Returns the nodes fused again.
+    /// solve moved, when [`GrowthOptions::fuse_each_stop`]; with `all` (the map settled), first
+    /// fuses every node of the world's segment not fused yet, then again every node moved.
+    /// Then parks the least recently used nodes beyond the resident limit (never the
+    /// `keep_newest` newest). Returns the nodes fused, first or again.
     pub(super) fn after_step(
         &mut self,
         map: &mut Map,
         keep_newest: usize,
         all: bool,
     ) -> Result<usize> {
+        if !all && !self.options.fuse_each_stop {
+            self.residency.trim(map, keep_newest)?;
+            return Ok(0);
+        }
+        let waiting = self.waiting(map);
+        for &id in &waiting {
+            let sensor = as_vectors(&self.residency.points_of(map, id)?);
+            self.fusion
+                .add(id, &map.nodes[id].world_from_sensor, &sensor)?;
+        }
         let poses: Vec<Pose> = map.nodes.iter().map(|n| n.world_from_sensor).collect();
         let mut stale = self.fusion.stale(
             &poses,
@@ -289,7 +320,32 @@ impl Upkeep {
             self.fusion.moved(id, &poses[id], &sensor)?;
         }
         self.residency.trim(map, keep_newest)?;
-        Ok(stale.len())
+        Ok(waiting.len() + stale.len())
+    }
+
+    /// The nodes of the world's segment not fused yet, by id.
+    fn waiting(&self, map: &Map) -> Vec<usize> {
+        (0..map.nodes.len())
+            .filter(|&id| in_world(map, id) && self.fusion.fused_pose(id).is_none())
+            .collect()
+    }
+
+    /// The fused map with the nodes of the world's segment not fused yet fused into a copy
+    /// (at their current poses), as a [`VoxelMap`].
+    ///
+    /// # Errors
+    /// [`crate::Error::NodeStore`] when a parked node's points cannot be read back.
+    pub(super) fn voxels(&self, map: &Map) -> Result<VoxelMap> {
+        let waiting = self.waiting(map);
+        if waiting.is_empty() {
+            return Ok(self.fusion.to_voxel_map());
+        }
+        let mut fusion = self.fusion.clone();
+        for id in waiting {
+            let sensor = as_vectors(&self.residency.points_of(map, id)?);
+            fusion.add(id, &map.nodes[id].world_from_sensor, &sensor)?;
+        }
+        Ok(fusion.to_voxel_map())
     }
 }
 
