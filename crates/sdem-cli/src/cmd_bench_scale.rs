@@ -69,6 +69,15 @@ pub struct RouteReport {
     lap_cpu_median_ms: Vec<f64>,
     /// Every stop's time, ms (NaN for a failed stop), in stop order.
     time_per_stop_ms: Vec<f64>,
+    /// After the last stop, the map settled as `sdem slam` settles it before it writes its
+    /// outputs (every node fused into the voxel map, which the steps leave to a view or a
+    /// save): how long it took, ms …
+    settle_ms: f64,
+    /// … the voxels it fused …
+    fused_voxels: usize,
+    /// … and the process's peak resident memory since the route began, settling included,
+    /// MiB (`None` off Linux).
+    peak_memory_settled_mib: Option<f64>,
 }
 
 /// The figures when the map reached a size.
@@ -277,7 +286,19 @@ fn map_route(
         }
     }
     bar.finish_and_clear();
-    Ok(route_report(run, &records, sizes))
+    say(&format!(
+        "{}: settling the map (the fused voxel map) ...",
+        run.route.name()
+    ));
+    let start = Instant::now();
+    slam.settle_map()?;
+    let settle_ms = elapsed_ms(start);
+    let (occupied, free) = slam.voxels()?.counts();
+    let mut report = route_report(run, &records, sizes);
+    report.settle_ms = settle_ms;
+    report.fused_voxels = occupied + free;
+    report.peak_memory_settled_mib = crate::memory::peak_mib();
+    Ok(report)
 }
 
 /// What the figures at a size are taken from.
@@ -438,6 +459,9 @@ fn route_report(run: &LongRun, records: &[StopRecord], sizes: Vec<SizeReport>) -
                 }
             })
             .collect(),
+        settle_ms: 0.0,
+        fused_voxels: 0,
+        peak_memory_settled_mib: None,
     }
 }
 

@@ -169,6 +169,15 @@ fn the_scale_bench_reports_each_size_and_plots_time_per_stop() {
         "{}",
         sizes[1]
     );
+    // The steps leave the fused map to a save or a view: settling after the last stop fused it.
+    assert!(number(route, "settle_ms") > 0.0, "{route}");
+    assert!(number(route, "fused_voxels") > 1000.0, "{route}");
+    if cfg!(target_os = "linux") {
+        assert!(
+            number(route, "peak_memory_settled_mib") >= number(&sizes[1], "peak_memory_mib"),
+            "{route}"
+        );
+    }
     let png = std::fs::read(&plot).unwrap();
     assert!(png.starts_with(b"\x89PNG\r\n\x1a\n"), "not a PNG");
 }

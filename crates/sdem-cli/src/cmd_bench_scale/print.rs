@@ -61,6 +61,15 @@ fn print_route(route: &RouteReport) {
     for s in &route.sizes {
         print_size(s);
     }
+    println!(
+        "   settled after the last stop (every node fused into the voxel map, as before a save): \
+         {:.1} s, {} voxels; peak memory with it {}",
+        route.settle_ms / 1e3,
+        route.fused_voxels,
+        route
+            .peak_memory_settled_mib
+            .map_or("-".to_string(), |m| format!("{m:.0} MiB"))
+    );
 }
 
 fn print_size(s: &SizeReport) {
