@@ -37,17 +37,13 @@ pub struct TrajectoryErrors {
 /// # Errors
 /// Different lengths or no pose.
 pub fn trajectory_errors(reference: &[Pose], estimate: &[Pose]) -> Result<TrajectoryErrors> {
-    if estimate.len() != reference.len() || estimate.is_empty() {
-        return Err(Error::Invalid(format!(
-            "cannot compare {} estimated poses with {} reference poses",
-            estimate.len(),
-            reference.len()
-        )));
-    }
+    let Aligned {
+        estimate: p,
+        reference: q,
+        rotation,
+        translation,
+    } = Aligned::new(reference, estimate, "compare")?;
     let n = estimate.len();
-    let p: Vec<Vec3> = estimate.iter().map(|t| t.translation.vector).collect();
-    let q: Vec<Vec3> = reference.iter().map(|t| t.translation.vector).collect();
-    let (rotation, translation) = umeyama(&p, &q);
     let position_errors_m: Vec<f64> = p
         .iter()
         .zip(&q)
@@ -97,18 +93,40 @@ pub fn trajectory_errors(reference: &[Pose], estimate: &[Pose]) -> Result<Trajec
 /// # Errors
 /// Different lengths or no pose.
 pub fn alignment(reference: &[Pose], estimate: &[Pose]) -> Result<Pose> {
-    if estimate.len() != reference.len() || estimate.is_empty() {
-        return Err(Error::Invalid(format!(
-            "cannot align {} estimated poses with {} reference poses",
-            estimate.len(),
-            reference.len()
-        )));
+    let aligned = Aligned::new(reference, estimate, "align")?;
+    let rotation = nalgebra::UnitQuaternion::from_matrix(&aligned.rotation);
+    Ok(Pose::from_parts(aligned.translation.into(), rotation))
+}
+
+/// The positions of an estimated and a reference trajectory, and the rotation and
+/// translation that carry the first onto the second best ([`umeyama`]).
+struct Aligned {
+    estimate: Vec<Vec3>,
+    reference: Vec<Vec3>,
+    rotation: Matrix3<f64>,
+    translation: Vec3,
+}
+
+impl Aligned {
+    /// Refuses (to `verb` them) trajectories of different lengths, or with no pose.
+    fn new(reference: &[Pose], estimate: &[Pose], verb: &str) -> Result<Self> {
+        if estimate.len() != reference.len() || estimate.is_empty() {
+            return Err(Error::Invalid(format!(
+                "cannot {verb} {} estimated poses with {} reference poses",
+                estimate.len(),
+                reference.len()
+            )));
+        }
+        let p: Vec<Vec3> = estimate.iter().map(|t| t.translation.vector).collect();
+        let q: Vec<Vec3> = reference.iter().map(|t| t.translation.vector).collect();
+        let (rotation, translation) = umeyama(&p, &q);
+        Ok(Self {
+            estimate: p,
+            reference: q,
+            rotation,
+            translation,
+        })
     }
-    let p: Vec<Vec3> = estimate.iter().map(|t| t.translation.vector).collect();
-    let q: Vec<Vec3> = reference.iter().map(|t| t.translation.vector).collect();
-    let (rotation, translation) = umeyama(&p, &q);
-    let rotation = nalgebra::UnitQuaternion::from_matrix(&rotation);
-    Ok(Pose::from_parts(translation.into(), rotation))
 }
 
 /// The rotation and translation that carry `from` onto `to` best in the least-squares sense
