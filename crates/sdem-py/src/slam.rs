@@ -162,10 +162,16 @@ impl Slam {
 
     /// The merged point cloud: every node's points in the world, kept where the fused map is
     /// occupied now (moved rubble, seen through later, drops out), one per voxel; ``(M, 3)``
-    /// float64.
-    fn merged_cloud<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    /// float64. The map is settled first: the scans not fused into the voxel map yet, and
+    /// those a loop closure moved, are fused now (the loop's steps leave that to a view), so
+    /// a later call pays only for what is new.
+    fn merged_cloud<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let slam = &mut self.inner;
         let cloud = py
-            .detach(|| self.inner.merged_cloud())
+            .detach(|| {
+                slam.settle_map()?;
+                slam.merged_cloud()
+            })
             .map_err(sdem_error)?;
         Ok(points_array(py, &cloud, |p| [p.x, p.y, p.z]))
     }
