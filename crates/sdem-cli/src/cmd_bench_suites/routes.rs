@@ -84,16 +84,8 @@ struct KittiPart {
 pub(super) fn parse_routes(names: &[String]) -> Result<Vec<RouteKind>> {
     (names.iter())
         .map(|name| {
-            RouteKind::ALL
-                .into_iter()
-                .find(|k| k.name() == name.trim())
-                .with_context(|| {
-                    let known: Vec<&str> = RouteKind::ALL.iter().map(|k| k.name()).collect();
-                    format!(
-                        "--route {name}: no such route of --suite routes (its routes: {})",
-                        known.join(", ")
-                    )
-                })
+            (name.trim().parse())
+                .with_context(|| format!("--route {name}: no such route of --suite routes"))
         })
         .collect()
 }

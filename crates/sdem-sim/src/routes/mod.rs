@@ -95,6 +95,24 @@ impl RouteKind {
     }
 }
 
+impl std::str::FromStr for RouteKind {
+    type Err = Error;
+
+    /// The kind named `text` (as [`RouteKind::name`] gives it).
+    fn from_str(text: &str) -> Result<Self> {
+        RouteKind::ALL
+            .into_iter()
+            .find(|k| k.name() == text)
+            .ok_or_else(|| {
+                let known: Vec<&str> = RouteKind::ALL.iter().map(|k| k.name()).collect();
+                Error::Invalid(format!(
+                    "unknown route {text:?}; the routes are {}",
+                    known.join(", ")
+                ))
+            })
+    }
+}
+
 /// What happened to the robot on the way to a stop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]

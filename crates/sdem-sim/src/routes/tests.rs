@@ -101,6 +101,18 @@ fn a_board_hides_half_the_view_of_a_blocked_stop() {
 }
 
 #[test]
+fn a_route_kind_is_found_by_its_name_and_an_unknown_name_lists_them() {
+    for kind in RouteKind::ALL {
+        assert_eq!(kind.name().parse::<RouteKind>().unwrap(), kind);
+    }
+    let e = "stairs".parse::<RouteKind>().unwrap_err().to_string();
+    assert!(
+        e.contains("stairs") && e.contains("long-steps") && e.contains("second-run"),
+        "{e}"
+    );
+}
+
+#[test]
 fn a_second_run_starts_inside_the_first_runs_map() {
     let r = route(RouteKind::SecondRun, 2, &coarse()).unwrap();
     let map_run = r.map_run.as_ref().unwrap();
