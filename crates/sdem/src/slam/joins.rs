@@ -224,8 +224,8 @@ impl Slam {
         })
     }
 
-    /// Node `node`'s scan (its points, one per S-DEM cell, `points`) as the loop takes a scan: its roll
-    /// and pitch as its segment's estimate has them, with its reading's σ.
+    /// Node `node`'s scan (its points, one per S-DEM cell, `points`) as the loop takes a scan:
+    /// its roll and pitch as its segment's estimate has them, with its reading's σ.
     fn scan_of<'p>(&self, node: usize, points: &'p [crate::geometry::Vec3]) -> ScanInput<'p> {
         let n = &self.map.nodes[node];
         let a = attitude_of(&n.world_from_sensor);
