@@ -544,10 +544,10 @@ impl ConeTerm {
         }
     }
 
-    /// The smallest [`Self::term`] over the [`LANES`] cells from `start` on (those from `valid`
-    /// on count `τ²`), one array per quantity, so that it is vectorized.
+    /// The [`Self::term`]s of the [`LANES`] cells from `start` on (those from `valid` on count
+    /// `τ²`), one array per quantity, so that it is vectorized.
     #[inline(always)]
-    fn lanes_min(&self, rows: &PlaneRows, start: usize, valid: usize) -> f32 {
+    fn lanes(&self, rows: &PlaneRows, start: usize, valid: usize) -> [f32; LANES] {
         let lane = |v: &[f32]| -> [f32; LANES] {
             v[start..start + LANES].try_into().expect("LANES cells")
         };
@@ -558,19 +558,25 @@ impl ConeTerm {
             let t = self.term([nx[j], ny[j], nz[j]], d[j], lo[j], hi[j]);
             out[j] = if j < valid { t } else { self.truncation_sq };
         }
-        let mut width = LANES;
-        while width > 1 {
-            width /= 2;
-            for j in 0..width {
-                out[j] = if out[j + width] < out[j] {
-                    out[j + width]
-                } else {
-                    out[j]
-                };
-            }
-        }
-        out[0]
+        out
     }
+}
+
+/// The smallest of `lanes`, by halving (so that it stays in vector registers).
+#[inline(always)]
+fn lanes_min(mut out: [f32; LANES]) -> f32 {
+    let mut width = LANES;
+    while width > 1 {
+        width /= 2;
+        for j in 0..width {
+            out[j] = if out[j + width] < out[j] {
+                out[j + width]
+            } else {
+                out[j]
+            };
+        }
+    }
+    out[0]
 }
 
 /// Cones of up to this many cells are bounded cell by cell, from each cell's plane; larger ones
@@ -644,18 +650,24 @@ fn reach_bound(tables: &RangeTables, planes: &crate::sdem::CellSurfaces, g: &Rea
         );
     }
     // Columns a0..=a1 of a row are one run of the stored row (see `PlaneRows`).
+    // The cells' terms are kept lane by lane over the whole cone, and the lanes brought to one
+    // at its end: a row of a small cone is one run of lanes, and bringing each run to one
+    // was a tenth of the bound's instructions.
     let len = (a1 - a0 + 1) as usize;
+    let mut lowest = [best; LANES];
     for e in e0..=e1 {
         let row = e as usize * rows.stride + a0 as usize;
         for k in (0..len).step_by(LANES) {
-            let t = p.lanes_min(rows, row + k, len - k);
-            best = if t < best { t } else { best };
+            let t = p.lanes(rows, row + k, len - k);
+            for j in 0..LANES {
+                lowest[j] = if t[j] < lowest[j] { t[j] } else { lowest[j] };
+            }
         }
-        if best == 0.0 {
+        if lowest.iter().any(|&v| v == 0.0) {
             return (0.0, estimate);
         }
     }
-    (best, estimate)
+    (lanes_min(lowest), estimate)
 }
 
 #[cfg(test)]
