@@ -663,7 +663,7 @@ fn reach_bound(tables: &RangeTables, planes: &crate::sdem::CellSurfaces, g: &Rea
                 lowest[j] = if t[j] < lowest[j] { t[j] } else { lowest[j] };
             }
         }
-        if lowest.iter().any(|&v| v == 0.0) {
+        if lowest.contains(&0.0) {
             return (0.0, estimate);
         }
     }
