@@ -652,7 +652,7 @@ fn reach_bound(tables: &RangeTables, planes: &crate::sdem::CellSurfaces, g: &Rea
     // Columns a0..=a1 of a row are one run of the stored row (see `PlaneRows`).
     // The cells' terms are kept lane by lane over the whole cone, and the lanes brought to one
     // at its end: a row of a small cone is one run of lanes, and bringing each run to one
-    // was a tenth of the bound's instructions.
+    // cost 10 M of the bound's 364 M instructions a bench pair (callgrind).
     let len = (a1 - a0 + 1) as usize;
     let mut lowest = [best; LANES];
     for e in e0..=e1 {
