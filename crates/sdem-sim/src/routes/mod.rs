@@ -32,8 +32,8 @@
 mod run;
 
 pub use run::{
-    relocalize_every_stop, run_route, RelocalizationOutcome, RouteOutcome, RouteStopOutcome,
-    RELOCALIZED_WITHIN_M,
+    relocalize_every_stop, run_route, truth_from_map, RelocalizationOutcome, RouteOutcome,
+    RouteStopOutcome, RELOCALIZED_WITHIN_M,
 };
 
 use crate::odometry::{simulate_odometry, OdometryNoise};

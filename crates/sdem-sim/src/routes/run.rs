@@ -34,9 +34,10 @@ pub struct RouteStopOutcome {
     pub status: StepStatus,
     /// The segment it ended in.
     pub segment: usize,
-    /// Its position's error at the end, in the world frame (no alignment), metres; a second
-    /// run's stop's in the first run's frame (the estimate aligned to the truth by the first
-    /// run's stops alone).
+    /// Its position's error at the end in the map's frame, metres: the estimate aligned to the
+    /// truth by every stop, as the ATE is (the world frame is where the first stop's compass
+    /// put it, and a reading 2° off there turns the whole map, 35 cm at 10 m); a second run's
+    /// stop's in the first run's frame (aligned by the first run's stops alone).
     pub error_m: f64,
     /// Wall time of its step, ms.
     pub time_ms: f64,
@@ -55,9 +56,8 @@ pub struct RouteOutcome {
     pub stops: usize,
     /// Absolute trajectory error after the best rigid alignment, RMSE over every stop, metres.
     pub ate_rmse_m: f64,
-    /// The largest position error of a stop, metres: with no alignment (the world frame is the
-    /// first stop's, as the truth's) over every stop; for a second run over its own stops, in
-    /// the first run's frame (aligned by the first run's stops alone).
+    /// The largest position error of a stop in the map's frame ([`RouteStopOutcome::error_m`]),
+    /// metres: over every stop; for a second run over its own stops, in the first run's frame.
     pub max_error_m: f64,
     /// Segments at the end (1: everything in the world's frame).
     pub segments: usize,
@@ -119,7 +119,7 @@ pub fn run_route(
     let errors = trajectory_errors(&truth, &poses)?;
     let scored_run = runs.len() - 1;
     let mut stops_detail: Vec<RouteStopOutcome> = (reports.iter())
-        .zip(&errors.unaligned_position_errors_m)
+        .zip(&errors.position_errors_m)
         .map(|((run, index, event, report), &error_m)| RouteStopOutcome {
             run: *run,
             index: *index,
@@ -222,35 +222,69 @@ fn closure_counts(
 pub struct RelocalizationOutcome {
     /// Scans relocalized: one at each stop of the map.
     pub scans: usize,
-    /// Found and trusted within [`RELOCALIZED_WITHIN_M`] of the truth.
+    /// Found and trusted within [`RELOCALIZED_WITHIN_M`] of the truth, in the map's frame
+    /// ([`truth_from_map`]).
     pub right: usize,
     /// Reported as not found.
     pub not_found: usize,
     /// Found with doubts (not trusted).
     pub doubtful: usize,
-    /// Trusted but farther than [`RELOCALIZED_WITHIN_M`] from the truth: the target is none.
+    /// Trusted but farther than [`RELOCALIZED_WITHIN_M`] from the truth in the map's frame: the
+    /// target is none.
     pub wrong_trusted: usize,
     /// Time per scan: median and largest, ms.
     pub time_ms_median: f64,
     /// See `time_ms_median`.
     pub time_ms_max: f64,
-    /// The error of each trusted result, metres (`None`: not found or doubtful).
+    /// The error of each trusted result in the map's frame, metres (`None`: not found or
+    /// doubtful).
     pub errors_m: Vec<Option<f64>>,
 }
 
-/// Relocalizes, without a prior, a fresh scan at each stop of the run that made `slam`'s map
-/// (`run`, whose stops are the map's nodes in order): the same pose, the sensor's noise drawn
-/// anew from `seed`, the gyro/compass reading given with the heading searched in full.
+/// Where the truth sees the frame of a map whose nodes are `poses`, in `segments`, made at the
+/// stops whose truth is `truth` (in order): the alignment of the world segment's nodes (the
+/// first node's) to their truth, as the ATE's. A map's world frame is where its first stop put
+/// it: a compass reading 2° off there turns the whole map by 2°, 35 cm at 10 m, and a scan
+/// relocalized right in that map lies as far from the truth.
 ///
 /// # Errors
-/// The relocalization's errors other than "not found".
+/// `poses`, `segments` and `truth` of different lengths, or no node.
+pub fn truth_from_map(poses: &[Pose], segments: &[usize], truth: &[Pose]) -> Result<Pose> {
+    if poses.len() != truth.len() || segments.len() != poses.len() || poses.is_empty() {
+        return Err(Error::Invalid(format!(
+            "a map of {} nodes ({} segments given) cannot be aligned to {} stops",
+            poses.len(),
+            segments.len(),
+            truth.len()
+        )));
+    }
+    let world: Vec<usize> = (0..poses.len())
+        .filter(|&i| segments[i] == segments[0])
+        .collect();
+    let pick = |v: &[Pose]| world.iter().map(|&i| v[i]).collect::<Vec<Pose>>();
+    alignment(&pick(truth), &pick(poses))
+}
+
+/// Relocalizes, without a prior, a fresh scan at each of the first `scans` stops of the run
+/// that made `slam`'s map (`run`, whose stops are the map's nodes in order): the same pose, the
+/// sensor's noise drawn anew from `seed`, the gyro/compass reading given with the heading
+/// searched in full. A pose found in the world's segment is scored in the map's frame
+/// ([`truth_from_map`]); one found in another segment, in its own frame as it is.
+///
+/// # Errors
+/// The relocalization's errors other than "not found"; a map whose nodes are not the run's
+/// stops.
 pub fn relocalize_every_stop(
     route: &SimRoute,
     route_config: &super::RouteConfig,
     slam: &Slam,
     seed: u64,
+    scans: usize,
 ) -> Result<RelocalizationOutcome> {
     let run = route.map_run.as_ref().unwrap_or(&route.run);
+    let segments: Vec<usize> = slam.map.nodes.iter().map(|n| n.segment).collect();
+    let truth: Vec<Pose> = run.stops.iter().map(|s| s.world_from_sensor).collect();
+    let map_frame = truth_from_map(&slam.poses(), &segments, &truth)?;
     let config = slam.config();
     let sensor = &route_config.sensor;
     let mut outcome = RelocalizationOutcome {
@@ -264,7 +298,7 @@ pub fn relocalize_every_stop(
         errors_m: Vec::new(),
     };
     let mut times = Vec::new();
-    for (i, stop) in run.stops.iter().enumerate() {
+    for (i, stop) in run.stops.iter().enumerate().take(scans) {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(1_000 + i as u64);
         let scene = &route.scene;
@@ -290,6 +324,11 @@ pub fn relocalize_every_stop(
         match found {
             Ok(found) if found.trusted => {
                 let pose = Pose::from(&found.world_from_sensor);
+                let pose = if segments[found.node_id] == segments[0] {
+                    map_frame * pose
+                } else {
+                    pose
+                };
                 let error =
                     (pose.translation.vector - stop.world_from_sensor.translation.vector).norm();
                 outcome.errors_m.push(Some(error));
