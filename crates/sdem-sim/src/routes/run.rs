@@ -177,11 +177,7 @@ fn measure_in_first_runs_frame(
     stops: &mut [RouteStopOutcome],
     scored_run: usize,
 ) -> Result<()> {
-    let earlier: Vec<usize> = (0..stops.len())
-        .filter(|&i| stops[i].run < scored_run)
-        .collect();
-    let pick = |v: &[Pose]| earlier.iter().map(|&i| v[i]).collect::<Vec<Pose>>();
-    let frame = alignment(&pick(truth), &pick(poses))?;
+    let frame = alignment_of(truth, poses, |i| stops[i].run < scored_run)?;
     for (i, stop) in stops.iter_mut().enumerate() {
         if stop.run == scored_run {
             let placed = frame * poses[i];
@@ -258,10 +254,14 @@ pub fn truth_from_map(poses: &[Pose], segments: &[usize], truth: &[Pose]) -> Res
             truth.len()
         )));
     }
-    let world: Vec<usize> = (0..poses.len())
-        .filter(|&i| segments[i] == segments[0])
-        .collect();
-    let pick = |v: &[Pose]| world.iter().map(|&i| v[i]).collect::<Vec<Pose>>();
+    alignment_of(truth, poses, |i| segments[i] == segments[0])
+}
+
+/// The alignment ([`alignment`]) of the estimate's `poses` to their `truth` over the indices
+/// `keep` keeps alone.
+fn alignment_of(truth: &[Pose], poses: &[Pose], keep: impl Fn(usize) -> bool) -> Result<Pose> {
+    let kept: Vec<usize> = (0..poses.len()).filter(|&i| keep(i)).collect();
+    let pick = |v: &[Pose]| kept.iter().map(|&i| v[i]).collect::<Vec<Pose>>();
     alignment(&pick(truth), &pick(poses))
 }
 
