@@ -183,9 +183,7 @@ impl Upkeep {
                 && in_world(map, id)
                 && self.fusion.fused_pose(id).is_none()
             {
-                let sensor = as_vectors(&self.residency.points_of(map, id)?);
-                self.fusion
-                    .add(id, &map.nodes[id].world_from_sensor, &sensor)?;
+                fuse_first(&mut self.fusion, &self.residency, map, &[id])?;
             }
         }
         Ok(())
@@ -301,11 +299,7 @@ impl Upkeep {
             return Ok(0);
         }
         let waiting = self.waiting(map);
-        for &id in &waiting {
-            let sensor = as_vectors(&self.residency.points_of(map, id)?);
-            self.fusion
-                .add(id, &map.nodes[id].world_from_sensor, &sensor)?;
-        }
+        fuse_first(&mut self.fusion, &self.residency, map, &waiting)?;
         let poses: Vec<Pose> = map.nodes.iter().map(|n| n.world_from_sensor).collect();
         let mut stale = self.fusion.stale(
             &poses,
@@ -341,12 +335,24 @@ impl Upkeep {
             return Ok(self.fusion.to_voxel_map());
         }
         let mut fusion = self.fusion.clone();
-        for id in waiting {
-            let sensor = as_vectors(&self.residency.points_of(map, id)?);
-            fusion.add(id, &map.nodes[id].world_from_sensor, &sensor)?;
-        }
+        fuse_first(&mut fusion, &self.residency, map, &waiting)?;
         Ok(fusion.to_voxel_map())
     }
+}
+
+/// Fuses the nodes `ids` of `map`, none fused yet, into `fusion` at their current poses (their
+/// points from memory or read back from the store).
+fn fuse_first(
+    fusion: &mut VoxelFusion,
+    residency: &Residency,
+    map: &Map,
+    ids: &[usize],
+) -> Result<()> {
+    for &id in ids {
+        let sensor = as_vectors(&residency.points_of(map, id)?);
+        fusion.add(id, &map.nodes[id].world_from_sensor, &sensor)?;
+    }
+    Ok(())
 }
 
 /// Whether node `id` is in the world's segment (node 0's).
