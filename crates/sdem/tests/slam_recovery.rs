@@ -192,6 +192,38 @@ fn a_scan_is_relocalized_in_a_saved_map_without_a_prior_or_reported_not_found() 
 }
 
 #[test]
+fn a_place_seen_twice_is_a_rival_though_places_after_a_match_are_pruned() {
+    let (slam, _) = six_stop_map();
+    let fresh = stops(&[1.2]).remove(0);
+    let points = fresh.sweep.points_in_sensor();
+    let attitude = Some(fresh.sweep.mean_attitude());
+    let config = slam.config();
+    // Found in the map as it is.
+    let found = relocalize(&slam.map, config, &points, attitude, None, 6).unwrap();
+    assert!(found.trusted, "{found:?}");
+    // The same building again 30 m away: a rival as good as the match, searched after it and
+    // so at the share of cells a rival needs, which must not hide it; the scan is then not
+    // found rather than found in one of the two.
+    let mut twice = slam.map.clone();
+    let count = twice.nodes.len();
+    for node in slam.map.nodes.iter() {
+        let mut copy = node.clone();
+        copy.node_id += count;
+        copy.world_from_sensor.translation.vector += Vec3::new(30.0, 0.0, 0.0);
+        twice.nodes.push(copy);
+    }
+    match relocalize(&twice, config, &points, attitude, None, 6) {
+        Err(Error::NotFound { tried }) => assert!(
+            tried
+                .iter()
+                .any(|(_, why)| why.contains("compares almost as well")),
+            "{tried:?}"
+        ),
+        other => panic!("a place seen twice came out as {other:?}"),
+    }
+}
+
+#[test]
 fn a_second_run_starts_with_no_pose_and_is_relocalized_into_the_map() {
     let (mut slam, _) = six_stop_map();
     slam.begin_run();

@@ -87,6 +87,25 @@ pub(super) const FINE_RECENTRES: usize = 2;
 /// loop closure needs (the coarse grid's cost lies above the basin's bottom).
 pub(super) const NO_PRIOR_SEARCH_SHARE: f64 = 0.75;
 
+/// A place searched for a rival to a match taken at another place ([`MapSearch::find_in_map`])
+/// is pruned on the coarse grid at twice the cost a rival may have there. In units of each
+/// grid's `τ²`, a place's coarse optimum cost at most its fine optimum's plus 0.06 on the 73
+/// places searched for 18 relocalizations of the route bench's `revisit` map (1.08–1.15 times
+/// it where over 0.15): this doubles the fine cost's share and this adds twice 0.06.
+pub(super) const RIVAL_COARSE_EXCESS: f64 = 0.12;
+
+/// A place searched over every heading ([`MapSearch::search_every_heading`]): the nodes whose
+/// points are merged (seen from the first one's origin), the window's centre (world) and
+/// half-size, and the share of its cells a match there must at least find on the coarse grid
+/// (0: what a match without a prior needs).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct EveryHeading<'n> {
+    pub nodes: &'n [usize],
+    pub centre: Vec3,
+    pub half: [f64; 3],
+    pub min_inlier_fraction: f64,
+}
+
 /// How far a compass reading may be off near steel, degrees (the fault bench's disturbed
 /// compass: up to ±20°): the widest heading window around a compass.
 pub(super) const DISTURBED_COMPASS_DEG: f64 = 25.0;
@@ -344,18 +363,22 @@ impl MapSearch<'_> {
     pub(super) fn search_every_heading(
         &self,
         scan: &ScanInput,
-        nodes: &[usize],
-        centre: &Vec3,
-        half: [f64; 3],
+        place: &EveryHeading,
         source: PredictionSource,
         attempts: &mut Vec<Attempt>,
     ) -> Result<Option<(Matched, bool)>> {
         let start = Instant::now();
+        let EveryHeading {
+            nodes,
+            centre,
+            half,
+            ..
+        } = *place;
         let origin = self.map.nodes[nodes[0]].position();
         let references: Vec<(usize, usize)> = nodes.iter().map(|&n| (n, 0)).collect();
         let prediction = Prediction {
             source,
-            position: *centre,
+            position: centre,
             attitude: scan.attitude.unwrap_or_default(),
             heading_prior: HeadingPrior::LastNode,
             heading_half: 180.0,
@@ -365,7 +388,7 @@ impl MapSearch<'_> {
             measured: false,
         };
         let mut attempt = Attempt::new(&prediction, &references);
-        let coarse = self.localize_every_heading(scan, nodes, &origin, centre, half);
+        let coarse = self.localize_every_heading(scan, place, &origin);
         let outcome = match coarse.and_then(|found| {
             let coarse = matched_from(&found, origin, references.clone(), &prediction, ms(start));
             // The fine search levels the scan by the coarse match's roll and pitch.
@@ -393,18 +416,16 @@ impl MapSearch<'_> {
     }
 
     /// `sdem::localize` of the scan (its reading with the heading unknown, or no reading)
-    /// against the merged points of `nodes` around `origin` (world axes, level), on the coarse
-    /// grid, with the runner-up search and no refinement.
+    /// against the merged points of the place's nodes around `origin` (world axes, level), on
+    /// the coarse grid, with the runner-up search and no refinement.
     fn localize_every_heading(
         &self,
         scan: &ScanInput,
-        nodes: &[usize],
+        place: &EveryHeading,
         origin: &Vec3,
-        centre: &Vec3,
-        half: [f64; 3],
     ) -> Result<Localization> {
         let grid = &self.config.sdem;
-        let points: Vec<Point3<f64>> = (nodes.iter())
+        let points: Vec<Point3<f64>> = (place.nodes.iter())
             .flat_map(|&n| self.map.nodes[n].points_in_world())
             .map(|p| Point3::from(p - origin))
             .collect();
@@ -426,17 +447,16 @@ impl MapSearch<'_> {
         let query = crate::scan::Scan::with_grid(&query_points, unknown_heading, grid)?;
         let base = &self.config.localize;
         let options = LocalizeOptions {
-            window: SearchWindow::around(&(centre - origin), half),
+            window: SearchWindow::around(&(place.centre - origin), place.half),
             step_m: base.step_m.max(COARSE_STEP_M),
             refine: false,
             runner_up: true,
             // Without a prior a match needs as many inliers as a loop closure: the coarse grid
             // prunes what falls well short of it.
             cost: CostConfig {
-                min_inlier_fraction: base
-                    .cost
-                    .min_inlier_fraction
-                    .max(NO_PRIOR_SEARCH_SHARE * self.config.loop_closure.min_inlier_fraction),
+                min_inlier_fraction: self
+                    .no_prior_inlier_fraction()
+                    .max(place.min_inlier_fraction),
                 truncation_m: base.cost.truncation_m.max(COARSE_TRUNCATION_M),
                 ..base.cost.clone()
             },
@@ -460,23 +480,43 @@ impl MapSearch<'_> {
         let recovery = &self.config.recovery;
         let count = max_candidates.unwrap_or(recovery.relocalize_candidates);
         let candidates = self.place_candidates(scan, &keep, count)?;
+        let ratio = self.config.localize.ambiguous_cost_ratio;
         let mut results: Vec<Matched> = Vec::new();
         let mut rivals: Vec<Matched> = Vec::new();
         for (node, distance) in candidates {
-            let place = self.map.nearby_in_segment(
+            let nodes = self.map.nearby_in_segment(
                 node,
                 recovery.relocalize_radius_m,
                 recovery.relocalize_place_nodes,
             );
-            let centre = self.map.nodes[node].position();
-            if let Some((matched, taken)) = self.search_every_heading(
+            // A place searched after a match was taken elsewhere matters only as its rival.
+            let taken_best = (results.iter()).min_by(|a, b| a.cost.total_cmp(&b.cost));
+            let rival_needs = (taken_best.map(|best| self.rival_inlier_fraction(best.cost)))
+                .filter(|&needs| needs > self.no_prior_inlier_fraction())
+                .unwrap_or(0.0);
+            let place = EveryHeading {
+                nodes: &nodes,
+                centre: self.map.nodes[node].position(),
+                half: recovery.relocalize_window_half_m,
+                min_inlier_fraction: rival_needs,
+            };
+            let found = self.search_every_heading(
                 scan,
                 &place,
-                &centre,
-                recovery.relocalize_window_half_m,
                 PredictionSource::Relocalization,
                 attempts,
-            )? {
+            )?;
+            if let Some(a) = attempts.last_mut() {
+                if found.is_none() && rival_needs > 0.0 {
+                    let best = taken_best.map_or(0, |b| b.references[0].0);
+                    a.reason = format!(
+                        "no rival to the match at node {best}: nothing here matches {:.0} % of \
+                         the cells on the coarse grid, as a rival would",
+                        rival_needs * 100.0,
+                    );
+                }
+            }
+            if let Some((matched, taken)) = found {
                 if let Some(a) = attempts.last_mut() {
                     a.descriptor_distance = Some(distance);
                 }
@@ -490,7 +530,6 @@ impl MapSearch<'_> {
         let Some(best) = results.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
             return Ok(None);
         };
-        let ratio = self.config.localize.ambiguous_cost_ratio;
         let segment_of = |m: &Matched| self.map.nodes[m.references[0].0].segment;
         let elsewhere = |m: &Matched| {
             let apart =
@@ -521,6 +560,24 @@ impl MapSearch<'_> {
         }
         let segment = segment_of(best);
         Ok(Some(found(best.clone(), StepStatus::Relocalized, segment)))
+    }
+
+    /// The share of its cells a place must match on the coarse grid to rival a match of fine
+    /// cost `best_cost`, as the search's cost cap ([`CostConfig::max_match_cost`]; 0 when any
+    /// share could): a rival costs at most the ambiguity ratio × `best_cost` at its fine
+    /// optimum, and on the coarse grid at most twice that (in units of each grid's `τ²`) plus
+    /// [`RIVAL_COARSE_EXCESS`].
+    fn rival_inlier_fraction(&self, best_cost: f64) -> f64 {
+        let fine = &self.config.localize.cost;
+        let share = self.config.localize.ambiguous_cost_ratio * best_cost
+            / (fine.truncation_m * fine.truncation_m);
+        (1.0 - 2.0 * share - RIVAL_COARSE_EXCESS).max(0.0)
+    }
+
+    /// The share of its cells a match without a prior must find on the coarse grid.
+    fn no_prior_inlier_fraction(&self) -> f64 {
+        let base = self.config.localize.cost.min_inlier_fraction;
+        base.max(NO_PRIOR_SEARCH_SHARE * self.config.loop_closure.min_inlier_fraction)
     }
 
     /// The nodes `keep` allows, most alike to the scan first by place descriptor over every

@@ -10,8 +10,8 @@
 //! found nowhere starts a new map segment ([`super::Slam::add_scan`]).
 
 use super::map_search::{
-    found, keep_best, nearest, same_nodes, Located, MapSearch, Matched, DISTURBED_COMPASS_DEG,
-    WIDE_MIN_INLIERS,
+    found, keep_best, nearest, same_nodes, EveryHeading, Located, MapSearch, Matched,
+    DISTURBED_COMPASS_DEG, WIDE_MIN_INLIERS,
 };
 use super::predictions::Prediction;
 use super::step::{Attempt, PredictionSource, StepStatus};
@@ -373,11 +373,15 @@ impl Slam {
         let centre = self.map.nodes[last].position();
         let recent = self.recent_nodes(segment, last);
         let nodes = nearest(&self.map, &recent, &centre, recovery.every_heading_nodes);
+        let place = EveryHeading {
+            nodes: &nodes,
+            centre,
+            half: recovery.max_window_half_m,
+            min_inlier_fraction: 0.0,
+        };
         let found = self.search().search_every_heading(
             scan,
-            &nodes,
-            &centre,
-            recovery.max_window_half_m,
+            &place,
             PredictionSource::EveryHeading,
             attempts,
         )?;
