@@ -632,6 +632,30 @@ impl<'a> Correlator<'a> {
         }
     }
 
+    /// [`Self::evaluate`] with the query turned by a whole rotation (`rotation`: its tilt as well
+    /// as its heading, about the levelled axes) instead of a heading alone: the cost about a
+    /// refined pose, whose tilt the query's attitude reading did not give. The virtual-S-DEM
+    /// model takes the rotation's heading only.
+    pub fn evaluate_turned(
+        &mut self,
+        offset: &Vec3,
+        rotation: &nalgebra::UnitQuaternion<f64>,
+    ) -> Option<Correlation> {
+        match self.model {
+            CostModel::Projective => {
+                let m = rotation.to_rotation_matrix().into_inner().cast::<f32>();
+                match self.evaluate_projective(offset, &m, f64::INFINITY) {
+                    Capped::Scored(c) => Some(c),
+                    Capped::Above(_) | Capped::NoOverlap => None,
+                }
+            }
+            CostModel::VirtualSdem => {
+                let (_, _, yaw) = rotation.euler_angles();
+                self.evaluate_virtual(offset, &yaw_matrix(yaw))
+            }
+        }
+    }
+
     /// [`Self::evaluate_capped`], saying why there is no score: above the cap (with the mean
     /// cost reached when the sum was cut short, a lower bound on the full cost), or too little
     /// overlap.

@@ -500,10 +500,18 @@ pub(crate) fn localize_below(
     } else {
         None
     };
-    let mut cost_at = |offset: Vec3| {
-        correlator
-            .evaluate(&offset, grid_heading)
-            .map_or(f64::INFINITY, |c| c.cost)
+    // Eq. (1) about the grid optimum (`false`: at its heading, the query levelled by its
+    // reading) or about the refined pose (`true`: turned by the refined rotation, its tilt as
+    // well as its heading; at the reading's tilt the cost has its minimum elsewhere when the
+    // refinement corrected it, and under `sdem bench --faults`' gyro drift half the right poses
+    // came out flat there).
+    let mut cost_at = |offset: Vec3, refined: bool| {
+        let scored = if refined {
+            correlator.evaluate_turned(&offset, &rotation)
+        } else {
+            correlator.evaluate(&offset, grid_heading)
+        };
+        scored.map_or(f64::INFINITY, |c| c.cost)
     };
     let (diagnostics, mut doubts) = diagnose(
         config,

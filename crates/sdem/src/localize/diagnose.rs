@@ -19,7 +19,7 @@ pub(super) fn diagnose(
     runner_up: Option<(f64, Vec3, f64)>,
     refinement: Option<&Refinement>,
     refine_error: Option<&str>,
-    cost_at: &mut dyn FnMut(Vec3) -> f64,
+    cost_at: &mut dyn FnMut(Vec3, bool) -> f64,
 ) -> (Diagnostics, Vec<Doubt>) {
     let known = query_known.max(1) as f64;
     let inlier_fraction = best.inliers as f64 / known;
@@ -56,28 +56,50 @@ pub(super) fn diagnose(
             flat.get_or_insert(w);
         }
     }
-    // The cost's shape is probed about the grid optimum, or, on a grid as coarse as half the
-    // probe's distance (a LiDAR's), about the refined offset: the grid optimum may then lie half
-    // a step from the cost's minimum, so that one probe lies nearer the minimum than it does.
-    // (On a 25 cm grid a street pair came out flat across the street, its cost 25 cm to one
-    // side no higher than at the grid optimum.)
-    let (centre, centre_cost) = match refinement {
-        Some(r) if config.step_m >= 0.25 * config.peak_radius_m => {
-            let centre = r.reference_level_from_query_level.translation.vector;
-            (centre, cost_at(centre))
-        }
-        _ => (best_offset, best.cost),
-    };
-    cost_shape(
-        config,
-        centre_cost,
-        centre,
-        eigen.as_ref(),
-        cost_at,
-        &mut weakest,
-        &mut flat,
-        &mut doubts,
-    );
+    // The cost's shape is probed about the refined pose (with its tilt and heading), where there
+    // is one, and about the grid optimum the search found; flat about either is a doubt. About
+    // the refined pose: on the 2 cm grid a refined pose 8.6 cm from a wrong grid optimum (moved
+    // rubble) lay on a slope of eq. (1) that the grid optimum hid. About the grid optimum: in a
+    // corridor the refinement slides along the axis to where the two scans' samplings coincide,
+    // a minimum of their pattern, not of the scene, while the grid optimum shows the valley flat.
+    // On a grid as coarse as half the probe's distance (a LiDAR's) only the refined pose is
+    // probed: the grid optimum may lie half a step from the cost's minimum, so that one probe
+    // lies nearer the minimum than it does (on a 25 cm grid a street pair came out flat across
+    // the street).
+    let before = doubts.len();
+    if let Some(r) = refinement {
+        let centre = r.reference_level_from_query_level.translation.vector;
+        let centre_cost = cost_at(centre, true);
+        let mut about_refined = |o: Vec3| cost_at(o, true);
+        cost_shape(
+            config,
+            centre_cost,
+            centre,
+            eigen.as_ref(),
+            &mut about_refined,
+            &mut weakest,
+            &mut flat,
+            &mut doubts,
+        );
+    }
+    let flat_found = doubts[before..]
+        .iter()
+        .any(|d| matches!(d, Doubt::FlatCost { .. }));
+    let coarse = config.step_m >= 0.25 * config.peak_radius_m;
+    let probe_grid = refinement.is_none() || !coarse;
+    if probe_grid && !flat_found {
+        let mut about_grid = |o: Vec3| cost_at(o, false);
+        cost_shape(
+            config,
+            best.cost,
+            best_offset,
+            eigen.as_ref(),
+            &mut about_grid,
+            &mut weakest,
+            &mut flat,
+            &mut doubts,
+        );
+    }
     // Too little in common, or the points did not confirm the grid's answer: on the fault
     // bench's failures (a query 0.45 m away seeing little of what the reference saw) 14–21 % of
     // the points matched, or the grid optimum was 10 cm off and the refinement refused to follow
@@ -178,6 +200,12 @@ fn cost_shape(
             (rise, *v)
         })
         .collect();
+    if std::env::var("SDEM_PROBE").is_ok() {
+        eprintln!(
+            "PROBE centre {:?} cost {:.4e} rises {:?}",
+            best_offset, best_cost, rises
+        );
+    }
     let flattest = rises
         .iter()
         .cloned()
