@@ -200,12 +200,6 @@ fn cost_shape(
             (rise, *v)
         })
         .collect();
-    if std::env::var("SDEM_PROBE").is_ok() {
-        eprintln!(
-            "PROBE centre {:?} cost {:.4e} rises {:?}",
-            best_offset, best_cost, rises
-        );
-    }
     let flattest = rises
         .iter()
         .cloned()
