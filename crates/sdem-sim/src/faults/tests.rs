@@ -39,8 +39,8 @@ fn the_ditch_mouth_pairs_with_lost_returns_are_localized() {
 /// moved pieces make the cost prefer it), and the refinement stops 8.6 cm from it where eq. (1)
 /// does not rise along one direction. Probed about the refined pose, the match says so instead
 /// of passing as certain, as the loop's tracking (no runner-up search) would take it. Under gyro
-/// drift the refinement tilts the query by 1–2.7° against its reading; probed in the cost of
-/// the query levelled again by that tilt, right poses are not ambiguous (probed at the
+/// drift the refinement tilts the query by 1–2.7° against its reading; probed with the query
+/// turned by the refined rotation, tilt included, right poses are not ambiguous (probed at the
 /// reading's tilt, about half of them came out flat).
 #[test]
 fn a_wrong_pose_under_moved_rubble_is_flagged_and_tilt_corrected_ones_are_not() {

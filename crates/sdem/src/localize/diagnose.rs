@@ -9,7 +9,8 @@ use nalgebra::{Matrix6, SymmetricEigen, UnitQuaternion, Vector3, U3};
 
 /// The diagnostics of a match (overlap, runner-up, covariance) and its doubts. `refinement` is
 /// the 6-DoF refinement's result when it converged; `refine_error` says why it failed, when it
-/// was asked for and did.
+/// was asked for and did. `cost_at(offset, refined)` is eq. (1) at `offset` with the query turned
+/// by the refined rotation (`true`) or by the grid optimum's heading (`false`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn diagnose(
     config: &LocalizeOptions,

@@ -91,7 +91,8 @@ pub(super) const NO_PRIOR_SEARCH_SHARE: f64 = 0.75;
 /// is pruned on the coarse grid at twice the cost a rival may have there. In units of each
 /// grid's `τ²`, a place's coarse optimum cost at most its fine optimum's plus 0.06 on the 73
 /// places searched for 18 relocalizations of the route bench's `revisit` map (1.08–1.15 times
-/// it where over 0.15): this doubles the fine cost's share and this adds twice 0.06.
+/// it where over 0.15). The cap doubles the fine cost's share and adds this, twice the 0.06
+/// measured.
 pub(super) const RIVAL_COARSE_EXCESS: f64 = 0.12;
 
 /// A place searched over every heading ([`MapSearch::search_every_heading`]): the nodes whose
@@ -480,7 +481,6 @@ impl MapSearch<'_> {
         let recovery = &self.config.recovery;
         let count = max_candidates.unwrap_or(recovery.relocalize_candidates);
         let candidates = self.place_candidates(scan, &keep, count)?;
-        let ratio = self.config.localize.ambiguous_cost_ratio;
         let mut results: Vec<Matched> = Vec::new();
         let mut rivals: Vec<Matched> = Vec::new();
         for (node, distance) in candidates {
@@ -530,6 +530,7 @@ impl MapSearch<'_> {
         let Some(best) = results.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
             return Ok(None);
         };
+        let ratio = self.config.localize.ambiguous_cost_ratio;
         let segment_of = |m: &Matched| self.map.nodes[m.references[0].0].segment;
         let elsewhere = |m: &Matched| {
             let apart =
