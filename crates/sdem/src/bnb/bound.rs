@@ -639,12 +639,12 @@ fn reach_bound(tables: &RangeTables, planes: &crate::sdem::CellSurfaces, g: &Rea
     if cone_cells > MAX_CONE_CELLS {
         // Too many cells to visit: whether any gate near the cone reaches the members' ranges
         // (if none does, every cell costs τ²), else 0.
-        let (min, max) = tables.window(e0 as usize, e1 as usize, a0 as usize, a1 as usize);
+        let cone = (e0 as usize, e1 as usize, a0 as usize, a1 as usize);
         return (
-            if min > r_hi || max < r_lo {
-                truncation_sq
-            } else {
+            if tables.reaches(cone, r_lo, r_hi) {
                 0.0
+            } else {
+                truncation_sq
             },
             estimate,
         );

@@ -111,18 +111,30 @@ impl RangeTables {
         Some(e as usize * self.n_az + a as usize)
     }
 
-    /// `(min, max)` of the gates over (at least) rows `e0..=e1` and columns `a0..=a1` (columns
-    /// may run past `n_az` on a full circle; `a1 < width`); `(∞, −∞)` where every cell is
-    /// unknown.
-    pub(super) fn window(&self, e0: usize, e1: usize, a0: usize, a1: usize) -> (f32, f32) {
+    /// Whether any gate over (at least) rows `e0..=e1` and columns `a0..=a1` (columns may run
+    /// past `n_az` on a full circle; `a1 < width`) reaches a range in `r_lo..=r_hi`: whether the
+    /// span `(min lo, max hi)` of their gates meets it. It stops at the first block at which the
+    /// span meets it: the span only grows block by block, so that is the whole window's answer.
+    /// A box of relocalization (±2 m, every heading) makes cones of most of the sphere, a few
+    /// thousand blocks, and the first few nearly always answer.
+    pub(super) fn reaches(
+        &self,
+        (e0, e1, a0, a1): (usize, usize, usize, usize),
+        r_lo: f32,
+        r_hi: f32,
+    ) -> bool {
         let mut acc = EMPTY;
         for be in e0 / BLOCK..=e1 / BLOCK {
             let row = &self.blocks[be * self.block_columns..][..self.block_columns];
             for &b in &row[a0 / BLOCK..=a1 / BLOCK] {
                 acc = merge(acc, b);
+                if acc.0 <= r_hi && acc.1 >= r_lo {
+                    return true;
+                }
             }
         }
-        acc
+        // Also where a range is NaN, as `!(min > r_hi || max < r_lo)` over the whole window.
+        !(acc.0 > r_hi || acc.1 < r_lo)
     }
 }
 
@@ -180,5 +192,75 @@ impl PlaneRows {
                 }
             });
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Attitude, Vec3};
+    use rand::{Rng, SeedableRng};
+
+    /// The span of the gates over every block the window touches, read to the end.
+    fn span(t: &RangeTables, (e0, e1, a0, a1): (usize, usize, usize, usize)) -> (f32, f32) {
+        let mut acc = EMPTY;
+        for be in e0 / BLOCK..=e1 / BLOCK {
+            for ba in a0 / BLOCK..=a1 / BLOCK {
+                acc = merge(acc, t.blocks[be * t.block_columns + ba]);
+            }
+        }
+        acc
+    }
+
+    /// Stopping at the first block whose span meets the ranges gives the answer of the whole
+    /// window, for windows small and large and ranges that do and do not meet it.
+    #[test]
+    fn reaches_answers_as_the_whole_windows_span() {
+        // A room with a box in it, seen from inside: gates from under a metre to a few.
+        let mut points = Vec::new();
+        for i in -40..=40 {
+            for j in -40..=40 {
+                let (u, v) = (i as f64 * 0.05, j as f64 * 0.05);
+                for p in [
+                    [2.0, u, v],
+                    [-1.5, u, v],
+                    [u, 1.7, v],
+                    [u, v, 1.1],
+                    [u, v, -0.4],
+                ] {
+                    points.push(Vec3::new(p[0], p[1], p[2]));
+                }
+                points.push(Vec3::new(0.8 + 0.2 * u, -0.9, 0.2 * v));
+            }
+        }
+        let cfg = crate::sdem::SdemConfig::default();
+        let sdem = Sdem::from_points(&points, &Attitude::default(), &cfg).unwrap();
+        let t = RangeTables::new(&sdem);
+        let width = t.block_columns * BLOCK;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let (mut met, mut missed) = (0, 0);
+        for _ in 0..20_000 {
+            let e0 = rng.random_range(0..t.n_el);
+            let e1 = rng.random_range(e0..t.n_el);
+            let a0 = rng.random_range(0..t.n_az);
+            let a1 = rng.random_range(a0..(a0 + t.n_az).min(width));
+            let r_lo = rng.random_range(0.0..5.0f32);
+            let r_hi = r_lo + rng.random_range(0.0..1.0f32);
+            let window = (e0, e1, a0, a1);
+            let (min, max) = span(&t, window);
+            let expected = !(min > r_hi || max < r_lo);
+            assert_eq!(
+                t.reaches(window, r_lo, r_hi),
+                expected,
+                "window {window:?}, ranges {r_lo}..{r_hi}, span {min}..{max}"
+            );
+            if expected {
+                met += 1;
+            } else {
+                missed += 1;
+            }
+        }
+        assert!(met > 1_000 && missed > 1_000, "{met} met, {missed} missed");
+        assert!(t.reaches((0, 0, 0, 0), f32::NAN, f32::NAN));
     }
 }
