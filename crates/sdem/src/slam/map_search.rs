@@ -98,13 +98,15 @@ pub(super) const RIVAL_COARSE_EXCESS: f64 = 0.12;
 /// A place searched over every heading ([`MapSearch::search_every_heading`]): the nodes whose
 /// points are merged (seen from the first one's origin), the window's centre (world) and
 /// half-size, and the share of its cells a match there must at least find on the coarse grid
-/// (0: what a match without a prior needs).
+/// (0: what a match without a prior needs), with the node of the match taken elsewhere that
+/// this share comes from when the place is searched only as its rival.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct EveryHeading<'n> {
     pub nodes: &'n [usize],
     pub centre: Vec3,
     pub half: [f64; 3],
     pub min_inlier_fraction: f64,
+    pub rival_of: Option<usize>,
 }
 
 /// How far a compass reading may be off near steel, degrees (the fault bench's disturbed
@@ -405,7 +407,18 @@ impl MapSearch<'_> {
                 attempt.record(&matched, reason);
                 Some((matched, attempt.accepted))
             }
-            Err(e) if e.is_no_match() || matches!(e, Error::TooFewPoints { .. }) => {
+            Err(e) if e.is_no_match() => {
+                attempt.reason = match place.rival_of {
+                    Some(taken) => format!(
+                        "no rival to the match at node {taken}: nothing here matches {:.0} % of \
+                         the cells on the coarse grid, as a rival would",
+                        place.min_inlier_fraction * 100.0,
+                    ),
+                    None => e.to_string(),
+                };
+                None
+            }
+            Err(e) if matches!(e, Error::TooFewPoints { .. }) => {
                 attempt.reason = e.to_string();
                 None
             }
@@ -499,6 +512,7 @@ impl MapSearch<'_> {
                 centre: self.map.nodes[node].position(),
                 half: recovery.relocalize_window_half_m,
                 min_inlier_fraction: rival_needs,
+                rival_of: (taken_best.map(|b| b.references[0].0)).filter(|_| rival_needs > 0.0),
             };
             let found = self.search_every_heading(
                 scan,
@@ -506,16 +520,6 @@ impl MapSearch<'_> {
                 PredictionSource::Relocalization,
                 attempts,
             )?;
-            if let Some(a) = attempts.last_mut() {
-                if found.is_none() && rival_needs > 0.0 {
-                    let best = taken_best.map_or(0, |b| b.references[0].0);
-                    a.reason = format!(
-                        "no rival to the match at node {best}: nothing here matches {:.0} % of \
-                         the cells on the coarse grid, as a rival would",
-                        rival_needs * 100.0,
-                    );
-                }
-            }
             if let Some((matched, taken)) = found {
                 if let Some(a) = attempts.last_mut() {
                     a.descriptor_distance = Some(distance);

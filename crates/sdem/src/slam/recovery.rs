@@ -378,6 +378,7 @@ impl Slam {
             centre,
             half: recovery.max_window_half_m,
             min_inlier_fraction: 0.0,
+            rival_of: None,
         };
         let found = self.search().search_every_heading(
             scan,
