@@ -671,7 +671,41 @@ impl<'a> Correlator<'a> {
         }
     }
 
+    /// Eq. (1) of the query moved by `rotation` and `offset` against the reference's cell
+    /// planes, stopped once its sum passes `cap`. Compiled twice, as the exact search's bound
+    /// is: for the baseline x86-64 the build targets and for AVX2 (eight lanes to the
+    /// directions' binning), chosen at run time; both compute the same values, bit for bit (the
+    /// same operations in the same order, no fused multiply-add).
     fn evaluate_projective(&mut self, offset: &Vec3, rotation: &Matrix3<f32>, cap: f64) -> Capped {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has just been found to support AVX2.
+            return unsafe { self.evaluate_projective_avx2(offset, rotation, cap) };
+        }
+        self.evaluate_projective_any(offset, rotation, cap)
+    }
+
+    /// [`Self::evaluate_projective`] with AVX2 instructions.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn evaluate_projective_avx2(
+        &mut self,
+        offset: &Vec3,
+        rotation: &Matrix3<f32>,
+        cap: f64,
+    ) -> Capped {
+        self.evaluate_projective_any(offset, rotation, cap)
+    }
+
+    /// [`Self::evaluate_projective`]'s body, inlined into each of its builds with the binning
+    /// of the moved points ([`crate::sdem::GridSpec::cells_of`]).
+    #[inline(always)]
+    fn evaluate_projective_any(
+        &mut self,
+        offset: &Vec3,
+        rotation: &Matrix3<f32>,
+        cap: f64,
+    ) -> Capped {
         let prior = self.prior_cost(offset);
         let grid = self.reference.grid();
         let surfaces = self.reference.surfaces();
@@ -696,7 +730,7 @@ impl<'a> Correlator<'a> {
                 my[i] = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
                 mz[i] = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
             }
-            grid.cells_of(
+            grid.cells_of_any(
                 &mx[start..end],
                 &my[start..end],
                 &mz[start..end],
