@@ -297,9 +297,22 @@ impl Map {
             .map(|n| {
                 let mut seen = vec![false; ranges.len()];
                 let mut matching = 0usize;
-                for p in n.points_in_world() {
-                    let q = p - origin;
-                    if let Some((cell, r)) = spec.cell_of([q.x as f32, q.y as f32, q.z as f32]) {
+                // Binned a chunk at a time (`GridSpec::cells_of`: vectorized, the same cells
+                // and ranges as `cell_of`): a LiDAR node holds 30,000 points or more.
+                const CHUNK: usize = 1024;
+                let (mut xs, mut ys, mut zs) = ([0f32; CHUNK], [0f32; CHUNK], [0f32; CHUNK]);
+                let (mut cells, mut rs) = ([0u32; CHUNK], [0f32; CHUNK]);
+                for chunk in n.points_in_world().chunks(CHUNK) {
+                    let k = chunk.len();
+                    for (i, p) in chunk.iter().enumerate() {
+                        let q = p - origin;
+                        (xs[i], ys[i], zs[i]) = (q.x as f32, q.y as f32, q.z as f32);
+                    }
+                    spec.cells_of(&xs[..k], &ys[..k], &zs[..k], &mut cells[..k], &mut rs[..k]);
+                    for (&cell, &r) in cells[..k].iter().zip(&rs[..k]) {
+                        if cell == u32::MAX {
+                            continue;
+                        }
                         let c = cell as usize;
                         let rq = ranges[c];
                         if !seen[c] && rq.is_finite() && (rq - r).abs() <= tolerance_m as f32 {
