@@ -673,9 +673,9 @@ impl<'a> Correlator<'a> {
 
     /// Eq. (1) of the query moved by `rotation` and `offset` against the reference's cell
     /// planes, stopped once its sum passes `cap`. Compiled twice, as the exact search's bound
-    /// is: for the baseline x86-64 the build targets and for AVX2 (eight lanes to the
-    /// directions' binning), chosen at run time; both compute the same values, bit for bit (the
-    /// same operations in the same order, no fused multiply-add).
+    /// is: for the baseline x86-64 the build targets and for AVX2 (eight lanes where the moved
+    /// points are binned into cells), chosen at run time; both compute the same values, bit for
+    /// bit (the same operations in the same order, no fused multiply-add).
     fn evaluate_projective(&mut self, offset: &Vec3, rotation: &Matrix3<f32>, cap: f64) -> Capped {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") {
