@@ -802,3 +802,68 @@ impl<'a> Correlator<'a> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Attitude;
+    use crate::sdem::SdemConfig;
+
+    /// The build chosen at run time (AVX2 where the processor has it) and the baseline build
+    /// score every candidate alike, bit for bit, capped or not.
+    #[test]
+    fn both_builds_of_the_cost_score_alike() {
+        let mut room = Vec::new();
+        for i in -40..=40 {
+            for j in -40..=40 {
+                let (u, v) = (i as f64 * 0.05, j as f64 * 0.05);
+                for p in [
+                    [2.0, u, v],
+                    [-1.5, u, v],
+                    [u, 1.7, v],
+                    [u, v, 1.1],
+                    [u, v, -0.4],
+                ] {
+                    room.push(Vec3::new(p[0], p[1], p[2]));
+                }
+                room.push(Vec3::new(0.8 + 0.2 * u, -0.9, 0.2 * v));
+            }
+        }
+        let cfg = SdemConfig::default();
+        let level = Attitude::default();
+        let reference = Sdem::from_points(&room, &level, &cfg).unwrap();
+        let moved: Vec<Vec3> = room
+            .iter()
+            .map(|p| p - Vec3::new(0.1, -0.05, 0.02))
+            .collect();
+        let query = Sdem::from_points(&moved, &level, &cfg).unwrap();
+        let mut correlator = Correlator::new(&reference, &query, &CostConfig::default()).unwrap();
+        let (mut scored, mut above) = (0, 0);
+        for k in 0..400 {
+            let t = k as f64;
+            let offset = Vec3::new(
+                0.1 + 0.2 * (0.37 * t).sin(),
+                -0.05 + 0.2 * (0.53 * t).cos(),
+                0.02 + 0.05 * (0.71 * t).sin(),
+            );
+            let m = yaw_matrix(0.1 * (0.29 * t).sin());
+            let cap = if k % 2 == 0 { f64::INFINITY } else { 5e-4 };
+            let any = correlator.evaluate_projective_any(&offset, &m, cap);
+            let chosen = correlator.evaluate_projective(&offset, &m, cap);
+            assert_eq!(
+                format!("{chosen:?}"),
+                format!("{any:?}"),
+                "offset {offset:?}"
+            );
+            match chosen {
+                Capped::Scored(_) => scored += 1,
+                Capped::Above(_) => above += 1,
+                Capped::NoOverlap => {}
+            }
+        }
+        assert!(
+            scored > 50 && above > 50,
+            "{scored} scored, {above} above the cap"
+        );
+    }
+}

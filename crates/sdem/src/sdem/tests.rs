@@ -84,15 +84,24 @@ fn batch_binning_equals_cell_of() {
         let xs: Vec<f32> = pts.iter().map(|p| p[0]).collect();
         let ys: Vec<f32> = pts.iter().map(|p| p[1]).collect();
         let zs: Vec<f32> = pts.iter().map(|p| p[2]).collect();
-        let mut cells = vec![0; pts.len()];
-        let mut ranges = vec![0.0; pts.len()];
-        spec.cells_of(&xs, &ys, &zs, &mut cells, &mut ranges);
-        for (i, p) in pts.iter().enumerate() {
-            match spec.cell_of(*p) {
-                Some((c, r)) => {
-                    assert_eq!((cells[i], ranges[i].to_bits()), (c, r.to_bits()), "{p:?}")
+        // The build chosen at run time (AVX2 where the processor has it) and the baseline one.
+        for baseline in [false, true] {
+            let mut cells = vec![0; pts.len()];
+            let mut ranges = vec![0.0; pts.len()];
+            if baseline {
+                spec.cells_of_any(&xs, &ys, &zs, &mut cells, &mut ranges);
+            } else {
+                spec.cells_of(&xs, &ys, &zs, &mut cells, &mut ranges);
+            }
+            for (i, p) in pts.iter().enumerate() {
+                match spec.cell_of(*p) {
+                    Some((c, r)) => assert_eq!(
+                        (cells[i], ranges[i].to_bits()),
+                        (c, r.to_bits()),
+                        "{p:?}, baseline build {baseline}"
+                    ),
+                    None => assert_eq!(cells[i], u32::MAX, "{p:?}, baseline build {baseline}"),
                 }
-                None => assert_eq!(cells[i], u32::MAX, "{p:?}"),
             }
         }
     }
