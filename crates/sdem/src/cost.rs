@@ -813,22 +813,7 @@ mod tests {
     /// score every candidate alike, bit for bit, capped or not.
     #[test]
     fn both_builds_of_the_cost_score_alike() {
-        let mut room = Vec::new();
-        for i in -40..=40 {
-            for j in -40..=40 {
-                let (u, v) = (i as f64 * 0.05, j as f64 * 0.05);
-                for p in [
-                    [2.0, u, v],
-                    [-1.5, u, v],
-                    [u, 1.7, v],
-                    [u, v, 1.1],
-                    [u, v, -0.4],
-                ] {
-                    room.push(Vec3::new(p[0], p[1], p[2]));
-                }
-                room.push(Vec3::new(0.8 + 0.2 * u, -0.9, 0.2 * v));
-            }
-        }
+        let room = crate::test_scenes::room(0.05);
         let cfg = SdemConfig::default();
         let level = Attitude::default();
         let reference = Sdem::from_points(&room, &level, &cfg).unwrap();

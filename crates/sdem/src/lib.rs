@@ -79,6 +79,8 @@ pub mod search;
 pub mod sensor;
 pub mod slam;
 pub mod store;
+#[cfg(test)]
+mod test_scenes;
 pub mod voxel;
 
 pub use doubt::Doubt;

@@ -198,7 +198,7 @@ impl PlaneRows {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{Attitude, Vec3};
+    use crate::geometry::Attitude;
     use rand::{Rng, SeedableRng};
 
     /// The span of the gates over every block the window touches, read to the end.
@@ -216,23 +216,7 @@ mod tests {
     /// window, for windows small and large and ranges that do and do not meet it.
     #[test]
     fn reaches_answers_as_the_whole_windows_span() {
-        // A room with a box in it, seen from inside: gates from under a metre to a few.
-        let mut points = Vec::new();
-        for i in -40..=40 {
-            for j in -40..=40 {
-                let (u, v) = (i as f64 * 0.05, j as f64 * 0.05);
-                for p in [
-                    [2.0, u, v],
-                    [-1.5, u, v],
-                    [u, 1.7, v],
-                    [u, v, 1.1],
-                    [u, v, -0.4],
-                ] {
-                    points.push(Vec3::new(p[0], p[1], p[2]));
-                }
-                points.push(Vec3::new(0.8 + 0.2 * u, -0.9, 0.2 * v));
-            }
-        }
+        let points = crate::test_scenes::room(0.05);
         let cfg = crate::sdem::SdemConfig::default();
         let sdem = Sdem::from_points(&points, &Attitude::default(), &cfg).unwrap();
         let t = RangeTables::new(&sdem);

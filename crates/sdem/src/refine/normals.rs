@@ -237,24 +237,7 @@ mod tests {
     use super::*;
     use crate::geometry::Attitude;
     use crate::sdem::SdemConfig;
-
-    /// A box-shaped room with a pillar, sampled every 2 cm.
-    fn room() -> Vec<Vec3> {
-        let mut points = Vec::new();
-        for i in -100i32..=100 {
-            for j in -100..=100 {
-                let (u, v) = (i as f64 * 0.02, j as f64 * 0.02);
-                let walls = [[2.0, u, v], [-1.5, u, v], [u, 1.7, v], [u, -1.3, v]];
-                for p in walls.into_iter().chain([[u, v, 1.1], [u, v, -0.4]]) {
-                    points.push(Vec3::new(p[0], p[1], p[2]));
-                }
-                if i.abs() <= 10 {
-                    points.push(Vec3::new(0.8 + u, 0.5, 0.3 * v));
-                }
-            }
-        }
-        points
-    }
+    use crate::test_scenes::room;
 
     /// A deterministic scatter in [-1, 1).
     fn jitter(k: usize) -> f64 {
@@ -267,7 +250,7 @@ mod tests {
     #[test]
     fn the_cone_of_cells_finds_the_point_the_tree_finds() {
         let sdem =
-            Sdem::from_points(&room(), &Attitude::default(), &SdemConfig::default()).unwrap();
+            Sdem::from_points(&room(0.02), &Attitude::default(), &SdemConfig::default()).unwrap();
         let normals = SurfaceNormals::new(&sdem, 2);
         let (grid, points) = (sdem.grid(), sdem.surface_points());
         let (mut compared, mut in_cone, mut paired) = (0, 0, 0);
