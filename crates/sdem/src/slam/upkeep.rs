@@ -17,6 +17,7 @@ use crate::map::{Descriptor, Map};
 use crate::posegraph::{optimize_local, Edge, LocalSolve, OptimizeConfig, PoseGraph};
 use crate::store::{NodeStore, Residency};
 use crate::voxel::{VoxelConfig, VoxelFusion, VoxelMap};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
@@ -341,19 +342,43 @@ impl Upkeep {
 }
 
 /// Fuses the nodes `ids` of `map`, none fused yet, into `fusion` at their current poses (their
-/// points from memory or read back from the store).
+/// points from memory or read back from the store). Many nodes at once (a map settled for the
+/// first time, or loaded) are fused in one contiguous share per thread, each into a fusion of
+/// its own, and the shares' counts summed in order ([`VoxelFusion::absorb`]): the same map as
+/// one by one, in about half the time on 2 cores.
 fn fuse_first(
     fusion: &mut VoxelFusion,
     residency: &Residency,
     map: &Map,
     ids: &[usize],
 ) -> Result<()> {
-    for &id in ids {
-        let sensor = as_vectors(&residency.points_of(map, id)?);
-        fusion.add(id, &map.nodes[id].world_from_sensor, &sensor)?;
+    let fuse = |fusion: &mut VoxelFusion, ids: &[usize]| -> Result<()> {
+        for &id in ids {
+            let sensor = as_vectors(&residency.points_of(map, id)?);
+            fusion.add(id, &map.nodes[id].world_from_sensor, &sensor)?;
+        }
+        Ok(())
+    };
+    let threads = rayon::current_num_threads();
+    if threads < 2 || ids.len() < PARALLEL_FUSION_NODES {
+        return fuse(fusion, ids);
+    }
+    let shares: Vec<Result<VoxelFusion>> = ids
+        .par_chunks(ids.len().div_ceil(threads))
+        .map(|share| {
+            let mut part = VoxelFusion::new(*fusion.config())?;
+            fuse(&mut part, share)?;
+            Ok(part)
+        })
+        .collect();
+    for part in shares {
+        fusion.absorb(part?)?;
     }
     Ok(())
 }
+
+/// The least nodes [`fuse_first`] shares among threads: fewer are fused one by one, on one.
+const PARALLEL_FUSION_NODES: usize = 8;
 
 /// Whether node `id` is in the world's segment (node 0's).
 fn in_world(map: &Map, id: usize) -> bool {
