@@ -349,6 +349,18 @@ mod tests {
         points
     }
 
+    /// Four poses a `step` and `turn_deg` of heading apart, 1 cm up and a little tilted.
+    fn poses_along(step: Vec3, turn_deg: f64) -> Vec<Pose> {
+        (0..4)
+            .map(|k| {
+                pose_from_parts(
+                    step * k as f64 + Vec3::new(0.0, 0.0, 0.01),
+                    Attitude::from_degrees(0.5, -0.3, turn_deg * k as f64),
+                )
+            })
+            .collect()
+    }
+
     fn as_sorted(map: &VoxelMap) -> Vec<(VoxelKey, u32)> {
         let mut v: Vec<(VoxelKey, u32)> = map.iter().map(|(k, l)| (k, l.to_bits())).collect();
         v.sort_unstable();
@@ -358,14 +370,7 @@ mod tests {
     #[test]
     fn a_node_moved_is_the_node_fused_at_its_new_pose_in_the_first_place() {
         let config = VoxelConfig::default();
-        let poses: Vec<Pose> = (0..4)
-            .map(|k| {
-                pose_from_parts(
-                    Vec3::new(0.1 * k as f64, 0.03 * k as f64, 0.01),
-                    Attitude::from_degrees(0.5, -0.3, 7.0 * k as f64),
-                )
-            })
-            .collect();
+        let poses = poses_along(Vec3::new(0.1, 0.03, 0.0), 7.0);
         let points = scan();
         let mut fusion = VoxelFusion::new(config).unwrap();
         for (id, pose) in poses.iter().enumerate() {
@@ -408,14 +413,7 @@ mod tests {
     #[test]
     fn fusions_of_two_shares_of_the_nodes_summed_are_the_fusion_of_all() {
         let config = VoxelConfig::default();
-        let poses: Vec<Pose> = (0..4)
-            .map(|k| {
-                pose_from_parts(
-                    Vec3::new(0.4 * k as f64, 0.05 * k as f64, 0.01),
-                    Attitude::from_degrees(0.3, -0.2, 9.0 * k as f64),
-                )
-            })
-            .collect();
+        let poses = poses_along(Vec3::new(0.4, 0.05, 0.0), 9.0);
         let points = scan();
         let fused = |ids: &[usize]| {
             let mut fusion = VoxelFusion::new(config).unwrap();
