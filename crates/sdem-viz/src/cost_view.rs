@@ -69,8 +69,9 @@ pub fn sample_cost_slice(
             2 * half_count + 1
         )));
     }
-    // Checks the grids and the configuration once, before the workers.
-    Correlator::new(reference, query, cost)?;
+    // Made once (it chooses the compared points, several passes over a LiDAR scan's) and
+    // cloned for each worker.
+    let correlator = Correlator::new(reference, query, cost)?;
     let axis = |c: f64| -> Vec<f64> {
         (-half_count..=half_count)
             .map(|k| c + k as f64 * step_m)
@@ -80,16 +81,18 @@ pub fn sample_cost_slice(
     let y_m = axis(optimum.y);
     let rows: Vec<Vec<Option<f64>>> = y_m
         .par_iter()
-        .map(|&y| {
-            let mut correlator = Correlator::new(reference, query, cost).expect("checked above");
-            x_m.iter()
-                .map(|&x| {
-                    correlator
-                        .evaluate(&Vec3::new(x, y, optimum.z), heading_rad)
-                        .map(|c| c.cost)
-                })
-                .collect()
-        })
+        .map_init(
+            || correlator.clone(),
+            |correlator, &y| {
+                x_m.iter()
+                    .map(|&x| {
+                        correlator
+                            .evaluate(&Vec3::new(x, y, optimum.z), heading_rad)
+                            .map(|c| c.cost)
+                    })
+                    .collect()
+            },
+        )
         .collect();
     Ok(CostSlice {
         x_m,
