@@ -27,6 +27,13 @@ struct Counts {
     stamp: u32,
 }
 
+impl Counts {
+    /// Whether some scan reached the voxel (a hit or a miss counted).
+    fn known(&self) -> bool {
+        self.hits > 0 || self.misses > 0
+    }
+}
+
 #[derive(Debug, Clone)]
 struct CountBlock {
     block_key: VoxelKey,
@@ -148,7 +155,7 @@ impl VoxelFusion {
         self.passes = self.passes.max(other.passes);
         for block in other.blocks {
             let Some(&position) = self.block_index.get(&Key(block.block_key)) else {
-                let known = block.cells.iter().filter(|c| c.hits > 0 || c.misses > 0);
+                let known = block.cells.iter().filter(|c| c.known());
                 self.known += known.count();
                 self.block_index
                     .insert(Key(block.block_key), self.blocks.len() as u32);
@@ -157,10 +164,10 @@ impl VoxelFusion {
             };
             let cells = self.blocks[position as usize].cells.iter_mut();
             for (mine, theirs) in cells.zip(block.cells.iter()) {
-                if theirs.hits == 0 && theirs.misses == 0 {
+                if !theirs.known() {
                     continue;
                 }
-                if mine.hits == 0 && mine.misses == 0 {
+                if !mine.known() {
                     self.known += 1;
                 }
                 mine.hits += theirs.hits;
@@ -252,7 +259,7 @@ impl VoxelFusion {
 
     /// `clamp(hits · l_hit + misses · l_miss)`, `None` for a voxel no scan reached.
     fn cell_log_odds(&self, c: &Counts) -> Option<f32> {
-        if c.hits == 0 && c.misses == 0 {
+        if !c.known() {
             return None;
         }
         let l = f64::from(c.hits) * self.config.hit_log_odds
@@ -302,7 +309,7 @@ impl VoxelFusion {
                     return;
                 }
                 cell.stamp = stamp;
-                let was_known = cell.hits > 0 || cell.misses > 0;
+                let was_known = cell.known();
                 let count = if is_hit {
                     &mut cell.hits
                 } else {
@@ -314,7 +321,7 @@ impl VoxelFusion {
                     // The same updates as when the scan went in: the count is at least 1.
                     *count -= 1;
                 }
-                let is_known = cell.hits > 0 || cell.misses > 0;
+                let is_known = cell.known();
                 match (was_known, is_known) {
                     (false, true) => *known += 1,
                     (true, false) => *known -= 1,
