@@ -209,9 +209,35 @@ impl SdemConfig {
         if self.min_range_m < 0.0 {
             return Err(Error::Invalid("S-DEM min_range_m must be >= 0".into()));
         }
+        let span_deg = (self.azimuth_max_deg - self.azimuth_min_deg)
+            * (self.elevation_max_deg - self.elevation_min_deg);
+        let cells = span_deg / (self.resolution_deg * self.resolution_deg);
+        if cells > MAX_CELLS as f64 * (1.0 + 1e-9) {
+            // Rounded up to a thousandth of a degree, so that the figure given passes.
+            let finest = ((span_deg / MAX_CELLS as f64).sqrt() * 1e3).ceil() / 1e3;
+            return Err(Error::Invalid(format!(
+                "S-DEM resolution {}° over azimuth {}..{}° and elevation {}..{}° makes {:.3e} \
+                 cells, more than the {MAX_CELLS} an S-DEM may have (a full sphere at 0.1°, \
+                 the finest step a scanner's grid is derived at); use a resolution of at least \
+                 {}° (or thin the scan)",
+                self.resolution_deg,
+                self.azimuth_min_deg,
+                self.azimuth_max_deg,
+                self.elevation_min_deg,
+                self.elevation_max_deg,
+                cells,
+                finest,
+            )));
+        }
         Ok(())
     }
 }
+
+/// The most cells an S-DEM's grid may have: a full sphere at 0.1°, the finest step
+/// [`SdemConfig::for_scan`] derives. Each cell holds a range, a plane and the search's tables
+/// (on the order of a hundred bytes), so a grid of 0.001° (65 billion cells) asked for
+/// hundreds of gigabytes and aborted the process; 6.5 million cells stay under a gigabyte.
+pub const MAX_CELLS: usize = 3600 * 1800;
 
 /// The fraction of the cells of a grid of `resolution_deg` in the band the `directions`
 /// (azimuth in [0, 360), elevation, degrees) cover that are holes: empty, with a known cell

@@ -250,3 +250,37 @@ fn partial_extent_and_bad_configs() {
         assert!(GridSpec::new(&bad).is_err());
     }
 }
+
+/// A grid too fine to hold (a resolution of a thousandth of a degree asked for 65 billion cells
+/// and aborted the process) is refused by name, with the finest resolution that fits; the
+/// finest grid a scan's own step gives (a full sphere at 0.1°) and a band at 0.05° pass.
+#[test]
+fn grids_beyond_the_cell_limit_are_refused_with_the_finest_that_fits() {
+    for resolution_deg in [0.001, 0.05] {
+        let full = SdemConfig {
+            resolution_deg,
+            ..Default::default()
+        };
+        let e = full.validate().unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("resolution {resolution_deg}°")) && e.contains("at least 0.1°"),
+            "{e}"
+        );
+    }
+    let finest_derived = SdemConfig {
+        resolution_deg: 0.1,
+        ..Default::default()
+    };
+    assert!(finest_derived.validate().is_ok());
+    let band = SdemConfig {
+        resolution_deg: 0.05,
+        elevation_min_deg: -25.0,
+        elevation_max_deg: 15.0,
+        ..Default::default()
+    };
+    assert!(band.validate().is_ok());
+    assert_eq!(
+        (360.0 / 0.1 * 180.0 / 0.1f64).round() as usize,
+        super::MAX_CELLS
+    );
+}
