@@ -603,9 +603,20 @@ fn stays_on_edge(
 /// centimetres inside the window is not cut by it.
 const EDGE_MARGIN_M: f64 = 0.02;
 
-/// Rejects a configuration [`localize`] cannot run: an invalid cost, refinement or heading
-/// window, branch-and-bound with a cost other than the projective one, or a step that is not a
-/// positive number.
+impl LocalizeOptions {
+    /// Rejects a configuration [`localize`] cannot run: an invalid cost, refinement or heading
+    /// window, branch-and-bound with a cost other than the projective one, or a step that is
+    /// not a positive number. [`localize`] checks it on every call; a caller that holds the
+    /// options longer (a configuration file, the loop) can check them once up front.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`], naming the setting.
+    pub fn validate(&self) -> Result<()> {
+        validate(self)
+    }
+}
+
+/// See [`LocalizeOptions::validate`].
 fn validate(config: &LocalizeOptions) -> Result<()> {
     config.cost.validate()?;
     config.refinement.validate()?;
@@ -619,7 +630,7 @@ fn validate(config: &LocalizeOptions) -> Result<()> {
     }
     if !(config.step_m.is_finite() && config.step_m > 0.0) {
         return Err(Error::Invalid(format!(
-            "search step {} m must be a positive number",
+            "search step (step_m) {} m must be a positive number",
             config.step_m
         )));
     }

@@ -311,10 +311,11 @@ impl SlamOptions {
         }
     }
 
-    /// Checks the values the loop itself uses (the search, S-DEM and voxel settings check
-    /// themselves when used).
+    /// Checks every setting, the search's, the S-DEM's and the voxel map's included, so that a
+    /// bad one is refused before the first scan rather than at the second.
     pub fn validate(&self) -> Result<()> {
         self.sdem.validate()?;
+        self.localize.validate()?;
         self.voxel.validate()?;
         self.recovery.validate()?;
         self.growth.validate()?;
