@@ -318,3 +318,50 @@ fn a_place_descriptor_recognises_a_place_whichever_way_the_robot_faced() {
     );
     assert!(as_read.is_none_or(|d| d > 0.1), "{as_read:?}");
 }
+
+/// An odometry that claims a step of a kilometre (a glitch, a wrong unit) once grew its window
+/// to billions of candidates and stopped the run with an error about the window. Its window is
+/// capped at the widest a recovery searches, so the other hypotheses take over and the stop is
+/// placed as without odometry.
+#[test]
+fn an_odometry_glitch_of_a_kilometre_is_recovered_from() {
+    let run = stops(&[0.0, 0.35, 0.7]);
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
+    let mut odom = Pose::identity();
+    for (i, stop) in run.iter().enumerate() {
+        let previous = odom;
+        odom = if i == 2 {
+            // The glitch: the odometry jumps 1 km ahead.
+            previous * Pose::translation(1000.0, 0.0, 0.0)
+        } else if i > 0 {
+            previous * (run[i - 1].world_from_sensor.inverse() * stop.world_from_sensor)
+        } else {
+            odom
+        };
+        let report = slam
+            .add_scan(&ScanInput {
+                scan_index: i,
+                points_in_sensor: &stop.sweep.points_in_sensor(),
+                attitude: Some(stop.sweep.mean_attitude()),
+                odometry: (i > 0).then_some(Odometry {
+                    odom_from_sensor: odom,
+                    odom_from_previous_sensor: previous,
+                }),
+            })
+            .expect("a glitch in the odometry is no error");
+        if i == 2 {
+            assert_eq!(
+                report.status,
+                StepStatus::Recovered,
+                "{:?}",
+                report.attempts
+            );
+            let odometry = &report.attempts[0];
+            assert!(!odometry.accepted, "{odometry:?}");
+        }
+    }
+    for (pose, stop) in slam.poses().iter().zip(&run) {
+        let e = error_m(pose, &stop.world_from_sensor);
+        assert!(e < 0.02, "{e} m off");
+    }
+}

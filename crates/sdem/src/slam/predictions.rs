@@ -133,9 +133,17 @@ impl Slam {
             let sigma = config
                 .prior_sigma_m
                 .max(config.odometry_error_per_m * motion.translation.vector.norm());
+            // No wider than the widest window a recovery searches: an odometry that claims a
+            // step of a kilometre (a glitch, a wrong unit) made a window of 2.9 billion
+            // candidates, and the run stopped with an error about the window. Capped, the
+            // prediction simply finds nothing there, and the other hypotheses and the recovery
+            // take over, as after a step the window does not hold.
             let mut window_half = config.window_half_m;
-            for h in &mut window_half[..2] {
-                *h = h.max(2.0 * sigma);
+            for (h, widest) in window_half[..2]
+                .iter_mut()
+                .zip(config.recovery.max_window_half_m)
+            {
+                *h = h.max(2.0 * sigma).min(widest.max(*h));
             }
             all.push(Prediction {
                 source: PredictionSource::Odometry,
