@@ -53,6 +53,9 @@ pub struct Args {
     /// `--suite` and its flags.
     #[command(flatten)]
     suites: crate::cmd_bench_suites::SuiteArgs,
+    /// With --suite scale: write the plot over an existing --plot file (refused without it).
+    #[arg(long, requires = "suite")]
+    force: bool,
 }
 
 impl Args {
@@ -194,8 +197,9 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
     })
 }
 
-/// The seeded pairs of `args` (checked), simulated once for every heading window measured.
-fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
+/// The number of seeded pairs `args` asks for, checked with the search's step: both are
+/// checked before any measurement starts.
+fn pair_count(args: &Args) -> Result<usize> {
     let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
     if count == 0 {
         anyhow::bail!("--pairs must be at least 1");
@@ -203,6 +207,12 @@ fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
     if !(args.step.is_finite() && args.step > 0.0) {
         anyhow::bail!("--step {} must be a positive number of metres", args.step);
     }
+    Ok(count)
+}
+
+/// The seeded pairs of `args` (checked), simulated once for every heading window measured.
+fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
+    let count = pair_count(args)?;
     say(&format!("pairs: simulating {count} seeded pairs ..."));
     Ok(bench_pairs(args.seed, count, &PairConfig::default())?)
 }
@@ -310,7 +320,10 @@ pub fn run(args: Args) -> Result<()> {
     if args.faults {
         return crate::cmd_bench_faults::run(&args.fault_args(), &say);
     }
-    if args.suites.suite.is_some() {
+    if let Some(suite) = args.suites.suite {
+        if suite == crate::cmd_bench_suites::Suite::Scale {
+            crate::cmd_bench_scale::check_plot(&args.suites.plot, args.force)?;
+        }
         let common = crate::cmd_bench_suites::Common {
             quick: args.quick,
             pairs: args.pairs,
@@ -331,6 +344,7 @@ pub fn run(args: Args) -> Result<()> {
 /// Runs the three measurements: the exact search twice, the seeded pairs with and without the
 /// compass, and the pose graph.
 fn measure(args: &Args, say: &dyn Fn(&str)) -> Result<Report> {
+    pair_count(args)?;
     let exact = exact_vs_exhaustive(args.quick, 0.0, say)?;
     // The default heading window; --quick narrows it so the oracle stays short.
     let heading_deg = if args.quick {

@@ -2,8 +2,11 @@
 //! against truth. Results with doubts are labelled as `localize` and `slam` label them, but the
 //! exit status stays 0: the demonstration has the truth to show how far off they are.
 
-use crate::output::{doubts_json, estimate_label, pose_line, print_doubts, print_json};
-use anyhow::{Context, Result};
+use crate::output::{
+    check_output_folder, create_folder, doubts_json, estimate_label, pose_line, print_doubts,
+    print_json,
+};
+use anyhow::{bail, Context, Result};
 use sdem::geometry::{PoseRecord, Vec3};
 use sdem_sim::experiment::{paper_experiment, stop_and_go_run, ExperimentConfig, RunStop, Trial};
 use serde::Serialize;
@@ -13,13 +16,19 @@ use std::path::PathBuf;
 /// Arguments of `sdem demo`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Folder for the outputs (report.json, poses, map.ply, pictures, viewer.html).
-    #[arg(long, default_value = "sdem-demo")]
-    out: PathBuf,
+    /// Folder for the outputs (report.json, poses, map.ply, pictures, viewer.html); a folder
+    /// named here is refused when it already holds any of them (or a map/ folder), unless
+    /// --force. [default: sdem-demo, the demo's own, which each run replaces]
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Write into an --out folder that already holds outputs of an earlier demo (or files of
+    /// the same names): they are replaced; other files are left alone.
+    #[arg(long)]
+    force: bool,
     /// Seed of the scenes, the path and the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Stops of the stop-and-go run (at least 2).
+    /// Stops of the stop-and-go run, 2 to 40 (the simulated building's route holds 40).
     #[arg(long, default_value_t = 8)]
     stops: usize,
     /// Print one JSON object instead of text.
@@ -119,9 +128,58 @@ fn run_report(stops: &[RunStop]) -> RunReport {
     }
 }
 
+/// The files `sdem demo` writes into its folder besides the map's pictures
+/// ([`crate::cmd_view::MAP_PICTURE_FILES`]).
+const OUTPUT_FILES: &[&str] = &[
+    "report.json",
+    "poses.txt",
+    "poses.tum",
+    "poses_truth.txt",
+    "poses_truth.tum",
+    "map.ply",
+];
+
+/// The stops the run may have: two make its first step, and the simulated building's route
+/// holds [`sdem_sim::sim::MAX_STOPS`].
+const STOPS: std::ops::RangeInclusive<usize> = 2..=sdem_sim::sim::MAX_STOPS;
+
+/// Checks the arguments before any work: `--stops` within [`STOPS`], and an `--out` folder
+/// that holds none of the files the demo writes, nor the `map/` of a `sdem slam` output (whose
+/// poses and pictures the demo's would replace), unless `--force`.
+fn check_args(args: &Args) -> Result<()> {
+    if !STOPS.contains(&args.stops) {
+        bail!(
+            "--stops {} must lie in {}..={}: the stop-and-go run needs 2 stops for one step, and \
+             the simulated building's route holds {}",
+            args.stops,
+            STOPS.start(),
+            STOPS.end(),
+            STOPS.end()
+        );
+    }
+    let names: Vec<&str> = OUTPUT_FILES
+        .iter()
+        .chain(crate::cmd_view::MAP_PICTURE_FILES)
+        .copied()
+        .collect();
+    let Some(out) = &args.out else {
+        // The demo's own folder: each run replaces the last one's outputs.
+        return Ok(());
+    };
+    check_output_folder(out, "--out", &names, args.force)?;
+    if !args.force && out.join("map").exists() {
+        bail!(
+            "--out {} holds map/, the saved map of a `sdem slam` run, whose poses and pictures \
+             the demo would replace; choose another --out, or pass --force",
+            out.display()
+        );
+    }
+    Ok(())
+}
+
 /// Writes the run's outputs: estimated and true poses (KITTI + TUM) and the merged map.
 fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> Result<()> {
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    create_folder(out)?;
     let estimates: Vec<_> = stops.iter().map(|s| s.estimate).collect();
     let truths: Vec<_> = stops.iter().map(|s| s.truth).collect();
     sdem_io::write_poses(&out.join("poses.txt"), &estimates)?;
@@ -157,11 +215,22 @@ fn write_outputs(out: &std::path::Path, stops: &[RunStop], report: &Report) -> R
     Ok(())
 }
 
+/// The outputs' folder: `--out`, else the demo's own.
+fn out_folder(args: &Args) -> PathBuf {
+    args.out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(DEFAULT_OUT))
+}
+
+/// The demo's own folder, which each run without `--out` replaces.
+const DEFAULT_OUT: &str = "sdem-demo";
+
 /// Runs `sdem demo`.
 pub fn run(args: Args) -> Result<()> {
+    check_args(&args)?;
     let config = ExperimentConfig {
         seed: args.seed,
-        stops: args.stops.max(2),
+        stops: args.stops,
         ..Default::default()
     };
     if !args.json {
@@ -179,9 +248,9 @@ pub fn run(args: Args) -> Result<()> {
     let report = Report {
         paper_experiment: paper.iter().map(CaseReport::from).collect(),
         run: run_report(&stops),
-        out: args.out.clone(),
+        out: out_folder(&args),
     };
-    write_outputs(&args.out, &stops, &report)?;
+    write_outputs(&out_folder(&args), &stops, &report)?;
     if args.json {
         return print_json(&report);
     }
@@ -264,6 +333,6 @@ fn print_summary(args: &Args, report: &Report) {
     println!(
         "   wrote {}/report.json, poses.txt (+ .tum), poses_truth.txt, map.ply, plan.png, \
          section.png, panorama.png, slice.png, cost.png, viewer.html",
-        args.out.display()
+        out_folder(args).display()
     );
 }

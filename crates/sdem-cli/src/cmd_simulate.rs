@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 /// Arguments of `sdem simulate`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The dataset folder to write.
+    /// The dataset folder to write; refused when it already holds a file a dataset has
+    /// (scans/, attitude.csv, poses_truth.txt, sensor.toml, …), unless --force.
     #[arg(long)]
     out: PathBuf,
     /// Seed of the scene, the path and the noise.
@@ -114,13 +115,36 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Refuses to write over a dataset without `--force`, and a route longer than the scene's.
+/// Refuses, before any work, an `--out` that is a file, one that holds any file or folder of a
+/// dataset (the files simulate writes, and those `--force` clears: `sdem_io::DATASET_ENTRIES`)
+/// without `--force`, and a route longer than the scene's.
 fn check_out_and_stops(args: &Args, route: Option<LongRoute>) -> Result<()> {
-    if args.out.join("scans").exists() && !args.force {
+    if let Some(file) = crate::output::file_in_the_way(&args.out) {
         bail!(
-            "{} already holds a dataset (scans/); choose another --out or pass --force to replace it",
-            args.out.display()
+            "--out {}: {} is a file, not a folder; --out names the dataset folder to write: \
+             choose a folder (a missing one is created)",
+            args.out.display(),
+            file.display()
         );
+    }
+    if !args.force {
+        if args.out.join(sdem_io::SCANS_DIR).exists() {
+            bail!(
+                "{} already holds a dataset (scans/); choose another --out or pass --force to \
+                 replace it",
+                args.out.display()
+            );
+        }
+        let held = (sdem_io::DATASET_ENTRIES.iter())
+            .find(|name| std::fs::symlink_metadata(args.out.join(name)).is_ok());
+        if let Some(name) = held {
+            bail!(
+                "{} already holds {name}, a dataset's file that simulate would overwrite; choose \
+                 another --out, or pass --force to replace the dataset's files (scans/, sweeps/, \
+                 attitude.csv, the pose files, sensor.toml; nothing else)",
+                args.out.display()
+            );
+        }
     }
     if route.is_some() {
         if !(1..=sim::MAX_LONG_STOPS).contains(&args.stops) {

@@ -2,7 +2,7 @@
 //! page. The pictures are drawn by `sdem_viz`; this module reads the inputs and writes files.
 
 use crate::cmd_localize::parse_window;
-use crate::output::print_json;
+use crate::output::{check_output_file, create_folder, print_json};
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
 use sdem::localize::{localize, LocalizeOptions, SearchWindow};
@@ -49,9 +49,12 @@ struct ScanArgs {
     /// The scan's index in the dataset.
     #[arg(long, default_value_t = 0)]
     index: usize,
-    /// The PNG to write.
+    /// The PNG to write (refused when it exists, unless --force).
     #[arg(long)]
     out: PathBuf,
+    /// Write over an existing --out file.
+    #[arg(long)]
+    force: bool,
     /// S-DEM cell size, degrees.
     #[arg(long, default_value_t = 1.0)]
     resolution: f64,
@@ -85,9 +88,12 @@ struct CostArgs {
     /// Index of the scan localized against it.
     #[arg(long)]
     query: usize,
-    /// The PNG to write.
+    /// The PNG to write (refused when it exists, unless --force).
     #[arg(long)]
     out: PathBuf,
+    /// Write over an existing --out file.
+    #[arg(long)]
+    force: bool,
     /// The localization's candidate window, x0:x1,y0:y1,z0:z1 metres [default: the paper's].
     #[arg(long, allow_hyphen_values = true, value_parser = parse_window)]
     window: Option<SearchWindow>,
@@ -101,7 +107,8 @@ struct CostArgs {
     /// Half the side of the square drawn around the optimum, metres.
     #[arg(long, default_value_t = 0.3)]
     extent: f64,
-    /// Sample spacing of the picture, metres.
+    /// Sample spacing of the picture, metres: at least 3 samples across the extent, at most
+    /// 401.
     #[arg(long, default_value_t = 0.01)]
     step: f64,
     /// S-DEM cell size, degrees.
@@ -111,6 +118,17 @@ struct CostArgs {
 
 /// Runs `sdem view`.
 pub fn run(args: Args) -> Result<()> {
+    // Checked before the work: no file a user saved is written over without --force.
+    match &args.what {
+        What::Panorama(scan) | What::Slice(SliceArgs { scan, .. }) => {
+            check_output_file(&scan.out, "--out", scan.force)?;
+        }
+        What::Cost(cost) => {
+            check_output_file(&cost.out, "--out", cost.force)?;
+            check_cost_sampling(cost)?;
+        }
+        What::Map(_) => {}
+    }
     let written = match args.what {
         What::Panorama(scan) => {
             let (sdem, label) = scan_sdem(&scan)?;
@@ -201,6 +219,16 @@ pub fn map_name(dataset: Option<&Path>, out_dir: &Path) -> String {
         .unwrap_or_else(|| "map".into())
 }
 
+/// The files [`write_map_pictures`] writes (`cost.png` only for a map of two nodes or more).
+pub const MAP_PICTURE_FILES: &[&str] = &[
+    "plan.png",
+    "section.png",
+    "panorama.png",
+    "slice.png",
+    "cost.png",
+    "viewer.html",
+];
+
 /// Writes every picture of a map into `out_dir` (created if missing): `plan.png`,
 /// `section.png` (a cut along the trajectory), `viewer.html` (the 3D page), and for the last
 /// node `panorama.png` and `slice.png` (elevation −30°), and `cost.png` (the last node against
@@ -221,8 +249,7 @@ pub fn write_map_pictures(
     cloud: &[Vec3],
     status: &[String],
 ) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    create_folder(out_dir)?;
     let nodes = &map.nodes;
     let world_from_node: Vec<Pose> = nodes.iter().map(|n| n.world_from_sensor).collect();
     let index_of = |node_id: usize| nodes.iter().position(|n| n.node_id == node_id);
@@ -309,8 +336,7 @@ fn write_last_node_pictures(
 /// Writes `image` as a PNG at `path`, creating its folder.
 fn write_png(path: &Path, image: &RgbImage) -> Result<()> {
     if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("cannot create {}", parent.display()))?;
+        create_folder(parent)?;
     }
     let bytes = encode_png(image)?;
     write_atomic(path, |w| w.write_all(&bytes))?;
@@ -421,6 +447,64 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
             ),
         ),
     )
+}
+
+/// Samples a side of the cost picture: at least 3 (a picture, not one flat sample), at most
+/// 401 (as `sdem_viz::sample_cost_slice` allows).
+const COST_SAMPLES: std::ops::RangeInclusive<i64> = 3..=401;
+
+/// Checks `--extent` and `--step` of `sdem view cost` before the localization: positive, and
+/// giving a number of samples across the picture within [`COST_SAMPLES`] (counted as
+/// `sdem_viz::sample_cost_slice` counts them).
+fn check_cost_sampling(args: &CostArgs) -> Result<()> {
+    if !(args.extent.is_finite() && args.extent > 0.0) {
+        bail!(
+            "--extent {} must be a positive number of metres (half the side of the picture, \
+             e.g. 0.3)",
+            args.extent
+        );
+    }
+    if !(args.step.is_finite() && args.step > 0.0) {
+        bail!(
+            "--step {} must be a positive number of metres (the picture's sample spacing, e.g. \
+             0.01)",
+            args.step
+        );
+    }
+    let half_count = (args.extent / args.step).round();
+    let samples = if half_count < 1e9 {
+        2 * half_count as i64 + 1
+    } else {
+        i64::MAX
+    };
+    if !COST_SAMPLES.contains(&samples) {
+        let (low, high) = (COST_SAMPLES.start(), COST_SAMPLES.end());
+        let count = match samples {
+            i64::MAX => "too many samples".to_string(),
+            1 => "1 sample".to_string(),
+            n => format!("{n} samples"),
+        };
+        bail!(
+            "--step {} m over --extent ±{} m gives {count} a side; the picture needs \
+             {low} to {high}: choose a --step between {} and {} m, or another --extent",
+            args.step,
+            args.extent,
+            short_metres(2.0 * args.extent / (*high as f64 - 1.0)),
+            short_metres(2.0 * args.extent / (*low as f64 - 1.0)),
+        );
+    }
+    Ok(())
+}
+
+/// A positive length as short text, four significant digits: `0.0015`, `0.3`, `12.5`.
+fn short_metres(value: f64) -> String {
+    let decimals = (3.0 - value.log10().floor()).clamp(0.0, 20.0) as usize;
+    let text = format!("{value:.decimals$}");
+    if text.contains('.') {
+        text.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        text
+    }
 }
 
 /// The localization `sdem view cost` runs to find the optimum, from the arguments, checked.

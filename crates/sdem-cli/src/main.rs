@@ -110,7 +110,7 @@ fn main() -> ExitCode {
             ExitCode::from(EXIT_DOUBTS)
         }
         Err(error) => {
-            eprintln!("sdem: error: {error:#}");
+            eprintln!("sdem: error: {}", output::error_line(&error));
             ExitCode::from(1)
         }
     }

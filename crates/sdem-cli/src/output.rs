@@ -1,10 +1,11 @@
 //! Printing helpers shared by the commands, and how a command that printed results ended.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, PoseRecord};
 use sdem::Doubt;
 use serde::Serialize;
 use serde_json::Value;
+use std::path::Path;
 
 /// How a command that ran to its end came out; `main` turns it into the exit status.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -101,4 +102,126 @@ pub fn degrees(value: f64) -> String {
 /// Milliseconds elapsed since `start`.
 pub fn elapsed_ms(start: std::time::Instant) -> f64 {
     start.elapsed().as_secs_f64() * 1e3
+}
+
+/// The first of `dir` and the folders above it that exists but is not a folder (a file in the
+/// way of creating `dir`), if any.
+pub fn file_in_the_way(dir: &Path) -> Option<&Path> {
+    dir.ancestors()
+        .filter(|p| !p.as_os_str().is_empty())
+        .find(|p| p.exists() && !p.is_dir())
+}
+
+/// Creates the folder `dir` and those above it; when a file stands in the way, says so (rather
+/// than the operating system's "File exists").
+pub fn create_folder(dir: &Path) -> Result<()> {
+    if let Some(file) = file_in_the_way(dir) {
+        bail!(
+            "cannot create the folder {}: {} is a file, not a folder",
+            dir.display(),
+            file.display()
+        );
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
+}
+
+/// Checks, before any work, that the folder `dir` given by the flag `flag` can take a
+/// command's outputs: it is not a file (nor below one), and unless `force` it holds none of
+/// `names` (files or folders the command writes), so that nothing a user saved is overwritten.
+/// The error names the first such entry and how to go on.
+pub fn check_output_folder(dir: &Path, flag: &str, names: &[&str], force: bool) -> Result<()> {
+    if let Some(file) = file_in_the_way(dir) {
+        bail!(
+            "{flag} {}: {} is a file, not a folder; {flag} names the folder the outputs go \
+             into: choose a folder (a missing one is created)",
+            dir.display(),
+            file.display()
+        );
+    }
+    if force {
+        return Ok(());
+    }
+    if let Some(name) = names.iter().find(|name| exists(&dir.join(name))) {
+        bail!(
+            "{flag} {} already holds {name}, which this command would overwrite; pass --force \
+             to replace it, or choose another {flag}",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+/// Checks, before any work, that the file `path` given by the flag `flag` can be written: it is
+/// not a folder, no file stands where its folder would be, and unless `force` it does not
+/// exist yet, so that nothing a user saved is overwritten.
+pub fn check_output_file(path: &Path, flag: &str, force: bool) -> Result<()> {
+    if path.is_dir() {
+        bail!(
+            "{flag} {} is a folder, not a file: name the file to write, e.g. {}",
+            path.display(),
+            path.join("picture.png").display()
+        );
+    }
+    if let Some(file) = path.parent().and_then(file_in_the_way) {
+        bail!(
+            "{flag} {}: {} is a file, not a folder: choose a path in a folder",
+            path.display(),
+            file.display()
+        );
+    }
+    if !force && exists(path) {
+        bail!(
+            "{flag} {} already exists; pass --force to replace it, or choose another {flag}",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// Whether anything (a file, a folder, even a dangling link) is at `path`.
+fn exists(path: &Path) -> bool {
+    std::fs::symlink_metadata(path).is_ok()
+}
+
+/// An error as one line: its message, then each cause not already part of the message above it
+/// (`sdem_io`'s errors say their OS error in their own message and carry it as their source
+/// too), joined by ": ".
+pub fn error_line(error: &anyhow::Error) -> String {
+    let mut line = String::new();
+    let mut above = String::new();
+    for (i, cause) in error.chain().enumerate() {
+        let text = cause.to_string();
+        if i == 0 {
+            line.clone_from(&text);
+        } else if !above.contains(&text) {
+            line.push_str(": ");
+            line.push_str(&text);
+        }
+        above = text;
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An `sdem_io` I/O error says its OS error in its message and carries it as its source:
+    /// the line says it once, and keeps every context above it.
+    #[test]
+    fn error_line_says_each_cause_once() {
+        let os = std::io::Error::from(std::io::ErrorKind::NotFound);
+        let os_text = os.to_string();
+        let io = sdem_io::Error::io("/proc/x.png", os);
+        let error = anyhow::Error::new(io).context("cannot write the picture");
+        let line = error_line(&error);
+        assert_eq!(line.matches(&os_text).count(), 1, "{line}");
+        assert!(
+            line.starts_with("cannot write the picture: /proc/x.png: "),
+            "{line}"
+        );
+        // A cause that adds something is kept.
+        let error = anyhow::anyhow!("unknown route").context("--route");
+        assert_eq!(error_line(&error), "--route: unknown route");
+    }
 }
