@@ -296,7 +296,7 @@ fn plan_scans(
             .clouds
             .get(&scan.topic)
             .map_or(&[][..], Vec::as_slice);
-        return plan_clouds(scan, entries, options);
+        return plan_clouds(scan, entries, tree, options);
     }
     super::laser::plan_sweeps(
         collected,
@@ -307,7 +307,12 @@ fn plan_scans(
     )
 }
 
-fn plan_clouds(scan: Chosen, entries: &[CloudEntry], options: &BagImportOptions) -> Result<Plan> {
+fn plan_clouds(
+    scan: Chosen,
+    entries: &[CloudEntry],
+    tree: &TfTree,
+    options: &BagImportOptions,
+) -> Result<Plan> {
     let mut candidates = Vec::new();
     let mut left_out = Vec::new();
     for entry in entries {
@@ -341,6 +346,21 @@ fn plan_clouds(scan: Chosen, entries: &[CloudEntry], options: &BagImportOptions)
         .first()
         .map(|e| frame_name(&e.frame_id).to_string())
         .unwrap_or_default();
+    // Clouds in a world frame (a map sdem or another tool exported, already aligned): taken as
+    // scans in their sensor's frame, every stop would seem to stand at the origin, and the map
+    // would be wrong with no doubt.
+    if let (Some(first), Some(moved)) = (entries.first(), tree.world_frame_moving(&sensor_frame)) {
+        return Err(Error::parse(
+            &first.origin.file,
+            None,
+            format!(
+                "{} is in frame {sensor_frame}, in which /tf moves {moved}: its points are in a \
+                 world frame (an aligned map's), not in their sensor's; sdem imports scans as \
+                 the sensor took them (a map sdem exported is opened with sdem view map)",
+                scan.topic
+            ),
+        ));
+    }
     if let Some(other) = entries
         .iter()
         .find(|e| frame_name(&e.frame_id) != sensor_frame)

@@ -11,6 +11,9 @@ pub fn frame_name(name: &str) -> &str {
     name.trim_start_matches('/')
 }
 
+/// The names REP 105 gives frames fixed in the world.
+const WORLD_FRAMES: [&str; 4] = ["map", "odom", "world", "earth"];
+
 /// The transforms of a bag.
 #[derive(Debug, Clone, Default)]
 pub struct TfTree {
@@ -94,6 +97,20 @@ impl TfTree {
         self.moving.get(frame_name(child)).map(|(p, _)| p.as_str())
     }
 
+    /// When `frame` is a world frame: one of REP 105's names for it (`map`, `odom`, `world`,
+    /// `earth`) in which `/tf` moves another frame (the first by name, returned). A robot's
+    /// own frame can be a moving parent too (its joints), so the moving alone does not tell.
+    pub fn world_frame_moving(&self, frame: &str) -> Option<&str> {
+        let parent = frame_name(frame);
+        if !WORLD_FRAMES.contains(&parent) {
+            return None;
+        }
+        (self.moving.iter())
+            .filter(|(_, (p, _))| p == parent)
+            .map(|(child, _)| child.as_str())
+            .min()
+    }
+
     /// `parent_from_child` of a moving frame at `stamp`.
     ///
     /// # Errors
@@ -159,5 +176,23 @@ mod tests {
         assert_eq!(tree.moving_parent("laser"), Some("tilt_base"));
         let mid = tree.moving_at("laser", 50_000_000).unwrap();
         assert!((mid.translation.vector.z - 0.1).abs() < 1e-12);
+    }
+
+    /// A world frame is a REP 105 name that `/tf` moves a frame in: `map` with the robot in it
+    /// is one, `map` alone is not known to be, and a robot's frame that moves its joints is not.
+    #[test]
+    fn a_world_frame_is_a_rep_105_name_that_tf_moves_a_frame_in() {
+        let mut moving = MovingSamples::default();
+        let q = [0.0, 0.0, 0.0, 1.0];
+        moving.add(&[
+            transform("/map", "base_link", [1.0, 0.0, 0.0], q),
+            transform("base_link", "tilt_link", [0.0; 3], q),
+        ]);
+        let tree = TfTree::new(&[], moving);
+        assert_eq!(tree.world_frame_moving("map"), Some("base_link"));
+        assert_eq!(tree.world_frame_moving("/map"), Some("base_link"));
+        assert_eq!(tree.world_frame_moving("base_link"), None);
+        assert_eq!(tree.world_frame_moving("odom"), None);
+        assert_eq!(TfTree::default().world_frame_moving("map"), None);
     }
 }
