@@ -27,7 +27,7 @@ pub struct Args {
     /// the dataset's full scans.
     #[arg(long)]
     node_points: bool,
-    /// Replace an existing MCAP output file.
+    /// Replace an existing output file (MCAP or E57).
     #[arg(long)]
     force: bool,
     /// Print one JSON object instead of text.
@@ -39,6 +39,13 @@ pub struct Args {
 pub fn run(args: Args) -> Result<()> {
     if args.mcap.is_none() && args.e57.is_none() {
         bail!("say what to write: --mcap OUT.mcap, --e57 OUT.e57, or both");
+    }
+    // Both targets checked before either is written.
+    if let Some(mcap) = &args.mcap {
+        crate::export_mcap::check_target(mcap, args.force)?;
+    }
+    if let Some(e57) = &args.e57 {
+        check_e57_target(e57, args.force)?;
     }
     let mut json = serde_json::Map::new();
     if let Some(mcap) = &args.mcap {
@@ -55,6 +62,23 @@ pub fn run(args: Args) -> Result<()> {
     }
     if args.json {
         return print_json(&serde_json::Value::Object(json));
+    }
+    Ok(())
+}
+
+/// Refuses an E57 target that is a folder, or a file that exists unless `force`.
+fn check_e57_target(path: &Path, force: bool) -> Result<()> {
+    if path.is_dir() {
+        bail!(
+            "--e57 {} is a folder; name a file (OUT.e57)",
+            path.display()
+        );
+    }
+    if path.exists() && !force {
+        bail!(
+            "--e57 {} already exists; choose another file or pass --force to replace it",
+            path.display()
+        );
     }
     Ok(())
 }

@@ -241,9 +241,30 @@ pub fn run(args: Args) -> Result<Outcome> {
     let dataset = Dataset::open(&args.dataset)?;
     let sigma = parse_sigma(&args, &dataset)?;
     let map_dir = args.out.join(MAP_DIR);
+    if args.max_scans == Some(0) {
+        bail!("--max-scans 0 maps nothing; give at least 1 (or leave it out for every scan)");
+    }
     if let Some(mcap) = &args.mcap {
         crate::export_mcap::check_target(mcap, args.force)?;
+        check_beside_outputs(&args.out, mcap, "--mcap")?;
     }
+    // Read before the run: a bad file is refused before the work, and a file among the outputs
+    // (OUT/poses.txt of an earlier run) is read as it was, not as this run rewrites it.
+    let compare = match &args.compare {
+        Some(path) => {
+            let poses = read_kitti_poses(path).context("--compare")?;
+            let scans = args.max_scans.unwrap_or(dataset.len()).min(dataset.len());
+            if poses.len() < scans {
+                bail!(
+                    "--compare {} holds {} poses, fewer than the {scans} scans to be mapped",
+                    path.display(),
+                    poses.len()
+                );
+            }
+            Some(poses)
+        }
+        None => None,
+    };
     prepare_out(&args, &map_dir)?;
     let mut run = match (&args.map, args.resume) {
         (Some(existing), _) => extend(existing, &map_dir)?,
@@ -254,7 +275,16 @@ pub fn run(args: Args) -> Result<Outcome> {
     let total = map_scans(&args, &dataset, sigma, &map_dir, &mut run)?;
     let outputs = write_outputs(&args, &mut run.slam, &run.steps)?;
     let attitude = slam_attitude(&dataset, sigma);
-    let report = make_report(&args, &dataset, run, total, outputs, attitude, start)?;
+    let compare = compare_errors(&args, compare.as_deref(), &outputs.poses)?;
+    let report = make_report(
+        &args,
+        &dataset,
+        run,
+        total,
+        (outputs, compare),
+        attitude,
+        start,
+    )?;
     let report_text = serde_json::to_vec_pretty(&report).context("cannot encode the report")?;
     write_atomic(&args.out.join(REPORT_FILE), |w| w.write_all(&report_text))?;
     if args.json {
@@ -265,24 +295,109 @@ pub fn run(args: Args) -> Result<Outcome> {
     Ok(Outcome::of(report.trusted, args.accept_doubtful))
 }
 
-/// Refuses to overwrite or resume the wrong map, then creates the output folder.
+/// The files `sdem slam` writes into its output folder, besides [`MAP_DIR`] and the pictures
+/// ([`crate::cmd_view::MAP_PICTURE_FILES`]).
+const OUTPUT_FILES: &[&str] = &[
+    "poses.txt",
+    "poses.tum",
+    "map.ply",
+    "map.sdemvox",
+    "config.toml",
+    REPORT_FILE,
+    STEPS_FILE,
+];
+
+/// The names in `out` that `sdem slam` writes, the map folder last.
+fn output_names() -> impl Iterator<Item = &'static str> {
+    (OUTPUT_FILES.iter())
+        .chain(crate::cmd_view::MAP_PICTURE_FILES)
+        .copied()
+        .chain([MAP_DIR])
+}
+
+/// Refuses a file given with `flag` that is one of the outputs in `out`: the run would write
+/// over it, or read what it writes.
+fn check_beside_outputs(out: &Path, path: &Path, flag: &str) -> Result<()> {
+    let (Some(name), Some(parent)) = (path.file_name(), path.parent()) else {
+        return Ok(());
+    };
+    let parent = if parent.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        parent
+    };
+    let same_folder = match (std::fs::canonicalize(parent), std::fs::canonicalize(out)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => parent == out,
+    };
+    if same_folder && output_names().any(|o| name == o) {
+        bail!(
+            "{flag} {} is one of the files sdem slam writes in {}; name a file elsewhere",
+            path.display(),
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses to overwrite or resume the wrong map, or to write over files of the same names as
+/// its outputs in a folder that holds no map; with `--force`, takes the earlier run's outputs
+/// away (its pictures and map nodes would otherwise stay beside the new run's); then creates
+/// the output folder.
 fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
+    let out = &args.out;
+    if out.exists() && !out.is_dir() {
+        bail!("--out {} is a file; name a folder", out.display());
+    }
     let has_map = map_dir.join(sdem_io::MAP_MANIFEST).exists();
     if has_map && !args.resume && !args.force {
         bail!(
             "{} already holds a map; pass --resume to continue it or --force to replace it",
-            args.out.display()
+            out.display()
         );
     }
     if args.resume && !has_map {
         bail!(
             "--resume: {} holds no saved map ({} is missing); run without --resume",
-            args.out.display(),
+            out.display(),
             map_dir.join(sdem_io::MAP_MANIFEST).display()
         );
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))
+    let present = || output_names().find(|name| out.join(name).exists());
+    if !has_map && !args.force {
+        if let Some(name) = present() {
+            bail!(
+                "{} holds {name} but no sdem map: sdem slam would write over it; choose another \
+                 folder, or pass --force to replace the files of sdem's names there",
+                out.display()
+            );
+        }
+    }
+    if args.force && !args.resume {
+        for name in OUTPUT_FILES
+            .iter()
+            .chain(crate::cmd_view::MAP_PICTURE_FILES)
+        {
+            let path = out.join(name);
+            if path.is_file() {
+                std::fs::remove_file(&path)
+                    .with_context(|| format!("--force: cannot remove {}", path.display()))?;
+            }
+        }
+        if has_map {
+            std::fs::remove_dir_all(map_dir)
+                .with_context(|| format!("--force: cannot remove {}", map_dir.display()))?;
+        }
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))
+}
+
+/// Whether `saved` (as the map recorded it) and `given` name one dataset folder.
+fn same_dataset(saved: &Path, given: &Path) -> bool {
+    match (std::fs::canonicalize(saved), std::fs::canonicalize(given)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => saved == given,
+    }
 }
 
 /// `--resume`: the saved map and step log, with the saved configuration.
@@ -290,6 +405,18 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
     let saved = load_map(map_dir)?;
     if args.config.is_some() || args.step.is_some() || args.no_loop_closure {
         bail!("--resume continues with the saved map's configuration; drop --config, --step and --no-loop-closure");
+    }
+    if let Some(made_from) = &saved.dataset {
+        if !same_dataset(made_from, &args.dataset) {
+            bail!(
+                "--resume: the map in {} was made from {}, not {}; resume it with that \
+                 dataset, or map {} into another folder",
+                args.out.display(),
+                made_from.display(),
+                args.dataset.display(),
+                args.dataset.display()
+            );
+        }
     }
     let next = saved.map.nodes.len();
     let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
@@ -551,12 +678,14 @@ fn recovery_words(how: PredictionSource) -> &'static str {
 fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
     let slam = &run.slam;
     debug_assert_eq!(run.folder.path(), map_dir);
+    // The dataset's whole path: `sdem export` and `--resume` find it from any folder.
+    let dataset = std::fs::canonicalize(&args.dataset).unwrap_or_else(|_| args.dataset.clone());
     run.folder.save(
         slam.config(),
         &slam.map,
         &slam.edges,
         &slam.loop_closures,
-        Some(&args.dataset),
+        Some(&dataset),
     )?;
     let steps_text = serde_json::to_vec(&run.steps).context("cannot encode the step log")?;
     write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;
@@ -621,12 +750,15 @@ fn node_statuses(slam: &Slam, steps: &[Value]) -> Vec<String> {
     status
 }
 
-/// The errors of `poses` against the `--compare` file, when given.
-fn compare_errors(args: &Args, poses: &[Pose]) -> Result<Option<TrajectoryErrors>> {
-    let Some(path) = &args.compare else {
+/// The errors of `poses` against the `--compare` file's poses (`reference`), when given.
+fn compare_errors(
+    args: &Args,
+    reference: Option<&[Pose]>,
+    poses: &[Pose],
+) -> Result<Option<TrajectoryErrors>> {
+    let (Some(path), Some(reference)) = (&args.compare, reference) else {
         return Ok(None);
     };
-    let reference = read_kitti_poses(path)?;
     if reference.len() < poses.len() {
         bail!(
             "{} holds {} poses, fewer than the {} scans mapped",
@@ -654,7 +786,7 @@ fn make_report(
     dataset: &Dataset,
     run: Run,
     total: usize,
-    outputs: Outputs,
+    (outputs, compare): (Outputs, Option<TrajectoryErrors>),
     attitude: SlamAttitude,
     start: Instant,
 ) -> Result<Report> {
@@ -669,7 +801,6 @@ fn make_report(
         Some(t) => Some(trajectory_errors(&t[..poses.len()], &poses)?),
         None => None,
     };
-    let compare = compare_errors(args, &poses)?;
     let Run {
         slam,
         steps,

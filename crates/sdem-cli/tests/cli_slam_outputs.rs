@@ -1,0 +1,230 @@
+//! What `sdem slam` and `sdem export` may write over, and which files they check before the
+//! work: a folder of the user's files, slam's own outputs named as `--mcap` or `--compare`, a
+//! map resumed with another dataset, what `--force` leaves of an earlier run, an existing E57.
+
+mod common;
+
+use common::{run_err, run_ok};
+use std::path::Path;
+use tempfile::TempDir;
+
+fn simulate(dir: &Path, out: &str, seed: &str) {
+    run_ok(
+        dir,
+        &["simulate", "--out", out, "--stops", "3", "--seed", seed],
+    );
+}
+
+#[test]
+fn a_folder_of_the_users_files_without_a_map_is_not_written_over() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("poses.txt"), "precious").unwrap();
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    let e = run_err(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    assert!(e.contains("poses.txt") && e.contains("--force"), "{e}");
+    assert_eq!(
+        std::fs::read_to_string(out.join("poses.txt")).unwrap(),
+        "precious"
+    );
+    // A folder whose files have other names is written into; they stay.
+    std::fs::remove_file(out.join("poses.txt")).unwrap();
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+    // A file as --out is named as such.
+    let e = run_err(
+        dir.path(),
+        &["slam", "data", "--out", "out/notes.txt", "--no-pictures"],
+    );
+    assert!(e.contains("is a file"), "{e}");
+}
+
+#[test]
+fn outputs_named_as_inputs_or_extra_outputs_are_refused_before_the_run() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    let e = run_err(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--mcap", "out/poses.txt"],
+    );
+    assert!(e.contains("--mcap") && e.contains("poses.txt"), "{e}");
+    // A --compare file is read before the run: missing, or too short, it stops the run
+    // before any output is written.
+    let e = run_err(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--compare", "out/poses.txt"],
+    );
+    assert!(e.contains("--compare"), "{e}");
+    std::fs::write(dir.path().join("short.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();
+    let e = run_err(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--compare", "short.txt"],
+    );
+    assert!(e.contains("1 poses") && e.contains("3 scans"), "{e}");
+    let e = run_err(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--max-scans", "0"],
+    );
+    assert!(e.contains("--max-scans"), "{e}");
+    assert!(!dir.path().join("out").exists());
+    // An earlier run's poses in the output folder are compared as they were, not as this
+    // run rewrites them.
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    let text = run_ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "out",
+            "--force",
+            "--no-pictures",
+            "--compare",
+            "out/poses.txt",
+        ],
+    );
+    assert!(text.contains("poses.txt"), "{text}");
+}
+
+#[test]
+fn a_map_is_resumed_only_with_its_own_dataset_and_names_it_by_its_whole_path() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    simulate(dir.path(), "other", "2");
+    run_ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "out",
+            "--max-scans",
+            "2",
+            "--no-pictures",
+        ],
+    );
+    let e = run_err(
+        dir.path(),
+        &["slam", "other", "--out", "out", "--resume", "--no-pictures"],
+    );
+    assert!(e.contains("was made from") && e.contains("other"), "{e}");
+    // The map names its dataset by its whole path, so it resumes (and exports) from any
+    // folder.
+    let manifest =
+        std::fs::read_to_string(dir.path().join("out/map").join(sdem_io::MAP_MANIFEST)).unwrap();
+    let whole = std::fs::canonicalize(dir.path().join("data")).unwrap();
+    assert!(manifest.contains(&*whole.to_string_lossy()), "{manifest}");
+    let elsewhere = dir.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    run_ok(
+        &elsewhere,
+        &[
+            "slam",
+            "../data",
+            "--out",
+            "../out",
+            "--resume",
+            "--no-pictures",
+        ],
+    );
+}
+
+#[test]
+fn force_takes_away_the_earlier_runs_pictures_and_map_nodes() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    run_ok(dir.path(), &["slam", "data", "--out", "out"]);
+    let out = dir.path().join("out");
+    assert!(out.join("plan.png").exists() && out.join("map/nodes/000002.pts").exists());
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    run_ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "out",
+            "--force",
+            "--no-pictures",
+            "--max-scans",
+            "2",
+        ],
+    );
+    assert!(!out.join("plan.png").exists() && !out.join("viewer.html").exists());
+    assert!(!out.join("map/nodes/000002.pts").exists());
+    assert!(out.join("map/nodes/000001.pts").exists() && out.join("poses.txt").exists());
+    assert_eq!(
+        std::fs::read_to_string(out.join("notes.txt")).unwrap(),
+        "mine"
+    );
+}
+
+#[test]
+fn export_reads_the_maps_dataset_from_any_folder_and_keeps_an_existing_e57() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    let elsewhere = dir.path().join("elsewhere");
+    std::fs::create_dir(&elsewhere).unwrap();
+    // Another dataset under the same relative name, where the export runs.
+    simulate(&elsewhere, "data", "9");
+    let exported = common::run_json(
+        &elsewhere,
+        &["export", "../out", "--e57", "a.e57", "--json"],
+    );
+    assert_eq!(exported["e57"]["points_from"], "dataset", "{exported}");
+    let here = common::run_json(dir.path(), &["export", "out", "--e57", "b.e57", "--json"]);
+    assert_eq!(
+        exported["e57"]["points"], here["e57"]["points"],
+        "{exported} {here}"
+    );
+    let e = run_err(dir.path(), &["export", "out", "--e57", "b.e57"]);
+    assert!(e.contains("--force"), "{e}");
+    run_ok(dir.path(), &["export", "out", "--e57", "b.e57", "--force"]);
+}
+
+/// sdem's MCAP map holds its scans in the map's frame: imported back as scans in their
+/// sensor's frame, every stop seemed to stand at the origin and the map came out wrong with no
+/// doubt. The import refuses clouds in a frame that `/tf` moves another frame in.
+#[test]
+fn clouds_in_a_world_frame_are_not_imported_as_a_sensors_scans() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    run_ok(dir.path(), &["export", "out", "--mcap", "map.mcap"]);
+    let e = run_err(
+        dir.path(),
+        &[
+            "import",
+            "map.mcap",
+            "--out",
+            "again",
+            "--scan-topic",
+            "/sdem/scans",
+        ],
+    );
+    assert!(
+        e.contains("frame map") && e.contains("/tf moves base_link"),
+        "{e}"
+    );
+}
