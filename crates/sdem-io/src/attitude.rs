@@ -1,8 +1,8 @@
 //! `attitude.csv`: the gyro/compass reading at each stop, degrees.
 
 use super::{
-    attitude_sigma_from_degrees, fmt_f64, numbered_lines, parse_count, parse_finite, read_text,
-    write_atomic,
+    attitude_sigma_from_degrees, fmt_f64, fmt_msg, numbered_lines, parse_count, parse_finite,
+    read_text, write_atomic,
 };
 use crate::error::{Error, Result};
 use sdem::geometry::{Attitude, AttitudeSigma};
@@ -41,9 +41,10 @@ pub(super) fn tilt_reading_problem(roll_deg: f64, pitch_deg: f64) -> Option<Stri
         .find(|(_, v)| v.abs() > MAX_TILT_READING_DEG)
         .map(|(name, v)| {
             format!(
-                "{name} is {v} degrees, more than a full turn; a gyro reading lies within \
+                "{name} is {} degrees, more than a full turn; a gyro reading lies within \
                  ±{MAX_TILT_READING_DEG}°, so this is not in degrees (hundredths of a degree? raw \
-                 counts?)"
+                 counts?)",
+                fmt_msg(v)
             )
         })
 }

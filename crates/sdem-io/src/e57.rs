@@ -14,7 +14,7 @@
 //! within [`crate::MAX_MEDIAN_RANGE_M`] of the scanner). A pose's quaternion is normalized, and
 //! one that is zero or not finite is an error naming the scan.
 
-use super::write_atomic;
+use super::{fmt_point, write_atomic};
 use crate::error::{one_line, Error, Result};
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use sdem::geometry::{Pose, Vec3};
@@ -152,7 +152,8 @@ fn read_scan<T: std::io::Read + std::io::Seek>(
                 if [x, y, z].iter().any(|v| v.is_infinite()) =>
             {
                 return Err(format!(
-                    "point {i} is ({x}, {y}, {z}); coordinates must be finite"
+                    "point {i} is {}; coordinates must be finite",
+                    fmt_point([x, y, z])
                 ));
             }
             _ => dropped += 1,

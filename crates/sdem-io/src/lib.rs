@@ -169,7 +169,9 @@
 //! ```
 //!
 //! Every optional per-scan file, when present, has exactly one row (pose) per scan, in the order
-//! of the scan files' names; a different count is an error naming the file and both counts.
+//! of the scan files' names, compared naturally (`scan2` before `scan10`; runs of digits by
+//! value); a different count is an error naming the file, both counts, and the files in `scans/`
+//! that were not taken as scans.
 //!
 //! - **`attitude.csv` absent**: the robot had no gyro/compass (KITTI), so there is no attitude
 //!   measurement ([`Dataset::attitude`] is `None`). `sdem localize` then searches the rotation
@@ -453,6 +455,26 @@ fn fmt_f64(value: f64) -> String {
     }
 }
 
+/// Formats a number for an error message: as `{}` for ordinary magnitudes, with an exponent
+/// (`1.000e300`) from 1e6 up and below 1e-4, since `{}` spells out every digit and a damaged
+/// file's 1e300 would fill the terminal with a 301-digit number nobody can read. An `f32` keeps
+/// its own shortest form (`0.1`, not `0.10000000149011612`).
+fn fmt_msg<T: Into<f64> + Copy + std::fmt::Display>(value: T) -> String {
+    let wide: f64 = value.into();
+    let magnitude = wide.abs();
+    if wide == 0.0 || (1e-4..1e6).contains(&magnitude) || !wide.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{wide:.3e}")
+    }
+}
+
+/// A point for an error message, `(x, y, z)`, each coordinate by [`fmt_msg`].
+fn fmt_point(xyz: [f64; 3]) -> String {
+    let [x, y, z] = xyz.map(fmt_msg);
+    format!("({x}, {y}, {z})")
+}
+
 /// Checks that every point is finite and representable as `f32` before writing.
 fn check_points_writable(path: &Path, points: &[Vec3]) -> Result<()> {
     if points.is_empty() {
@@ -464,11 +486,9 @@ fn check_points_writable(path: &Path, points: &[Vec3]) -> Result<()> {
     for (i, p) in points.iter().enumerate() {
         if !(p.iter().all(|v| v.is_finite() && (*v as f32).is_finite())) {
             return Err(Error::Invalid(format!(
-                "refusing to write {}: point {i} is ({}, {}, {}); coordinates must be finite and fit in f32",
+                "refusing to write {}: point {i} is {}; coordinates must be finite and fit in f32",
                 path.display(),
-                p.x,
-                p.y,
-                p.z
+                fmt_point([p.x, p.y, p.z])
             )));
         }
     }
@@ -631,6 +651,29 @@ mod tests {
         }
         assert_eq!(fmt_f64(0.5), "0.5");
         assert_eq!(fmt_f64(1e-17), "1e-17");
+    }
+
+    #[test]
+    fn messages_print_huge_numbers_compactly() {
+        assert_eq!(fmt_msg(1e300), "1.000e300");
+        assert_eq!(fmt_msg(-3e38f32), "-3.000e38");
+        assert_eq!(fmt_msg(0.1f32), "0.1");
+        assert_eq!(fmt_msg(-2.5), "-2.5");
+        assert_eq!(fmt_msg(999_999.5), "999999.5");
+        assert_eq!(fmt_msg(f64::INFINITY), "inf");
+        assert_eq!(
+            fmt_point([1e300, 0.0, -1e-300]),
+            "(1.000e300, 0, -1.000e-300)"
+        );
+        // A point of 1e300 (beyond f32) and one of 3e38 (in f32, but kilometres away): both
+        // messages stay short and show the number.
+        let dir = tempfile::tempdir().unwrap();
+        for (text, want) in [("1e300 0 0\n", "1.000e300"), ("3e38 0 0\n", "3.000e38")] {
+            let path = dir.path().join("far.xyz");
+            std::fs::write(&path, text).unwrap();
+            let msg = read_points(&path).unwrap_err().to_string();
+            assert!(msg.contains(want) && msg.len() < 400, "{msg}");
+        }
     }
 
     #[test]

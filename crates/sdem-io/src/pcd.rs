@@ -10,7 +10,7 @@
 //! row; its points with a NaN coordinate (no return) are dropped. `VERSION` and `VIEWPOINT` are
 //! ignored, as are unknown keys.
 
-use super::{count_newlines, parse_count, read_bytes};
+use super::{count_newlines, fmt_point, parse_count, read_bytes};
 use crate::error::{Error, Result};
 use sdem::geometry::Vec3;
 use std::path::Path;
@@ -403,8 +403,8 @@ fn check_point(
             path,
             line,
             format!(
-                "point {index} is ({}, {}, {}); coordinates must be finite (or nan for no return)",
-                xyz[0], xyz[1], xyz[2]
+                "point {index} is {}; coordinates must be finite (or nan for no return)",
+                fmt_point(xyz)
             ),
         ));
     }

@@ -1,6 +1,8 @@
 //! Point-cloud dispatch and the simple formats: `.xyz` / `.txt`, 3DTK `.3d`, KITTI `.bin`.
 
-use super::{numbered_lines, parse_finite, read_bytes, read_text, sweep_points};
+use super::{
+    fmt_msg, fmt_point, numbered_lines, parse_finite, read_bytes, read_text, sweep_points,
+};
 use crate::error::{Error, Result};
 use sdem::geometry::Vec3;
 use std::path::Path;
@@ -126,9 +128,9 @@ pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
             path,
             None,
             format!(
-                "point {i} is ({}, {}, {}); sdem keeps coordinates as 32-bit floats, and this one \
-                 does not fit (the file is damaged or not in metres)",
-                p.x, p.y, p.z
+                "point {i} is {}; sdem keeps coordinates as 32-bit floats, and this one does not \
+                 fit (the file is damaged or not in metres)",
+                fmt_point([p.x, p.y, p.z])
             ),
         ));
     }
@@ -142,10 +144,11 @@ pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
             path,
             None,
             format!(
-                "half of the points lie farther than {median:.0} m from the sensor (point {i} is \
-                 at ({}, {}, {})); sdem reads scans in metres in the sensor frame: is the file in \
-                 millimetres, or in world coordinates?",
-                p.x, p.y, p.z
+                "half of the points lie farther than {} m from the sensor (point {i} is at {}); \
+                 sdem reads scans in metres in the sensor frame: is the file in millimetres, or in \
+                 world coordinates?",
+                fmt_msg(median.round()),
+                fmt_point([p.x, p.y, p.z])
             ),
         ));
     }

@@ -1,6 +1,6 @@
 //! Pose files: KITTI (row-major 3×4 `[R | t]` per line) and TUM (`t x y z qx qy qz qw`).
 
-use super::{fmt_f64, numbered_lines, parse_finite, read_text, write_atomic};
+use super::{fmt_f64, fmt_msg, numbered_lines, parse_finite, read_text, write_atomic};
 use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion};
 use sdem::geometry::Pose;
@@ -119,11 +119,14 @@ pub(super) fn parse_row_major_pose(
 pub(super) fn to_rotation(r: &Matrix3<f64>) -> std::result::Result<Rotation3<f64>, String> {
     let det = r.determinant();
     if !det.is_finite() || (det - 1.0).abs() > ROTATION_TOLERANCE {
-        return Err(format!("its determinant is {det}, not 1"));
+        return Err(format!("its determinant is {}, not 1", fmt_msg(det)));
     }
     let off = (r.transpose() * r - Matrix3::identity()).abs().max();
     if off > ROTATION_TOLERANCE {
-        return Err(format!("RᵀR differs from the identity by up to {off}"));
+        return Err(format!(
+            "RᵀR differs from the identity by up to {}",
+            fmt_msg(off)
+        ));
     }
     let svd = r.svd(true, true);
     let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else {
@@ -201,7 +204,10 @@ pub fn read_tum_poses(path: &Path) -> Result<Vec<(f64, Pose)>> {
             return Err(Error::parse(
                 path,
                 Some(line_no),
-                format!("the quaternion's norm is {norm}, not 1; it is not a rotation"),
+                format!(
+                    "the quaternion's norm is {}, not 1; it is not a rotation",
+                    fmt_msg(norm)
+                ),
             ));
         }
         poses.push((

@@ -3,7 +3,8 @@
 
 use super::attitude::tilt_reading_problem;
 use super::{
-    fmt_f64, numbered_lines, parse_count, parse_finite, read_text, write_atomic, MAX_MEDIAN_RANGE_M,
+    fmt_f64, fmt_msg, numbered_lines, parse_count, parse_finite, read_text, write_atomic,
+    MAX_MEDIAN_RANGE_M,
 };
 use crate::error::{Error, Result};
 use sdem::geometry::Attitude;
@@ -418,7 +419,10 @@ fn data_line(path: &Path, line_no: usize, line: &str, pan_count: usize) -> Resul
             return Err(Error::parse(
                 path,
                 Some(line_no),
-                format!("range {k} is {r}; a range is nan (no return) or a finite number >= 0"),
+                format!(
+                    "range {k} is {}; a range is nan (no return) or a finite number >= 0",
+                    fmt_msg(r)
+                ),
             ));
         }
         ranges.push(r);
