@@ -4,10 +4,12 @@
 //! pre-checked here for what the crate does not guard against (a count too large for 64 bits
 //! panics inside its grammar; repeated property names silently shift the binary layout), and the
 //! declared element counts are checked against the bytes that follow, so a lying header is an
-//! error before anything is allocated. The ASCII payload is read here, to report line numbers and
-//! to accept the `nan` that scanners write for "no return".
+//! error before anything is allocated; data left after the declared elements is an error too
+//! (as in PCD and `.sweep`), since reading only the declared count would drop points silently.
+//! The ASCII payload is read here, to report line numbers and to accept the `nan` that scanners
+//! write for "no return".
 
-use super::{check_points_writable, read_bytes, write_atomic};
+use super::{check_points_writable, fmt_point, read_bytes, write_atomic};
 use crate::error::{one_line, Error, Result};
 use ply_rs_bw::parser::Parser;
 use ply_rs_bw::ply::{
@@ -283,9 +285,8 @@ fn check_vertex_axes(path: &Path, vertex: &ElementDef) -> Result<()> {
     Ok(())
 }
 
-/// Checks that every element up to the vertices fits in the `body` that follows the header
-/// (the file holds `file_len` bytes), so that a lying count is an error before anything is
-/// allocated.
+/// Checks that every element fits in the `body` that follows the header (the file holds
+/// `file_len` bytes), so that a lying count is an error before anything is allocated.
 fn check_elements_fit(
     path: &Path,
     header: &Header,
@@ -330,15 +331,24 @@ fn check_elements_fit(
                 return Err(Error::parse(path, layout.element_line(name), message));
             }
         }
-        if name == "vertex" {
-            break;
-        }
     }
     Ok(())
 }
 
-/// Reads the binary `body` (of a file of `file_len` bytes): skips the elements before the
-/// `vertex` element and reads that.
+/// The declared elements in words, for a message: `3 'vertex' elements`, or
+/// `3 'vertex' and 1 'face' elements`.
+fn declared_elements(elements: &ply_rs_bw::ply::KeyMap<ElementDef>) -> String {
+    let counts: Vec<String> = elements
+        .iter()
+        .map(|(name, def)| format!("{} '{name}'", def.count))
+        .collect();
+    format!("{} elements", counts.join(" and "))
+}
+
+/// Reads the binary `body` (of a file of `file_len` bytes): reads the `vertex` element and skips
+/// every other. Bytes left after the last declared element (but for trailing whitespace, which
+/// some writers add) are an error: they are data the header does not count, and reading only
+/// the declared count would silently drop points.
 fn read_binary_vertices(
     path: &Path,
     header: &Header,
@@ -350,11 +360,16 @@ fn read_binary_vertices(
     let mut reader = body;
     // Where the reader stopped, as a byte offset in the file.
     let at = |reader: &[u8]| file_len - reader.len();
+    let mut vertices = Vec::new();
     for (name, def) in &header.elements {
         if name == "vertex" {
-            break;
-        }
-        if !def.properties.is_empty() {
+            vertices = Parser::<XyzVertex>::new()
+                .read_payload_for_element(&mut reader, vertex, header)
+                .map_err(|e| {
+                    let line = layout.element_line("vertex");
+                    truncated(path, line, "vertex", vertex.count, at(reader), &e)
+                })?;
+        } else if !def.properties.is_empty() {
             Parser::<Skip>::new()
                 .read_payload_for_element(&mut reader, def, header)
                 .map_err(|e| {
@@ -369,12 +384,20 @@ fn read_binary_vertices(
                 })?;
         }
     }
-    Parser::<XyzVertex>::new()
-        .read_payload_for_element(&mut reader, vertex, header)
-        .map_err(|e| {
-            let line = layout.element_line("vertex");
-            truncated(path, line, "vertex", vertex.count, at(reader), &e)
-        })
+    if !reader.iter().all(u8::is_ascii_whitespace) {
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "more data than the {} the header declares: {} bytes are left from byte offset {}; \
+                 the header's count is wrong or data was appended",
+                declared_elements(&header.elements),
+                reader.len(),
+                at(reader)
+            ),
+        ));
+    }
+    Ok(vertices)
 }
 
 /// The binary body ended (at byte offset `at`) inside the elements declared at `line`.
@@ -413,23 +436,26 @@ fn finite_point(
             path,
             line,
             format!(
-                "vertex {index} is ({}, {}, {}); coordinates must be finite (or nan for no return)",
-                xyz[0], xyz[1], xyz[2]
+                "vertex {index} is {}; coordinates must be finite (or nan for no return)",
+                fmt_point(xyz)
             ),
         ));
     }
     Ok(Some(Vec3::new(xyz[0], xyz[1], xyz[2])))
 }
 
-/// Reads the ASCII payload: one element per line, up to and including the vertices.
+/// Reads the ASCII payload: one element per line. Non-blank lines after the last declared
+/// element are an error, as in PCD and `.sweep`: reading only the declared count would silently
+/// drop the points a wrong header does not count.
 fn read_ascii_body(
     path: &Path,
     body: &[u8],
     header_lines: usize,
     elements: &ply_rs_bw::ply::KeyMap<ElementDef>,
 ) -> Result<Vec<Vec3>> {
+    // Each line with its line break, so that the break after the last line opens no empty one.
     let mut lines = body
-        .split(|&b| b == b'\n')
+        .split_inclusive(|&b| b == b'\n')
         .enumerate()
         .map(|(i, raw)| (header_lines + 1 + i, raw));
     let mut last_line = header_lines;
@@ -454,6 +480,19 @@ fn read_ascii_body(
             };
             last_line = line_no;
             if !is_vertex {
+                // An element with properties has at least one value (a list, its length), so a
+                // blank line is not one: it would shift every later line.
+                if raw.trim_ascii().is_empty() && !def.properties.is_empty() {
+                    return Err(Error::parse(
+                        path,
+                        Some(line_no),
+                        format!(
+                            "empty line where a '{name}' element should be; the header declares \
+                             {} '{name}' elements, one per line",
+                            def.count
+                        ),
+                    ));
+                }
                 continue;
             }
             let line = std::str::from_utf8(raw)
@@ -463,9 +502,17 @@ fn read_ascii_body(
                 points.push(p);
             }
         }
-        if is_vertex {
-            return Ok(points);
-        }
+    }
+    if let Some((line_no, _)) = lines.find(|(_, raw)| !raw.trim_ascii().is_empty()) {
+        return Err(Error::parse(
+            path,
+            Some(line_no),
+            format!(
+                "more data lines than the {} the header declares; the header's count is wrong or \
+                 data was appended",
+                declared_elements(elements)
+            ),
+        ));
     }
     Ok(points)
 }
@@ -823,6 +870,73 @@ mod tests {
         expect_err(&with("1 2 3\n"), None);
         expect_err(&with("1 2 3\n\n4 5 6\n"), Some(9));
         expect_err(&with("nan 2 3\nnan 5 6\n"), None); // no points at all
+    }
+
+    #[test]
+    fn data_beyond_the_declared_count_is_an_error() {
+        // Binary: four points under a header that declares three.
+        let head = |count: usize| {
+            format!(
+                "ply\nformat binary_little_endian 1.0\nelement vertex {count}\nproperty float x\n\
+                 property float y\nproperty float z\nend_header\n"
+            )
+            .into_bytes()
+        };
+        let mut bytes = head(3);
+        for i in 0..4 {
+            for v in [i as f32, 1.0, 2.0] {
+                bytes.extend(v.to_le_bytes());
+            }
+        }
+        let msg = expect_err(&bytes, None);
+        assert!(
+            msg.contains("more data than the 3 'vertex' elements the header declares")
+                && msg.contains("12 bytes are left"),
+            "{msg}"
+        );
+        // The same with the count right, and a trailing line break as some writers add: read.
+        bytes.splice(..head(3).len(), head(4));
+        bytes.extend(b"\r\n");
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(
+            read_points(&write(dir.path(), "ok.ply", &bytes))
+                .unwrap()
+                .len(),
+            4
+        );
+        // Bytes after an element declared before the vertices.
+        let mut bytes = binary_ply(true);
+        bytes.extend([0u8; 28]);
+        let msg = expect_err(&bytes, None);
+        assert!(msg.contains("2 'face' and 3 'vertex' elements"), "{msg}");
+
+        // ASCII: a line after the declared vertices, and after the declared faces.
+        let ascii = |count: usize, faces: &str, body: &str| {
+            format!(
+                "ply\nformat ascii 1.0\nelement vertex {count}\nproperty float x\n\
+                 property float y\nproperty float z\n{faces}end_header\n{body}"
+            )
+            .into_bytes()
+        };
+        let msg = expect_err(&ascii(2, "", "1 2 3\n4 5 6\n7 8 9\n"), Some(10));
+        assert!(
+            msg.contains("more data lines than the 2 'vertex' elements the header declares"),
+            "{msg}"
+        );
+        let faces = "element face 1\nproperty list uchar int vertex_indices\n";
+        let msg = expect_err(&ascii(2, faces, "1 2 3\n4 5 6\n2 0 1\n2 1 0\n"), Some(13));
+        assert!(msg.contains("2 'vertex' and 1 'face' elements"), "{msg}");
+        // Declared faces that are missing: the file is cut short.
+        let msg = expect_err(&ascii(2, faces, "1 2 3\n4 5 6\n"), None);
+        assert!(msg.contains("'face'"), "{msg}");
+        // Faces after the vertices, and trailing blank lines: read.
+        let ok = ascii(2, faces, "1 2 3\n4 5 6\n2 0 1\n\n  \n");
+        assert_eq!(
+            read_points(&write(dir.path(), "ok.ply", &ok))
+                .unwrap()
+                .len(),
+            2
+        );
     }
 
     #[test]
