@@ -99,6 +99,7 @@ fn check_raw_header(path: &Path, raw: &las::raw::Header, bytes: &[u8]) -> Result
                  the header is wrong"
             )));
         }
+        check_no_uncounted_points(path, raw, file_len, declared)?;
     } else if declared.checked_mul(record_len).is_none() {
         return Err(err(format!(
             "the header declares {declared} points of {record_len} bytes, more than any file \
@@ -109,6 +110,48 @@ fn check_raw_header(path: &Path, raw: &las::raw::Header, bytes: &[u8]) -> Result
         check_first_evlr(path, evlr, bytes)?;
     }
     Ok(declared)
+}
+
+/// Refuses uncompressed point records beyond the header's count: `las` reads only the declared
+/// count, so a header that a writer did not update (or points appended after it) would silently
+/// lose the rest. The points end where the first extended VLR (LAS 1.4) or an internal waveform
+/// packet record (LAS 1.3) starts, else at the end of the file; fewer bytes than one record
+/// left over are not a point and are tolerated, as padding some writers add.
+fn check_no_uncounted_points(
+    path: &Path,
+    raw: &las::raw::Header,
+    file_len: u64,
+    declared: u64,
+) -> Result<()> {
+    let start = u64::from(raw.offset_to_point_data);
+    let record_len = u64::from(raw.point_data_record_length);
+    let evlr = raw
+        .evlr
+        .as_ref()
+        .filter(|e| e.number_of_evlrs > 0)
+        .map(|e| e.start_of_first_evlr);
+    let end = [evlr, raw.start_of_waveform_data_packet_record]
+        .into_iter()
+        .flatten()
+        .filter(|&at| at > start)
+        .fold(file_len, u64::min);
+    // The caller checked that the declared records fit in the file.
+    let points_end = start + declared * record_len;
+    let extra = end.saturating_sub(points_end);
+    if record_len > 0 && extra >= record_len {
+        let held = (end - start) / record_len;
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "the file holds {held} point records of {record_len} bytes from byte offset \
+                 {start}, more than the {declared} the header declares; the header's point count \
+                 is wrong or points were appended (rewrite the file with a tool that updates the \
+                 header, e.g. `las2las`)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The first extended VLR (LAS 1.4), which `las` reads, must hold no more data than the file.
@@ -413,6 +456,70 @@ mod tests {
         let mut scale = good.clone();
         scale[131..139].copy_from_slice(&0f64.to_le_bytes());
         assert!(expect_err("s.las", &scale).contains("scale"));
+        // A scale of 1e300 gives coordinates no f32 holds: the message prints them compactly.
+        scale[131..139].copy_from_slice(&1e300f64.to_le_bytes());
+        let msg = expect_err("h.las", &scale);
+        assert!(msg.contains("e30") && msg.len() < 400, "{msg}");
+    }
+
+    /// The header's point count at bytes 107 (legacy) and 247 (LAS 1.4) set to `count`.
+    fn with_count(bytes: &[u8], count: u32) -> Vec<u8> {
+        let mut bytes = bytes.to_vec();
+        bytes[107..111].copy_from_slice(&count.to_le_bytes());
+        bytes[247..255].copy_from_slice(&u64::from(count).to_le_bytes());
+        bytes
+    }
+
+    #[test]
+    fn points_beyond_the_declared_count_are_an_error() {
+        let good = las_bytes(&POINTS, false);
+        let msg = expect_err("short.las", &with_count(&good, 3));
+        assert!(
+            msg.contains("holds 4 point records") && msg.contains("than the 3 the header declares"),
+            "{msg}"
+        );
+        // A few bytes of padding after the points are not a point: read.
+        let dir = tempfile::tempdir().unwrap();
+        let mut padded = good.clone();
+        padded.extend([0u8; 3]);
+        assert_eq!(
+            read_points(&write(dir.path(), "p.las", &padded))
+                .unwrap()
+                .len(),
+            4
+        );
+        // LAS 1.4 with an extended VLR after the points: the points end where it starts.
+        let mut builder = las::Builder::from((1, 4));
+        builder.evlrs.push(las::Vlr {
+            user_id: "sdem".into(),
+            record_id: 1,
+            description: "test".into(),
+            data: vec![7; 100],
+        });
+        let header = builder.into_header().unwrap();
+        let mut writer = las::Writer::new(Cursor::new(Vec::new()), header).unwrap();
+        for p in POINTS {
+            let point = las::Point {
+                x: p[0],
+                y: p[1],
+                z: p[2],
+                ..Default::default()
+            };
+            writer.write_point(point).unwrap();
+        }
+        let with_evlr = writer.into_inner().unwrap().into_inner();
+        let points = read_points(&write(dir.path(), "e.las", &with_evlr)).unwrap();
+        assert_eq!(points.len(), 4);
+        let msg = expect_err("es.las", &with_count(&with_evlr, 2));
+        assert!(msg.contains("than the 2 the header declares"), "{msg}");
+        // LAZ is compressed: its length says nothing about the count, and is not checked.
+        let laz = las_bytes(&POINTS, true);
+        assert_eq!(
+            read_points(&write(dir.path(), "a.laz", &laz))
+                .unwrap()
+                .len(),
+            4
+        );
     }
 
     #[test]
