@@ -10,6 +10,7 @@ use super::{
 use crate::error::{Error, Result};
 use sdem::geometry::{Attitude, AttitudeSigma, Pose, Vec3};
 use sdem::sensor::{SensorConfig, Sweep};
+use std::cmp::Ordering;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -36,7 +37,8 @@ pub const SENSOR_FILE: &str = "sensor.toml";
 pub struct Dataset {
     /// The dataset folder.
     pub root: PathBuf,
-    /// One point-cloud file per stop, in `scans/`, sorted by file name.
+    /// One point-cloud file per stop, in `scans/`, in the natural order of their file names
+    /// (`scan2` before `scan10`).
     pub scan_paths: Vec<PathBuf>,
     /// The gyro/compass attitude of each scan, from `attitude.csv`, when present (one per scan),
     /// each with its standard deviations ([`Attitude::sigma`]): the row's own when the file
@@ -91,19 +93,103 @@ fn is_hidden(path: &Path) -> bool {
         .is_none_or(|n| n.starts_with('.'))
 }
 
-/// The visible regular files of `folder` that have a point-cloud extension, sorted by name.
-fn point_files(folder: &Path) -> Result<Vec<PathBuf>> {
+/// Compares two names in natural order: runs of ASCII digits by their value, the rest by
+/// character, so that `scan2` comes before `scan10`. Scan names are often not zero-padded, and a
+/// plain text sort (`scan1`, `scan10`, `scan2`) would pair the scans with the wrong rows of
+/// `attitude.csv` and the pose files without a word. Zero-padded names keep their order; names
+/// equal in value (`scan01`, `scan1`) fall back to plain text, so the order is total.
+fn natural_cmp(a: &str, b: &str) -> Ordering {
+    let (mut x, mut y) = (a.as_bytes(), b.as_bytes());
+    loop {
+        match (x.first(), y.first()) {
+            (None, None) => return a.cmp(b),
+            (None, Some(_)) => return Ordering::Less,
+            (Some(_), None) => return Ordering::Greater,
+            (Some(c), Some(d)) if c.is_ascii_digit() && d.is_ascii_digit() => {
+                let run = |s: &[u8]| s.iter().take_while(|c| c.is_ascii_digit()).count();
+                let (dx, rest_x) = x.split_at(run(x));
+                let (dy, rest_y) = y.split_at(run(y));
+                // Leading zeros aside, a longer run is a larger number, without overflow.
+                let trim = |s: &[u8]| s.iter().take_while(|&&c| c == b'0').count();
+                let (vx, vy) = (&dx[trim(dx)..], &dy[trim(dy)..]);
+                let order = vx.len().cmp(&vy.len()).then_with(|| vx.cmp(vy));
+                if order != Ordering::Equal {
+                    return order;
+                }
+                (x, y) = (rest_x, rest_y);
+            }
+            (Some(c), Some(d)) => {
+                if c != d {
+                    return c.cmp(d);
+                }
+                (x, y) = (&x[1..], &y[1..]);
+            }
+        }
+    }
+}
+
+/// What [`point_files`] found in a folder: the scans, and the visible entries it did not take,
+/// each as `NAME (why)`, for the messages that a skipped file would otherwise leave unexplained.
+struct ScanListing {
+    scans: Vec<PathBuf>,
+    skipped: Vec<String>,
+}
+
+impl ScanListing {
+    /// The skipped entries for a count-mismatch message, or nothing when there are none.
+    fn skipped_note(&self) -> String {
+        const SHOWN: usize = 5;
+        if self.skipped.is_empty() {
+            return String::new();
+        }
+        let mut names = self.skipped[..self.skipped.len().min(SHOWN)].join(", ");
+        if self.skipped.len() > SHOWN {
+            names.push_str(&format!(", and {} more", self.skipped.len() - SHOWN));
+        }
+        format!(
+            "; not counted as scans: {names}; rename or restore them (a scan has one of the \
+             extensions .{}), or remove them",
+            POINT_EXTENSIONS.join(", .")
+        )
+    }
+}
+
+/// The visible regular files of `folder` that have a point-cloud extension, in the natural
+/// order of their names ([`natural_cmp`]), and the visible entries left out.
+fn point_files(folder: &Path) -> Result<ScanListing> {
     let entries = std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))?;
-    let mut files = Vec::new();
+    let mut scans = Vec::new();
+    let mut skipped = Vec::new();
     for entry in entries {
         let path = entry.map_err(|e| Error::io(folder, e))?.path();
-        if is_hidden(&path) || PointFormat::from_path(&path).is_none() || !path.is_file() {
+        if is_hidden(&path) {
             continue;
         }
-        files.push(path);
+        let why = if path.is_file() {
+            if PointFormat::from_path(&path).is_some() {
+                scans.push(path);
+                continue;
+            }
+            "not a point-cloud extension"
+        } else if path.is_dir() {
+            "a folder"
+        } else if path.is_symlink() {
+            "a link to a missing file"
+        } else {
+            "not a regular file"
+        };
+        let name = path.file_name().unwrap_or_default().to_string_lossy();
+        skipped.push(format!("{name} ({why})"));
     }
-    files.sort();
-    Ok(files)
+    let name = |p: &PathBuf| {
+        p.file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned()
+    };
+    scans.sort_by(|a, b| natural_cmp(&name(a), &name(b)));
+    skipped.sort_by(|a, b| natural_cmp(a, b));
+    Ok(ScanListing { scans, skipped })
 }
 
 impl Dataset {
@@ -111,11 +197,14 @@ impl Dataset {
     /// `poses_truth.txt` and `sensor.toml` when present. Point clouds are read later, one at a
     /// time, by [`Dataset::load_scan`].
     ///
-    /// In `scans/`, files with a point-cloud extension ([`POINT_EXTENSIONS`]) are the scans,
-    /// sorted by file name; hidden files and other files are ignored. Errors: no `scans/` folder,
-    /// no scan in it, two scans with the same name stem (`000001.ply` and `000001.pcd`), a row
-    /// count in `attitude.csv`, `odometry.txt` or `poses_truth.txt` different from the scan count
-    /// (the message names the file and both counts), and any error reading those files.
+    /// In `scans/`, files with a point-cloud extension ([`POINT_EXTENSIONS`]) are the scans, in
+    /// the natural order of their names (`scan2` before `scan10`, runs of digits compared by
+    /// value); hidden files and other files are ignored. Errors: no `scans/` folder, no scan in
+    /// it, two scans with the same name stem (`000001.ply` and `000001.pcd`), a row count in
+    /// `attitude.csv`, `odometry.txt` or `poses_truth.txt` different from the scan count (the
+    /// message names the file, both counts, and the visible entries of `scans/` that were not
+    /// taken as scans: another extension, a folder, a link to a missing file), and any error
+    /// reading those files.
     ///
     /// # Example
     /// ```
@@ -143,16 +232,18 @@ impl Dataset {
                 POINT_EXTENSIONS.join(", .")
             )));
         }
-        let scan_paths = point_files(&scans_dir)?;
+        let listing = point_files(&scans_dir)?;
+        let scan_paths = &listing.scans;
         if scan_paths.is_empty() {
             return Err(Error::Invalid(format!(
-                "{} holds no point-cloud file; put one file per stop there (.{})",
+                "{} holds no point-cloud file; put one file per stop there (.{}){}",
                 scans_dir.display(),
-                POINT_EXTENSIONS.join(", .")
+                POINT_EXTENSIONS.join(", ."),
+                listing.skipped_note()
             )));
         }
         let mut stems: HashMap<&std::ffi::OsStr, &Path> = HashMap::new();
-        for path in &scan_paths {
+        for path in scan_paths {
             if let Some(stem) = path.file_stem() {
                 if let Some(other) = stems.insert(stem, path) {
                     return Err(Error::Invalid(format!(
@@ -185,11 +276,12 @@ impl Dataset {
             let readings = read_attitude_readings(&attitude_path, attitude_sigma)?;
             if readings.attitudes.len() != scan_paths.len() {
                 return Err(Error::Invalid(format!(
-                    "{} has {} rows but {} holds {} scans; they must match one to one",
+                    "{} has {} rows but {} holds {} scans; they must match one to one{}",
                     attitude_path.display(),
                     readings.attitudes.len(),
                     scans_dir.display(),
-                    scan_paths.len()
+                    scan_paths.len(),
+                    listing.skipped_note()
                 )));
             }
             if readings.sigma_per_row {
@@ -199,12 +291,12 @@ impl Dataset {
         } else {
             None
         };
-        let odometry = read_poses_if_present(&root.join(ODOMETRY_FILE), &scans_dir, &scan_paths)?;
-        let truth = read_poses_if_present(&root.join(TRUTH_FILE), &scans_dir, &scan_paths)?;
+        let odometry = read_poses_if_present(&root.join(ODOMETRY_FILE), &scans_dir, &listing)?;
+        let truth = read_poses_if_present(&root.join(TRUTH_FILE), &scans_dir, &listing)?;
 
         Ok(Dataset {
             root: root.to_path_buf(),
-            scan_paths,
+            scan_paths: listing.scans,
             attitudes,
             odometry,
             truth,
@@ -280,19 +372,20 @@ impl Dataset {
 fn read_poses_if_present(
     path: &Path,
     scans_dir: &Path,
-    scan_paths: &[PathBuf],
+    listing: &ScanListing,
 ) -> Result<Option<Vec<Pose>>> {
     if !path.exists() {
         return Ok(None);
     }
     let poses = read_kitti_poses(path)?;
-    if poses.len() != scan_paths.len() {
+    if poses.len() != listing.scans.len() {
         return Err(Error::Invalid(format!(
-            "{} has {} poses but {} holds {} scans; they must match one to one",
+            "{} has {} poses but {} holds {} scans; they must match one to one{}",
             path.display(),
             poses.len(),
             scans_dir.display(),
-            scan_paths.len()
+            listing.scans.len(),
+            listing.skipped_note()
         )));
     }
     Ok(Some(poses))
@@ -695,6 +788,83 @@ mod tests {
         );
         assert!(dataset.truth.is_none() && dataset.sensor.is_none());
         assert!(dataset.load_sweep(0).unwrap().is_none());
+    }
+
+    #[test]
+    fn natural_cmp_orders_digit_runs_by_value() {
+        let mut names = vec![
+            "scan10", "scan2", "scan0", "scan11", "scan1", "scan01", "b", "a10b", "a9c", "a",
+        ];
+        names.sort_by(|a, b| natural_cmp(a, b));
+        assert_eq!(
+            names,
+            ["a", "a9c", "a10b", "b", "scan0", "scan01", "scan1", "scan2", "scan10", "scan11"]
+        );
+        // Zero-padded names keep their plain order; digit runs longer than any integer compare.
+        assert_eq!(natural_cmp("000009", "000010"), Ordering::Less);
+        let huge = "9".repeat(40);
+        assert_eq!(natural_cmp(&huge, &format!("1{huge}")), Ordering::Less);
+        assert_eq!(natural_cmp("x", "x"), Ordering::Equal);
+    }
+
+    /// Scans named without zero padding pair with the rows in the order of their numbers:
+    /// `scan2` is the third scan, not the twelfth.
+    #[test]
+    fn open_sorts_unpadded_scan_names_by_number() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        std::fs::create_dir(root.join("scans")).unwrap();
+        for i in 0..12 {
+            std::fs::write(
+                root.join(format!("scans/scan{i}.xyz")),
+                format!("{i} 0 0\n"),
+            )
+            .unwrap();
+        }
+        let dataset = Dataset::open(root).unwrap();
+        let names: Vec<_> = dataset
+            .scan_paths
+            .iter()
+            .map(|p| p.file_name().unwrap().to_str().unwrap().to_string())
+            .collect();
+        let want: Vec<_> = (0..12).map(|i| format!("scan{i}.xyz")).collect();
+        assert_eq!(names, want);
+        assert_eq!(
+            dataset.load_scan(2).unwrap(),
+            vec![Vec3::new(2.0, 0.0, 0.0)]
+        );
+    }
+
+    /// A file that looks like a scan but is not taken as one is named when the row counts do not
+    /// match, so the user sees why.
+    #[test]
+    fn count_mismatch_names_the_skipped_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path();
+        std::fs::create_dir(root.join("scans")).unwrap();
+        std::fs::write(root.join("scans/000000.xyz"), "1 2 3\n").unwrap();
+        std::fs::write(root.join("scans/000001.foo"), "1 2 3\n").unwrap();
+        std::fs::write(root.join("scans/000002.xyz"), "1 2 3\n").unwrap();
+        #[cfg(unix)]
+        std::os::unix::fs::symlink(root.join("gone.ply"), root.join("scans/000003.ply")).unwrap();
+        write_attitude_csv(&root.join("attitude.csv"), &[Attitude::default(); 4]).unwrap();
+        let err = Dataset::open(root).unwrap_err().to_string();
+        assert!(
+            err.contains("4 rows") && err.contains("000001.foo (not a point-cloud extension)"),
+            "{err}"
+        );
+        #[cfg(unix)]
+        assert!(
+            err.contains("000003.ply (a link to a missing file)"),
+            "{err}"
+        );
+        std::fs::remove_file(root.join("attitude.csv")).unwrap();
+        crate::write_kitti_poses(&root.join("poses_truth.txt"), &[Pose::identity(); 4]).unwrap();
+        let err = Dataset::open(root).unwrap_err().to_string();
+        assert!(
+            err.contains("4 poses") && err.contains("000001.foo"),
+            "{err}"
+        );
     }
 
     /// The readings' σ: per row from attitude.csv's columns, else sensor.toml's, else the
