@@ -24,7 +24,8 @@
 //!   angle in degrees (hundredths of a degree, raw counts); radians look like small angles in
 //!   degrees and cannot be told apart, and yaw is not bounded (a gyro heading may be
 //!   unwrapped). Pose translations (KITTI, TUM, 3DTK), `sensor.toml` lengths and angles, voxel
-//!   sizes: any value is a possible one, so no unit check.
+//!   sizes: any value is a possible one, so no unit check (3DTK `.pose` and `.frames` refuse
+//!   only the absurd: a translation beyond ±1e6 m, an angle beyond a thousand turns).
 //! - **Truncated mid-number** is detected where the cut leaves a non-number (`5e`, `1,1,`), where
 //!   the declared count is not reached (PLY, PCD, `.sweep`, binary formats) and, in `.sweep`,
 //!   where the last line lacks its line break. A text file without a declared count cut inside

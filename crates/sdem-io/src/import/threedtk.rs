@@ -38,8 +38,8 @@ use crate::dataset::{ODOMETRY_FILE, SLAM6D_FILE};
 use crate::error::{Error, Result};
 use crate::poses::to_rotation;
 use crate::{
-    numbered_lines, parse_finite, read_points, read_text, write_attitude_csv, write_points_ply,
-    write_poses, write_sensor_toml, ATTITUDE_FILE, SCANS_DIR, SENSOR_FILE,
+    fmt_msg, numbered_lines, parse_finite, read_points, read_text, write_attitude_csv,
+    write_points_ply, write_poses, write_sensor_toml, ATTITUDE_FILE, SCANS_DIR, SENSOR_FILE,
 };
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
 use sdem::geometry::{attitude_of, Attitude, Pose, Vec3};
@@ -72,6 +72,33 @@ pub fn uos_sensor() -> SensorConfig {
         range_noise_m: 0.01,
         ..SensorConfig::default()
     }
+}
+
+/// The largest translation, metres from 3DTK's origin, that a `.pose` or `.frames` may hold: a
+/// robot's survey spans kilometres, not a thousand; beyond this the value is damaged (a `1e300`
+/// would become an odometry step of 1e298 m that every later stage trusts) or not centimetres.
+const MAX_UOS_TRANSLATION_M: f64 = 1e6;
+
+/// The largest angle, degrees, that a `.pose` may hold: a thousand turns leaves room for an
+/// unwrapped heading; beyond it the value is damaged or not in degrees, and its sine and cosine
+/// carry no meaning.
+const MAX_UOS_ANGLE_DEG: f64 = 360_000.0;
+
+/// Refuses a translation component (`cm`) beyond [`MAX_UOS_TRANSLATION_M`]; `what` names it.
+fn check_uos_translation(path: &Path, line_no: usize, cm: f64, what: &str) -> Result<()> {
+    if (cm / 100.0).abs() > MAX_UOS_TRANSLATION_M {
+        return Err(Error::parse(
+            path,
+            Some(line_no),
+            format!(
+                "{what} is {} cm, {} m from 3DTK's origin; a position lies within \
+                 ±{MAX_UOS_TRANSLATION_M:e} m, so the file is damaged or not in centimetres",
+                fmt_msg(cm),
+                fmt_msg(cm / 100.0)
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The folder name under which the 3DTK example data keeps slam6D's `.frames` files.
@@ -148,8 +175,9 @@ pub fn uos_pose_to_world_from_sensor(translation_cm: [f64; 3], angles_deg: [f64;
 /// ignored) as sdem's `world_from_sensor` ([`uos_pose_to_world_from_sensor`]).
 ///
 /// # Errors
-/// [`Error::Parse`] naming the file and line for a line without exactly 3 numbers, a non-number
-/// or a non-finite value, and for a file with other than 2 such lines.
+/// [`Error::Parse`] naming the file and line for a line without exactly 3 numbers, a non-number,
+/// a non-finite value, a translation beyond ±1e6 m or an angle beyond ±360 000° (a thousand
+/// turns), and for a file with other than 2 such lines.
 pub fn read_uos_pose(path: &Path) -> Result<Pose> {
     let text = read_text(path)?;
     let mut rows: Vec<[f64; 3]> = Vec::new();
@@ -176,12 +204,21 @@ pub fn read_uos_pose(path: &Path) -> Result<Pose> {
         }
         let mut row = [0.0; 3];
         for (k, (slot, token)) in row.iter_mut().zip(&tokens).enumerate() {
-            *slot = parse_finite(
-                path,
-                line_no,
-                token,
-                &format!("value {} of the {what}", k + 1),
-            )?;
+            let name = format!("value {} of the {what}", k + 1);
+            *slot = parse_finite(path, line_no, token, &name)?;
+            if rows.is_empty() {
+                check_uos_translation(path, line_no, *slot, &name)?;
+            } else if slot.abs() > MAX_UOS_ANGLE_DEG {
+                return Err(Error::parse(
+                    path,
+                    Some(line_no),
+                    format!(
+                        "{name} is {}°, more than a thousand turns; the file is damaged or not in \
+                         degrees",
+                        fmt_msg(*slot)
+                    ),
+                ));
+            }
         }
         rows.push(row);
     }
@@ -205,7 +242,8 @@ pub fn read_uos_pose(path: &Path) -> Result<Pose> {
 ///
 /// # Errors
 /// [`Error::Parse`] naming the file and line: a wrong number count, a non-number, a non-finite
-/// value, or a matrix that is not a rigid transform; a file without lines.
+/// value, a translation beyond ±1e6 m, or a matrix that is not a rigid transform; a file without
+/// lines.
 pub fn read_uos_frames_last(path: &Path) -> Result<Pose> {
     let text = read_text(path)?;
     let mut last = None;
@@ -228,6 +266,9 @@ pub fn read_uos_frames_last(path: &Path) -> Result<Pose> {
         let mut v = [0f64; 16];
         for (k, (slot, token)) in v.iter_mut().zip(&tokens).enumerate() {
             *slot = parse_finite(path, line_no, token, &format!("value {}", k + 1))?;
+            if (12..15).contains(&k) {
+                check_uos_translation(path, line_no, *slot, &format!("value {}", k + 1))?;
+            }
         }
         let m = Matrix4::from_column_slice(&v);
         let pose = uos_matrix_to_world_from_sensor(&m)
@@ -265,6 +306,39 @@ fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
     (kept, far, near)
 }
 
+/// Refuses a gap in the numbers of the selected scans (`scan000`, `scan002` without `scan001`):
+/// the import numbers the dataset's scans from 0 without gaps, so a lost or deleted scan would
+/// silently join its neighbours as consecutive stops, and the user would never learn that the
+/// motion between them spans two. `--first` and `--count` choose where a selection starts and
+/// ends, so only a gap inside it is an error.
+fn check_no_gap(scans: &[(usize, std::path::PathBuf)]) -> Result<()> {
+    for pair in scans.windows(2) {
+        let [(before, before_path), (after, after_path)] = pair else {
+            continue;
+        };
+        if *after == before + 1 {
+            continue;
+        }
+        // The missing file, with the digits of its neighbour (`scan001.3d`, not `scan1.3d`).
+        let digits = before_path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .and_then(|s| s.strip_prefix("scan"))
+            .map_or(0, str::len);
+        let missing = before_path.with_file_name(format!("scan{:0digits$}.3d", before + 1));
+        let gap = after - before - 1;
+        return Err(Error::Invalid(format!(
+            "{} is missing ({gap} scan(s) missing between {} and {}): the import would number the \
+             scans on either side of the gap as consecutive stops; restore it, or import each \
+             side on its own with --first and --count",
+            missing.display(),
+            before_path.display(),
+            after_path.display()
+        )));
+    }
+    Ok(())
+}
+
 /// Imports a 3DTK folder into the dataset folder `out` (see the module documentation for the
 /// frames and the files written): `scans/NNNNNN.ply`, `odometry.txt` (+ `.tum`),
 /// `attitude.csv`, and `poses_slam6d.txt` (+ `.tum`) when `.frames` files are found.
@@ -273,7 +347,8 @@ fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
 /// while writing removes what was written.
 ///
 /// # Errors
-/// `source` missing or without `scanNNN.3d`; a `.pose` (or, with a frames folder, a `.frames`)
+/// `source` missing or without `scanNNN.3d`; a gap in the numbers of the selected scans (naming
+/// the first missing file); a `.pose` (or, with a frames folder, a `.frames`)
 /// missing for a selected scan; a malformed `.pose`, `.frames` or `.3d` (naming the file and
 /// line); a scan left without points by the range filter; `out` holding a dataset entry
 /// ([`DATASET_ENTRIES`](crate::DATASET_ENTRIES)).
@@ -285,6 +360,7 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
         source,
         "3DTK scanNNN.3d files",
     )?;
+    check_no_gap(&scans)?;
     let mut odometry = Vec::with_capacity(scans.len());
     for (_, scan) in &scans {
         let pose_path = scan.with_extension("pose");
@@ -469,6 +545,41 @@ mod tests {
                 .to_string();
             assert!(err.contains(want), "{name}: {err}");
         }
+    }
+
+    #[test]
+    fn absurd_pose_values_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let cases = [
+            ("t.pose", "1e300 0 0\n0 0 0\n", "t.pose:1", "1.000e300 cm"),
+            (
+                "u.pose",
+                "0 -2e8 0\n0 0 0\n",
+                "u.pose:1",
+                "value 2 of the translation",
+            ),
+            ("a.pose", "0 0 0\n0 1e300 0\n", "a.pose:2", "1.000e300°"),
+            (
+                "f.frames",
+                "1 0 0 0 0 1 0 0 0 0 1 0 0 1e300 0 1 2\n",
+                "f.frames:1",
+                "value 14",
+            ),
+        ];
+        for (name, text, place, what) in cases {
+            let path = write(dir.path(), name, text);
+            let err = if name.ends_with(".pose") {
+                read_uos_pose(&path).unwrap_err()
+            } else {
+                read_uos_frames_last(&path).unwrap_err()
+            };
+            let err = err.to_string();
+            assert!(err.contains(place) && err.contains(what), "{name}: {err}");
+            assert!(err.len() < 400, "{name}: {err}");
+        }
+        // A long survey and an unwrapped heading are still poses.
+        let ok = write(dir.path(), "ok.pose", "5e7 0 -3e7\n0 -7200 0\n");
+        read_uos_pose(&ok).unwrap();
     }
 
     fn frames_line(m: &Matrix4<f64>, flag: u32) -> String {
@@ -683,6 +794,32 @@ mod tests {
         );
         assert!(!out.exists());
         assert!(nothing_left(dir.path()));
+    }
+
+    #[test]
+    fn a_gap_in_the_scan_numbers_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let source = uos_folder(dir.path(), 4);
+        std::fs::remove_file(source.join("scan001.3d")).unwrap();
+        std::fs::remove_file(source.join("scan002.3d")).unwrap();
+        let out = dir.path().join("ds");
+        let err = import_3dtk(&source, &out, &ImportOptions::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("scan001.3d is missing")
+                && err.contains("2 scan(s) missing")
+                && err.contains("scan003.3d")
+                && err.contains("--first"),
+            "{err}"
+        );
+        assert!(!out.exists());
+        // A selection on one side of the gap is imported.
+        let options = ImportOptions {
+            first: 3,
+            ..Default::default()
+        };
+        assert_eq!(import_3dtk(&source, &out, &options).unwrap().scans, 1);
     }
 
     /// No temporary file is left anywhere under `dir`.
