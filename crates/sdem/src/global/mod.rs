@@ -3,8 +3,10 @@
 //! people's recordings.
 //!
 //! The paper levels every scan by its gyro and compass and searches only the position (and
-//! here a few degrees of heading). Without a reading, three more angles are unknown. They are
-//! found in two steps, each of which keeps the exact search as the judge:
+//! here a few degrees of heading). Without a reading, three more angles are unknown; with a gyro
+//! and no compass (readings whose headings' three σ cover a half turn), one. They are found in
+//! two steps (a gyro's reading stands for the first), each of which keeps the exact search as
+//! the judge:
 //!
 //! 1. **Level each scan by its own surfaces** ([`crate::level`]): floors and ceilings face
 //!    along the vertical wherever the scan was taken, and walls stand across it, so the
