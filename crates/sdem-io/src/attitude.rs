@@ -29,9 +29,15 @@ pub struct AttitudeReadings {
 
 /// The largest roll or pitch magnitude, degrees, that a gyro reading can have. A tilt sensor
 /// reports angles within one turn, so a larger value is in another unit (hundredths of a degree,
-/// raw counts). Yaw is not bounded: a heading integrated from a gyro may be unwrapped. (Radians
-/// where degrees are expected look like small angles and cannot be told apart.)
+/// raw counts). Yaw is bounded only by [`MAX_YAW_READING_DEG`]: a heading integrated from a gyro
+/// may be unwrapped. (Radians where degrees are expected look like small angles and cannot be
+/// told apart.)
 pub const MAX_TILT_READING_DEG: f64 = 360.0;
+
+/// The largest yaw magnitude, degrees, that a reading can have: an unwrapped heading of some
+/// 2,800 turns. A larger one is damage or another unit, and its sine and cosine would be noise
+/// (at 1e300 degrees an f64 holds no fraction of a turn).
+pub const MAX_YAW_READING_DEG: f64 = 1e6;
 
 /// The error text for a roll or pitch (degrees) beyond [`MAX_TILT_READING_DEG`], `None` when
 /// both are within it.
@@ -47,6 +53,19 @@ pub(super) fn tilt_reading_problem(roll_deg: f64, pitch_deg: f64) -> Option<Stri
                 fmt_msg(v)
             )
         })
+}
+
+/// The error text for a yaw (degrees) beyond [`MAX_YAW_READING_DEG`], `None` within it.
+pub(super) fn yaw_reading_problem(yaw_deg: f64) -> Option<String> {
+    (yaw_deg.abs() > MAX_YAW_READING_DEG).then(|| {
+        format!(
+            "yaw is {} degrees, more than {} turns even unwrapped; a heading in degrees lies \
+             within ±{}°, so the value is damaged or in another unit",
+            fmt_msg(yaw_deg),
+            (MAX_YAW_READING_DEG / 360.0) as u64,
+            fmt_msg(MAX_YAW_READING_DEG)
+        )
+    })
 }
 
 /// Writes `attitude.csv`: the header [`ATTITUDE_HEADER`], then `index,roll,pitch,yaw` per scan
@@ -78,14 +97,17 @@ pub fn write_attitude_csv(path: &Path, attitudes: &[Attitude]) -> Result<()> {
                 path.display()
             )));
         }
-        let [roll, pitch, _] = a.to_degrees();
+        let [roll, pitch, yaw] = a.to_degrees();
         let sigma = attitude_sigma_from_degrees(
             a.sigma.roll_pitch.to_degrees(),
             a.sigma.yaw.to_degrees(),
             "roll_pitch_sigma_deg",
             "yaw_sigma_deg",
         );
-        if let Some(why) = tilt_reading_problem(roll, pitch).or(sigma.err()) {
+        if let Some(why) = (tilt_reading_problem(roll, pitch))
+            .or_else(|| yaw_reading_problem(yaw))
+            .or(sigma.err())
+        {
             return Err(Error::Invalid(format!(
                 "refusing to write {}: attitude {i}: {why}",
                 path.display()
@@ -221,7 +243,7 @@ pub fn read_attitude_readings(
         let roll = parse_finite(path, line_no, roll, "roll_deg")?;
         let pitch = parse_finite(path, line_no, pitch, "pitch_deg")?;
         let yaw = parse_finite(path, line_no, yaw, "yaw_deg")?;
-        if let Some(why) = tilt_reading_problem(roll, pitch) {
+        if let Some(why) = tilt_reading_problem(roll, pitch).or_else(|| yaw_reading_problem(yaw)) {
             return Err(Error::parse(path, Some(line_no), why));
         }
         let sigma = match sigma {
@@ -316,6 +338,18 @@ mod tests {
         expect_err(&format!("{h}-1,1,2,3\n"), Some(2));
         expect_err(&format!("{h}0,1,2,3\n0,1,2,3\n"), Some(3));
         expect_err(&format!("{h}0 1 2 3\n"), Some(2));
+        // A yaw of 1e300 degrees is damage: refused, said with an exponent.
+        let e = expect_err(&format!("{h}0,1,2,3\n1,1,2,1e300\n"), Some(3));
+        assert!(e.contains("yaw is 1.000e300 degrees"), "{e}");
+    }
+
+    #[test]
+    fn an_unwrapped_heading_reads() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("attitude.csv");
+        std::fs::write(&path, "index,roll_deg,pitch_deg,yaw_deg\n0,1,2,7290\n").unwrap();
+        let read = read_attitude_csv(&path).unwrap();
+        assert!((read[0].yaw.to_degrees() - 7290.0).abs() < 1e-9);
     }
 
     #[test]
