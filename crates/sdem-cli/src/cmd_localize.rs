@@ -54,8 +54,8 @@ pub struct Args {
     #[arg(long, requires = "map", conflicts_with = "dataset")]
     scan: Option<PathBuf>,
     /// With --map: the gyro/compass reading of the scan, roll,pitch,yaw in degrees [default:
-    /// none: the tilt and the heading are searched]. Without --near or --prior the heading is
-    /// searched over a full turn whatever the reading says.
+    /// none: the tilt and the heading are searched]. Without --near or --prior every heading is
+    /// searched (the surfaces' heading hypotheses) whatever the reading says.
     #[arg(long, requires = "map", allow_hyphen_values = true)]
     attitude: Option<String>,
     /// How far the attitude readings can be off, standard deviations in degrees:
@@ -77,7 +77,7 @@ pub struct Args {
     near: Option<String>,
     /// Candidate window: query origin minus reference origin on world axes, metres, as
     /// x0:x1,y0:y1,z0:z1 [default: the paper's -0.5:0.5,-0.3:0.6,-0.1:0.1].
-    #[arg(long, allow_hyphen_values = true, value_parser = parse_window)]
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_window, conflicts_with = "map")]
     window: Option<SearchWindow>,
     /// A prediction of the offset (odometry), x,y,z,sigma in metres: weighed into the cost as one
     /// more point off by the truncation at one sigma, so it decides only what the scans leave
@@ -86,20 +86,25 @@ pub struct Args {
     /// leaves free the position is the prediction's, as in `sdem slam` [default: none].
     #[arg(long, allow_hyphen_values = true, conflicts_with = "near")]
     prior: Option<String>,
-    /// Grid step of the search, metres.
-    #[arg(long, default_value_t = 0.01, allow_hyphen_values = true)]
+    /// Grid step of the search, metres (with --map: the map's own).
+    #[arg(
+        long,
+        default_value_t = 0.01,
+        allow_hyphen_values = true,
+        conflicts_with = "map"
+    )]
     step: f64,
     /// Score every candidate of the window (the paper's search; slow). Same as
     /// `--search exhaustive`.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "map")]
     exhaustive: bool,
     /// Which search: exact branch-and-bound (projective cost), the exhaustive oracle, or the
     /// coarse-to-fine heuristic.
-    #[arg(long, value_enum, default_value_t = Search::BranchAndBound)]
+    #[arg(long, value_enum, default_value_t = Search::BranchAndBound, conflicts_with = "map")]
     search: Search,
     /// Which form of the paper's eq. (1): query points looked up in the reference S-DEM
     /// (projective), or the paper's z-buffered virtual S-DEM (virtual; not with branch-and-bound).
-    #[arg(long, value_enum, default_value_t = Cost::Projective)]
+    #[arg(long, value_enum, default_value_t = Cost::Projective, conflicts_with = "map")]
     cost: Cost,
     /// Override the heading window: search ± this many degrees around the two compass readings'
     /// difference, whatever their σ (0 trusts the compass; 180 is a full turn). Needs attitude
@@ -118,8 +123,8 @@ pub struct Args {
     /// place that scores almost as well then raises no `runner_up` doubt).
     #[arg(long)]
     no_runner_up: bool,
-    /// S-DEM cell size, degrees.
-    #[arg(long, default_value_t = 1.0)]
+    /// S-DEM cell size, degrees (with --map: the map's own).
+    #[arg(long, default_value_t = 1.0, conflicts_with = "map")]
     resolution: f64,
     /// Derive the S-DEM grid from the reference scan and the search's step, truncation and
     /// refinement from its S-DEM (for a spinning LiDAR: `SdemConfig::for_scan`,

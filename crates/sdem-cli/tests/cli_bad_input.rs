@@ -73,6 +73,38 @@ fn localize_names_a_bad_sensor_toml() {
     error_naming(dir.path(), &args, &["sensor.toml:2:", "min_range_m"]);
     std::fs::write(ds.join("sensor.toml"), "").unwrap();
     error_naming(dir.path(), &args, &["sensor.toml", "empty"]);
+    // A step too coarse for an S-DEM cell is named by its key, not as the grid's resolution.
+    std::fs::write(ds.join("sensor.toml"), "pan_step_deg = 90.0\n").unwrap();
+    error_naming(
+        dir.path(),
+        &args,
+        &["sensor.toml:1:", "pan_step_deg is 90°"],
+    );
+}
+
+/// Relocalizing in a saved map searches with the map's own settings: the search's options of
+/// a pair are refused there, not ignored.
+#[test]
+fn localize_in_a_map_refuses_the_options_it_would_ignore() {
+    let dir = tempfile::tempdir().unwrap();
+    for flag in [
+        ["--step", "0.05"],
+        ["--window", "-1:1,-1:1,-0.1:0.1"],
+        ["--resolution", "0.5"],
+        ["--cost", "virtual"],
+        ["--search", "exhaustive"],
+    ] {
+        let r = common::run(
+            dir.path(),
+            &["localize", "--map", "map", "scan.ply", flag[0], flag[1]],
+        );
+        assert_eq!(r.code, Some(2), "{flag:?}: {}", r.stderr);
+        assert!(
+            r.stderr.contains("cannot be used with"),
+            "{flag:?}: {}",
+            r.stderr
+        );
+    }
 }
 
 #[test]

@@ -109,6 +109,19 @@ impl SensorConfig {
                 "sensor: tilt_step_deg and pan_step_deg must be > 0".into(),
             ));
         }
+        // The S-DEM is matched to the coarser step (`matched_sdem_resolution_deg`); named here,
+        // a step too coarse for a cell says which key to mend.
+        for (name, value) in [
+            ("tilt_step_deg", self.tilt_step_deg),
+            ("pan_step_deg", self.pan_step_deg),
+        ] {
+            if value > 45.0 {
+                return Err(Error::Invalid(format!(
+                    "sensor: {name} is {value}°; the S-DEM's cells are matched to the scanner's \
+                     coarser step and may be at most 45°"
+                )));
+            }
+        }
         if self.tilt_min_deg > self.tilt_max_deg || self.pan_min_deg > self.pan_max_deg {
             return Err(Error::Invalid(
                 "sensor: tilt_min_deg/pan_min_deg must not exceed tilt_max_deg/pan_max_deg".into(),
@@ -392,6 +405,18 @@ mod tests {
         cfg.validate().unwrap();
         assert_eq!(cfg.tilt_angles_deg().len(), 86);
         assert_eq!(cfg.pan_count(), 181);
+    }
+
+    /// A step too coarse for an S-DEM cell is refused by its key, not by the S-DEM grid's
+    /// resolution the loop derives from it later.
+    #[test]
+    fn a_step_coarser_than_a_cell_may_be_is_named() {
+        let cfg = SensorConfig {
+            pan_step_deg: 90.0,
+            ..Default::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains("pan_step_deg is 90°"), "{e}");
     }
 
     #[test]
