@@ -118,6 +118,10 @@ pub(super) const DISTURBED_COMPASS_DEG: f64 = 25.0;
 pub(super) struct MapSearch<'a> {
     pub map: &'a Map,
     pub config: &'a SlamOptions,
+    /// Every heading searched as a full turn, exactly ([`crate::localize::localize`] over
+    /// ±180°), for a scan with an attitude reading, instead of at the surfaces' heading
+    /// hypotheses: the relocalization's second pass when the first finds nothing.
+    pub full_turn: bool,
 }
 
 impl MapSearch<'_> {
@@ -460,7 +464,7 @@ impl MapSearch<'_> {
         });
         let query = crate::scan::Scan::with_grid(&query_points, unknown_heading, grid)?;
         let base = &self.config.localize;
-        let options = LocalizeOptions {
+        let mut options = LocalizeOptions {
             window: SearchWindow::around(&(place.centre - origin), place.half),
             step_m: base.step_m.max(COARSE_STEP_M),
             refine: false,
@@ -476,6 +480,19 @@ impl MapSearch<'_> {
             },
             ..base.clone()
         };
+        let levelled_by_readings = || {
+            crate::global::rotation_prior(
+                reference.attitude(),
+                query.attitude(),
+                crate::scan::LEVEL_TOLERANCE,
+            )
+            .is_none()
+        };
+        if self.full_turn && levelled_by_readings() {
+            // Both levelled by their readings: the heading over a full turn, exactly.
+            options.heading.half_range_deg = 180.0;
+            return crate::localize::localize(reference.sdem(), query.sdem(), &options);
+        }
         crate::scan::localize(&reference, &query, &options)
     }
 

@@ -394,6 +394,7 @@ impl Slam {
         MapSearch {
             map: &self.map,
             config: &self.config,
+            full_turn: false,
         }
     }
 }
