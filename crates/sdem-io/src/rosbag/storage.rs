@@ -112,6 +112,21 @@ impl Damage {
     }
 }
 
+/// Refuses a storage file of 0 bytes by name: read, it was called damaged at byte 0 (MCAP)
+/// or said to have no table of topics (SQLite), and offered `--salvage`, where nothing was
+/// ever recorded into it.
+fn refuse_empty(files: &[std::path::PathBuf]) -> Result<()> {
+    for file in files {
+        if std::fs::metadata(file).is_ok_and(|m| m.len() == 0) {
+            return Err(Error::Invalid(format!(
+                "{} is empty (0 bytes): nothing was recorded into it",
+                file.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
 impl Bag {
     /// Opens a bag: a rosbag2 folder (its `metadata.yaml` names the storage and the files; a
     /// folder without one is read from its `.mcap` or `.db3` files in name order), or a single
@@ -143,6 +158,7 @@ impl Bag {
             None => files_in_folder(path)?,
         };
         let (file_compressed, message_compressed) = compression(&metadata_path, metadata.as_ref())?;
+        refuse_empty(&files)?;
         Ok(Bag {
             path: path.to_path_buf(),
             storage,
@@ -160,6 +176,7 @@ impl Bag {
                 path.display()
             ))
         })?;
+        refuse_empty(&[path.to_path_buf()])?;
         Ok(Bag {
             path: path.to_path_buf(),
             storage,
@@ -648,5 +665,29 @@ fn compression(metadata_path: &Path, metadata: Option<&Metadata>) -> Result<(boo
             None,
             format!("compression_mode '{other}' is not FILE or MESSAGE"),
         )),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An empty `.mcap` or `.db3` is named empty, not damaged at byte 0 or missing its table of
+    /// topics, whether given alone or in a bag folder.
+    #[test]
+    fn an_empty_storage_file_is_named_empty() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in ["run.mcap", "run_0.db3"] {
+            let path = dir.path().join(name);
+            std::fs::write(&path, b"").unwrap();
+            let e = Bag::open(&path).unwrap_err().to_string();
+            assert!(e.contains(name) && e.contains("is empty (0 bytes)"), "{e}");
+            std::fs::remove_file(&path).unwrap();
+        }
+        let folder = dir.path().join("bag");
+        std::fs::create_dir(&folder).unwrap();
+        std::fs::write(folder.join("bag_0.mcap"), b"").unwrap();
+        let e = Bag::open(&folder).unwrap_err().to_string();
+        assert!(e.contains("is empty (0 bytes)"), "{e}");
     }
 }
