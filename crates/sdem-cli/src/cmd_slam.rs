@@ -537,7 +537,10 @@ fn map_scans(
     let total = args.max_scans.unwrap_or(dataset.len()).min(dataset.len());
     let first = run_nodes(&run.slam);
     if first > total {
-        bail!("the saved map has {first} nodes but only {total} scans are to be processed");
+        bail!(
+            "the saved map has {first} nodes but only {total} scans are to be processed; give \
+             --max-scans {first} or more (or leave it out), with the dataset the map was made from"
+        );
     }
     let bar = crate::progress::bar((total - first) as u64, args.json, "scans");
     for index in first..total {

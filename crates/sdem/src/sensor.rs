@@ -165,6 +165,13 @@ impl SensorConfig {
                 )));
             }
         }
+        if self.range_noise_m >= self.max_range_m {
+            return Err(Error::Invalid(format!(
+                "sensor: range_noise_m is {} m, not below max_range_m ({} m): the returns would \
+                 be noise (the SICK's is 0.005 m)",
+                self.range_noise_m, self.max_range_m
+            )));
+        }
         self.lift.validate()
     }
 
@@ -417,6 +424,13 @@ mod tests {
         };
         let e = cfg.validate().unwrap_err().to_string();
         assert!(e.contains("pan_step_deg is 90°"), "{e}");
+        // So is a range noise as large as the range (a simulated run of nothing but noise).
+        let cfg = SensorConfig {
+            range_noise_m: 1e9,
+            ..Default::default()
+        };
+        let e = cfg.validate().unwrap_err().to_string();
+        assert!(e.contains("range_noise_m is 1000000000 m"), "{e}");
     }
 
     #[test]
