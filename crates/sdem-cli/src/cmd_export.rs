@@ -45,7 +45,7 @@ pub fn run(args: Args) -> Result<()> {
         crate::export_mcap::check_target(mcap, args.force)?;
     }
     if let Some(e57) = &args.e57 {
-        check_e57_target(e57, args.force)?;
+        crate::output::check_output_file(e57, "--e57", args.force)?;
     }
     let mut json = serde_json::Map::new();
     if let Some(mcap) = &args.mcap {
@@ -62,23 +62,6 @@ pub fn run(args: Args) -> Result<()> {
     }
     if args.json {
         return print_json(&serde_json::Value::Object(json));
-    }
-    Ok(())
-}
-
-/// Refuses an E57 target that is a folder, or a file that exists unless `force`.
-fn check_e57_target(path: &Path, force: bool) -> Result<()> {
-    if path.is_dir() {
-        bail!(
-            "--e57 {} is a folder; name a file (OUT.e57)",
-            path.display()
-        );
-    }
-    if path.exists() && !force {
-        bail!(
-            "--e57 {} already exists; choose another file or pass --force to replace it",
-            path.display()
-        );
     }
     Ok(())
 }

@@ -1,26 +1,14 @@
 //! A map as MCAP for Foxglove and RViz (`sdem slam --mcap`, `sdem export --mcap`): the
 //! values `sdem_io::write_map_mcap` writes, taken from the mapper.
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use sdem::Slam;
 use sdem_io::{write_map_mcap, MapScene, McapSummary};
 use std::path::Path;
 
 /// Refuses to replace an existing file without `force`, before any work is done.
 pub fn check_target(path: &Path, force: bool) -> Result<()> {
-    if path.is_dir() {
-        bail!(
-            "--mcap {} is a folder; name a file (OUT.mcap)",
-            path.display()
-        );
-    }
-    if path.exists() && !force {
-        bail!(
-            "--mcap {} already exists; choose another file or pass --force to replace it",
-            path.display()
-        );
-    }
-    Ok(())
+    crate::output::check_output_file(path, "--mcap", force)
 }
 
 /// Writes the map of `slam`: its fused cloud, every node's points in the world, the poses, the

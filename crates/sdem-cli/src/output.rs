@@ -157,9 +157,8 @@ pub fn check_output_folder(dir: &Path, flag: &str, names: &[&str], force: bool) 
 pub fn check_output_file(path: &Path, flag: &str, force: bool) -> Result<()> {
     if path.is_dir() {
         bail!(
-            "{flag} {} is a folder, not a file: name the file to write, e.g. {}",
-            path.display(),
-            path.join("picture.png").display()
+            "{flag} {} is a folder, not a file: name the file to write in it",
+            path.display()
         );
     }
     if let Some(file) = path.parent().and_then(file_in_the_way) {
