@@ -322,7 +322,8 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(suite) = args.suites.suite {
         if suite == crate::cmd_bench_suites::Suite::Scale {
-            crate::cmd_bench_scale::check_plot(&args.suites.plot, args.force)?;
+            // Before the suite runs: a saved picture is never written over without --force.
+            crate::output::check_output_file(&args.suites.plot, "--plot", args.force)?;
         }
         let common = crate::cmd_bench_suites::Common {
             quick: args.quick,

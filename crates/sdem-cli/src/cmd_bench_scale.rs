@@ -143,12 +143,6 @@ struct Report {
     plot: Option<PathBuf>,
 }
 
-/// Checks, before the suite runs, that the plot can go to `plot`: not a folder, and not an
-/// existing file unless `force` (`--force`), so a saved picture is never written over.
-pub fn check_plot(plot: &Path, force: bool) -> Result<()> {
-    crate::output::check_output_file(plot, "--plot", force)
-}
-
 /// Runs the suite.
 pub fn run(args: &ScaleArgs, say: &dyn Fn(&str)) -> Result<()> {
     if args.sizes.is_empty() || args.sizes.contains(&0) {

@@ -119,33 +119,7 @@ pub fn run(args: Args) -> Result<()> {
 /// dataset (the files simulate writes, and those `--force` clears: `sdem_io::DATASET_ENTRIES`)
 /// without `--force`, and a route longer than the scene's.
 fn check_out_and_stops(args: &Args, route: Option<LongRoute>) -> Result<()> {
-    if let Some(file) = crate::output::file_in_the_way(&args.out) {
-        bail!(
-            "--out {}: {} is a file, not a folder; --out names the dataset folder to write: \
-             choose a folder (a missing one is created)",
-            args.out.display(),
-            file.display()
-        );
-    }
-    if !args.force {
-        if args.out.join(sdem_io::SCANS_DIR).exists() {
-            bail!(
-                "{} already holds a dataset (scans/); choose another --out or pass --force to \
-                 replace it",
-                args.out.display()
-            );
-        }
-        let held = (sdem_io::DATASET_ENTRIES.iter())
-            .find(|name| std::fs::symlink_metadata(args.out.join(name)).is_ok());
-        if let Some(name) = held {
-            bail!(
-                "{} already holds {name}, a dataset's file that simulate would overwrite; choose \
-                 another --out, or pass --force to replace the dataset's files (scans/, sweeps/, \
-                 attitude.csv, the pose files, sensor.toml; nothing else)",
-                args.out.display()
-            );
-        }
-    }
+    crate::output::check_output_folder(&args.out, "--out", sdem_io::DATASET_ENTRIES, args.force)?;
     if route.is_some() {
         if !(1..=sim::MAX_LONG_STOPS).contains(&args.stops) {
             bail!(

@@ -17,6 +17,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
+mod out_folder;
+
+use out_folder::{check_beside_outputs, prepare_out};
+
 /// Arguments of `sdem slam`.
 #[derive(clap::Args)]
 pub struct Args {
@@ -293,103 +297,6 @@ pub fn run(args: Args) -> Result<Outcome> {
         print_text(&args, &report);
     }
     Ok(Outcome::of(report.trusted, args.accept_doubtful))
-}
-
-/// The files `sdem slam` writes into its output folder, besides [`MAP_DIR`] and the pictures
-/// ([`crate::cmd_view::MAP_PICTURE_FILES`]).
-const OUTPUT_FILES: &[&str] = &[
-    "poses.txt",
-    "poses.tum",
-    "map.ply",
-    "map.sdemvox",
-    "config.toml",
-    REPORT_FILE,
-    STEPS_FILE,
-];
-
-/// The names in `out` that `sdem slam` writes, the map folder last.
-fn output_names() -> impl Iterator<Item = &'static str> {
-    (OUTPUT_FILES.iter())
-        .chain(crate::cmd_view::MAP_PICTURE_FILES)
-        .copied()
-        .chain([MAP_DIR])
-}
-
-/// Refuses a file given with `flag` that is one of the outputs in `out`: the run would write
-/// over it, or read what it writes.
-fn check_beside_outputs(out: &Path, path: &Path, flag: &str) -> Result<()> {
-    let (Some(name), Some(parent)) = (path.file_name(), path.parent()) else {
-        return Ok(());
-    };
-    let parent = if parent.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        parent
-    };
-    let same_folder = match (std::fs::canonicalize(parent), std::fs::canonicalize(out)) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => parent == out,
-    };
-    if same_folder && output_names().any(|o| name == o) {
-        bail!(
-            "{flag} {} is one of the files sdem slam writes in {}; name a file elsewhere",
-            path.display(),
-            out.display()
-        );
-    }
-    Ok(())
-}
-
-/// Refuses to overwrite or resume the wrong map, or to write over files of the same names as
-/// its outputs in a folder that holds no map; with `--force`, takes the earlier run's outputs
-/// away (its pictures and map nodes would otherwise stay beside the new run's); then creates
-/// the output folder.
-fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
-    let out = &args.out;
-    if out.exists() && !out.is_dir() {
-        bail!("--out {} is a file; name a folder", out.display());
-    }
-    let has_map = map_dir.join(sdem_io::MAP_MANIFEST).exists();
-    if has_map && !args.resume && !args.force {
-        bail!(
-            "{} already holds a map; pass --resume to continue it or --force to replace it",
-            out.display()
-        );
-    }
-    if args.resume && !has_map {
-        bail!(
-            "--resume: {} holds no saved map ({} is missing); run without --resume",
-            out.display(),
-            map_dir.join(sdem_io::MAP_MANIFEST).display()
-        );
-    }
-    let present = || output_names().find(|name| out.join(name).exists());
-    if !has_map && !args.force {
-        if let Some(name) = present() {
-            bail!(
-                "{} holds {name} but no sdem map: sdem slam would write over it; choose another \
-                 folder, or pass --force to replace the files of sdem's names there",
-                out.display()
-            );
-        }
-    }
-    if args.force && !args.resume {
-        for name in OUTPUT_FILES
-            .iter()
-            .chain(crate::cmd_view::MAP_PICTURE_FILES)
-        {
-            let path = out.join(name);
-            if path.is_file() {
-                std::fs::remove_file(&path)
-                    .with_context(|| format!("--force: cannot remove {}", path.display()))?;
-            }
-        }
-        if has_map {
-            std::fs::remove_dir_all(map_dir)
-                .with_context(|| format!("--force: cannot remove {}", map_dir.display()))?;
-        }
-    }
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))
 }
 
 /// Whether `saved` (as the map recorded it) and `given` name one dataset folder.

@@ -1,0 +1,96 @@
+//! Where `sdem slam` writes: the names of its outputs, and the checks that keep it from
+//! writing over what a user keeps in the output folder or names as another input or output.
+
+use super::{Args, MAP_DIR, REPORT_FILE, STEPS_FILE};
+use crate::output::{check_output_folder, create_folder};
+use anyhow::{bail, Context, Result};
+use std::path::Path;
+
+/// The files `sdem slam` writes into its output folder, besides [`MAP_DIR`] and the pictures
+/// ([`crate::cmd_view::MAP_PICTURE_FILES`]).
+const OUTPUT_FILES: &[&str] = &[
+    "poses.txt",
+    "poses.tum",
+    "map.ply",
+    "map.sdemvox",
+    "config.toml",
+    REPORT_FILE,
+    STEPS_FILE,
+];
+
+/// The names in `out` that `sdem slam` writes, the map folder last.
+fn output_names() -> impl Iterator<Item = &'static str> {
+    (OUTPUT_FILES.iter())
+        .chain(crate::cmd_view::MAP_PICTURE_FILES)
+        .copied()
+        .chain([MAP_DIR])
+}
+
+/// Refuses a file given with `flag` that is one of the outputs in `out`: the run would write
+/// over it, or read what it writes.
+pub(super) fn check_beside_outputs(out: &Path, path: &Path, flag: &str) -> Result<()> {
+    let (Some(name), Some(parent)) = (path.file_name(), path.parent()) else {
+        return Ok(());
+    };
+    let parent = if parent.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        parent
+    };
+    let same_folder = match (std::fs::canonicalize(parent), std::fs::canonicalize(out)) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => parent == out,
+    };
+    if same_folder && output_names().any(|o| name == o) {
+        bail!(
+            "{flag} {} is one of the files sdem slam writes in {}; name a file elsewhere",
+            path.display(),
+            out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Refuses to overwrite or resume the wrong map, or to write over files of the same names as
+/// its outputs in a folder that holds no map; with `--force`, takes the earlier run's outputs
+/// away (its pictures and map nodes would otherwise stay beside the new run's); then creates
+/// the output folder.
+pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
+    let out = &args.out;
+    let has_map = map_dir.join(sdem_io::MAP_MANIFEST).exists();
+    // A folder holding a map is continued (--resume) or replaced (--force) below; in one
+    // without, no file of an output's name is written over unless --force.
+    let names: Vec<&str> = if has_map {
+        Vec::new()
+    } else {
+        output_names().collect()
+    };
+    check_output_folder(out, "--out", &names, args.force)?;
+    if has_map && !args.resume && !args.force {
+        bail!(
+            "{} already holds a map; pass --resume to continue it or --force to replace it",
+            out.display()
+        );
+    }
+    if args.resume && !has_map {
+        bail!(
+            "--resume: {} holds no saved map ({} is missing); run without --resume",
+            out.display(),
+            map_dir.join(sdem_io::MAP_MANIFEST).display()
+        );
+    }
+    if args.force && !args.resume {
+        for name in output_names() {
+            let path = out.join(name);
+            if path.is_file() {
+                std::fs::remove_file(&path)
+                    .with_context(|| format!("--force: cannot remove {}", path.display()))?;
+            }
+        }
+        if has_map {
+            std::fs::remove_dir_all(map_dir)
+                .with_context(|| format!("--force: cannot remove {}", map_dir.display()))?;
+        }
+    }
+    create_folder(out)
+}
