@@ -5,7 +5,7 @@
 //! `las` applies; sdem takes them as metres in the sensor frame, like every scan (a
 //! georeferenced file is refused by [`crate::read_points`]'s unit check). Other attributes
 //! (intensity, returns, colour, GPS time) are ignored. Every LAS version 1.0–1.4 and point format
-//! 0–10 that `las` reads is accepted.
+//! 0–10 that `las` reads is accepted; another version is refused, naming it.
 //!
 //! Before `las` sees the file, the counts it would trust are checked against the file's size:
 //! the point records (uncompressed), the first extended VLR's length (LAS 1.4), and for LAZ the
@@ -21,6 +21,9 @@ use std::path::Path;
 
 /// Points are decoded this many bytes of records at a time.
 const BATCH_BYTES: usize = 4 << 20;
+
+/// The newest LAS version read is 1.this (LAS 1.4, the latest ASPRS specification).
+const MAX_LAS_MINOR: u8 = 4;
 
 /// The LASzip VLR: user id and record id.
 const LASZIP_USER_ID: &str = "laszip encoded";
@@ -41,6 +44,16 @@ pub(super) fn read_las(path: &Path) -> Result<Vec<Vec3>> {
             "the file starts with {start:?}, not the LAS magic 'LASF'; it is not a LAS or LAZ \
              file"
         )));
+    }
+    // The version (bytes 24 and 25) decides the header's layout: checked before it is read.
+    if let (Some(&major), Some(&minor)) = (bytes.get(24), bytes.get(25)) {
+        if !(major == 1 && minor <= MAX_LAS_MINOR) {
+            return Err(err(format!(
+                "LAS version {major}.{minor} is not supported: sdem reads LAS 1.0 to \
+                 1.{MAX_LAS_MINOR}, the versions ASPRS has published (the header's bytes 24 and \
+                 25); the file is damaged or of a newer format"
+            )));
+        }
     }
     let raw = las::raw::Header::read_from(&bytes[..]).map_err(|e| {
         err(format!(
@@ -460,6 +473,23 @@ mod tests {
         scale[131..139].copy_from_slice(&1e300f64.to_le_bytes());
         let msg = expect_err("h.las", &scale);
         assert!(msg.contains("e30") && msg.len() < 400, "{msg}");
+    }
+
+    #[test]
+    fn a_las_version_other_than_1_0_to_1_4_is_named() {
+        let good = las_bytes(&POINTS, false);
+        for (major, minor, wanted) in [(1, 9, "1.9"), (2, 0, "2.0"), (1, 5, "1.5")] {
+            let mut bytes = good.clone();
+            (bytes[24], bytes[25]) = (major, minor);
+            let msg = expect_err("v.las", &bytes);
+            assert!(
+                msg.contains(&format!("LAS version {wanted}")) && msg.contains("1.0 to 1.4"),
+                "{msg}"
+            );
+        }
+        let mut laz = las_bytes(&POINTS, true);
+        laz[25] = 9;
+        assert!(expect_err("v.laz", &laz).contains("LAS version 1.9"));
     }
 
     /// The header's point count at bytes 107 (legacy) and 247 (LAS 1.4) set to `count`.
