@@ -103,7 +103,7 @@
 //!    from forward inside the scan plane. `PAN_STEP` > 0, and every beam's pan angle lies within
 //!    ±360°.
 //! 3. `lift_slide_m U` — the lift's slide `u` during the sweep, metres (see
-//!    [`sdem::sensor::LiftConfig`]).
+//!    [`sdem::sensor::LiftConfig`]), within ±[`MAX_LIFT_SLIDE_M`] (100 m).
 //! 4. `lines N` — the number of scan lines that follow (≥ 1).
 //! 5. `N` data lines, in the order they were taken, each with `4 + PAN_COUNT` values:
 //!    `TILT_DEG ROLL_DEG PITCH_DEG YAW_DEG R_0 R_1 … R_(PAN_COUNT−1)`.
@@ -280,7 +280,7 @@ pub use sensor_file::{
     ATTITUDE_SIGMA_ROLL_PITCH_KEY, ATTITUDE_SIGMA_YAW_KEY, MAX_ATTITUDE_SIGMA_ROLL_PITCH_DEG,
     MAX_ATTITUDE_SIGMA_YAW_DEG,
 };
-pub use sweep::{read_sweep, write_sweep, SWEEP_MAGIC, SWEEP_VERSION};
+pub use sweep::{read_sweep, write_sweep, MAX_LIFT_SLIDE_M, SWEEP_MAGIC, SWEEP_VERSION};
 pub use voxels::{read_voxel_map, write_voxel_map, VOXEL_EXTENSION, VOXEL_MAGIC, VOXEL_VERSION};
 
 /// What [`write_atomic`]'s temporary files carry between the target's name and the process id.

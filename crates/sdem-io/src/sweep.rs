@@ -24,6 +24,23 @@ const MAX_PAN_COUNT: usize = 1_000_000;
 /// side of forward (larger angles are a damaged header, and overflow to non-finite points).
 const MAX_PAN_DEG: f64 = 360.0;
 
+/// The largest lift slide a sweep may hold, metres, either sign. A slide mechanism moves the
+/// scanner by centimetres to a few metres (the paper's scissor lift slides 0.20–0.58 m,
+/// [`sdem::sensor::LiftConfig`]); 100 m leaves room for any such mechanism and still refuses a
+/// damaged header, or a slide written in millimetres.
+pub const MAX_LIFT_SLIDE_M: f64 = 100.0;
+
+/// `Some(message)` when the lift slide `slide_m` is not finite or beyond ±[`MAX_LIFT_SLIDE_M`].
+fn lift_problem(slide_m: f64) -> Option<String> {
+    (!(slide_m.is_finite() && slide_m.abs() <= MAX_LIFT_SLIDE_M)).then(|| {
+        format!(
+            "the lift slide is {} m; it must lie within ±{MAX_LIFT_SLIDE_M} m (a lift moves the \
+             scanner by centimetres to a few metres: is it in millimetres?)",
+            fmt_msg(slide_m)
+        )
+    })
+}
+
 /// `Some(message)` when the pan angles `PAN_MIN`, …, `PAN_MIN + (PAN_COUNT − 1) · PAN_STEP`
 /// leave ±[`MAX_PAN_DEG`].
 fn pan_problem(pan_min_deg: f64, pan_step_deg: f64, pan_count: usize) -> Option<String> {
@@ -99,6 +116,9 @@ pub fn write_sweep(path: &Path, sweep: &Sweep) -> Result<()> {
         return Err(refuse("the sweep has no lines or no beams".into()));
     }
     if let Some(why) = pan_problem(sweep.pan_min_deg, sweep.pan_step_deg, pan_count) {
+        return Err(refuse(why));
+    }
+    if let Some(why) = lift_problem(sweep.lift_slide_m) {
         return Err(refuse(why));
     }
     for (i, line) in sweep.lines.iter().enumerate() {
@@ -315,7 +335,11 @@ impl<'t, I: Iterator<Item = (usize, &'t str)>> Header<'_, I> {
                 "expected 'lift_slide_m U' (the lift's slide, metres)",
             ));
         };
-        parse_finite(self.path, line_no, slide, "the lift slide")
+        let slide_m = parse_finite(self.path, line_no, slide, "the lift slide")?;
+        match lift_problem(slide_m) {
+            Some(why) => Err(Error::parse(self.path, Some(line_no), why)),
+            None => Ok(slide_m),
+        }
     }
 
     /// The `lines N` line: the number of scan lines, which a file of `text_len` bytes with
@@ -568,6 +592,33 @@ mod tests {
             &with("0 0 0 0 1 2 3\n0 0 0 0 1 2 3\n0 0 0 0 1 2 3\n"),
             Some(7),
         );
+    }
+
+    #[test]
+    fn an_absurd_lift_is_refused_naming_the_file_and_value() {
+        for lift in ["1e9", "-150", "100.5"] {
+            let text = format!(
+                "sdem-sweep 1\npan_deg -90 1 3\nlift_slide_m {lift}\nlines 1\n0 0 0 0 1 2 3\n"
+            );
+            let msg = expect_err(&text, Some(3));
+            assert!(msg.contains("lift") && msg.contains("100 m"), "{msg}");
+        }
+        let msg = expect_err(
+            "sdem-sweep 1\npan_deg -90 1 3\nlift_slide_m 1e9\nlines 1\n0 0 0 0 1 2 3\n",
+            Some(3),
+        );
+        assert!(msg.contains("1.000e9"), "{msg}");
+        // A lift of a few metres is read.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("tall.sweep");
+        let text = "sdem-sweep 1\npan_deg -90 1 3\nlift_slide_m 2.5\nlines 1\n0 0 0 0 1 2 3\n";
+        std::fs::write(&path, text).unwrap();
+        assert_eq!(read_sweep(&path).unwrap().lift_slide_m, 2.5);
+        // The writer refuses what the reader would.
+        let mut sweep = sample_sweep();
+        sweep.lift_slide_m = 1e9;
+        let err = write_sweep(&dir.path().join("w.sweep"), &sweep).unwrap_err();
+        assert!(err.to_string().contains("lift"), "{err}");
     }
 
     #[test]
