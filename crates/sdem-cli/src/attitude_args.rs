@@ -21,18 +21,13 @@ pub struct AttitudeFlags {
 
 /// Parses `--attitude-sigma-deg ROLL_PITCH,YAW` (degrees), checked as sensor.toml's σ is.
 pub fn parse_attitude_sigma(text: &str) -> Result<AttitudeSigma> {
-    let [rp, yaw] = crate::parse::parse_numbers(
-        "--attitude-sigma-deg",
-        text,
-        "ROLL_PITCH,YAW (standard deviations in degrees)",
-    )?;
-    sdem_io::attitude_sigma_from_degrees(
-        rp,
-        yaw,
-        "--attitude-sigma-deg: the roll/pitch σ",
-        "--attitude-sigma-deg: the heading σ",
-    )
-    .map_err(|why| anyhow::anyhow!("{why}"))
+    attitude_sigma(text).map_err(|why| anyhow::anyhow!("--attitude-sigma-deg '{text}': {why}"))
+}
+
+/// [`parse_attitude_sigma`] as a clap value parser: the message does not name the flag.
+pub fn attitude_sigma(text: &str) -> std::result::Result<AttitudeSigma, String> {
+    let [rp, yaw] = crate::parse::numbers(text, "ROLL_PITCH,YAW (standard deviations in degrees)")?;
+    sdem_io::attitude_sigma_from_degrees(rp, yaw, "the roll/pitch σ", "the heading σ")
 }
 
 /// Where the attitudes of a localization come from.

@@ -1,14 +1,14 @@
 //! `sdem localize`: one scan against another.
 
 use crate::attitude_args::{
-    attitude_assumption, attitudes_of, parse_attitude_sigma, AttitudeAssumption, AttitudeFlags,
+    attitude_assumption, attitude_sigma, attitudes_of, AttitudeAssumption, AttitudeFlags,
     AttitudeKind, Attitudes,
 };
 use crate::output::{
     doubts_json, elapsed_ms, estimate_label, pose_line, print_doubts, print_json,
     with_doubt_messages, Outcome,
 };
-use crate::parse::parse_numbers;
+use crate::parse::{numbers, positive_degrees, positive_metres};
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, Attitude, AttitudeSigma, Pose, PoseRecord};
@@ -56,16 +56,22 @@ pub struct Args {
     /// With --map: the gyro/compass reading of the scan, roll,pitch,yaw in degrees [default:
     /// none: the tilt and the heading are searched]. Without --near or --prior every heading is
     /// searched (the surfaces' heading hypotheses) whatever the reading says.
-    #[arg(long, requires = "map", allow_hyphen_values = true)]
-    attitude: Option<String>,
+    #[arg(
+        long,
+        requires = "map",
+        allow_hyphen_values = true,
+        value_name = "R,P,Y",
+        value_parser = parse_attitude
+    )]
+    attitude: Option<[f64; 3]>,
     /// How far the attitude readings can be off, standard deviations in degrees:
     /// ROLL_PITCH,YAW (e.g. 0.5,20 for a compass near steel). Overrides attitude.csv's and
     /// sensor.toml's σ for both scans (with --map: for --attitude). The heading is searched over
     /// 3σ of the two readings' difference; a match that tilts the scans beyond 3σ of roll and
     /// pitch is a doubt [default: attitude.csv's σ columns, else sensor.toml's
     /// attitude_sigma_roll_pitch_deg / attitude_sigma_yaw_deg, else 0.5,3.5].
-    #[arg(long, allow_hyphen_values = true, value_name = "RP,YAW")]
-    attitude_sigma_deg: Option<String>,
+    #[arg(long, allow_hyphen_values = true, value_name = "RP,YAW", value_parser = attitude_sigma)]
+    attitude_sigma_deg: Option<AttitudeSigma>,
     /// Without attitude.csv: take both scans as level (roll = pitch = yaw = 0, with the σ of
     /// sensor.toml or --attitude-sigma-deg) instead of searching their attitude. For a scanner
     /// known to stand level; faster than the search, wrong when it is not level.
@@ -73,8 +79,14 @@ pub struct Args {
     assume_level: bool,
     /// With --map: where the scan was taken, roughly, x,y,z in metres in the map's frame
     /// [default: the nodes whose place descriptors look most like the scan's].
-    #[arg(long, requires = "map", allow_hyphen_values = true)]
-    near: Option<String>,
+    #[arg(
+        long,
+        requires = "map",
+        allow_hyphen_values = true,
+        value_name = "X,Y,Z",
+        value_parser = parse_near
+    )]
+    near: Option<[f64; 3]>,
     /// Candidate window: query origin minus reference origin on world axes, metres, as
     /// x0:x1,y0:y1,z0:z1 [default: the paper's -0.5:0.5,-0.3:0.6,-0.1:0.1].
     #[arg(long, allow_hyphen_values = true, value_parser = parse_window, conflicts_with = "map")]
@@ -84,14 +96,21 @@ pub struct Args {
     /// open (the position along a featureless corridor). With --map: the predicted position in
     /// the map's frame; it centres the search as --near does, and along a direction the scan
     /// leaves free the position is the prediction's, as in `sdem slam` [default: none].
-    #[arg(long, allow_hyphen_values = true, conflicts_with = "near")]
-    prior: Option<String>,
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        conflicts_with = "near",
+        value_name = "X,Y,Z,SIGMA",
+        value_parser = parse_prior
+    )]
+    prior: Option<OffsetPrior>,
     /// Grid step of the search, metres (with --map: the map's own).
     #[arg(
         long,
         default_value_t = 0.01,
         allow_hyphen_values = true,
-        conflicts_with = "map"
+        conflicts_with = "map",
+        value_parser = positive_metres
     )]
     step: f64,
     /// Score every candidate of the window (the paper's search; slow). Same as
@@ -113,18 +132,25 @@ pub struct Args {
         long,
         allow_hyphen_values = true,
         conflicts_with = "map",
-        value_name = "DEG"
+        value_name = "DEG",
+        value_parser = parse_heading_window
     )]
     heading_window: Option<f64>,
     /// Heading step, degrees [default: matched to the scan's extent and --step].
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = positive_degrees)]
     heading_step: Option<f64>,
     /// Skip the second search for the runner-up outside the peak (halves the time; a distant
     /// place that scores almost as well then raises no `runner_up` doubt).
     #[arg(long)]
     no_runner_up: bool,
     /// S-DEM cell size, degrees (with --map: the map's own).
-    #[arg(long, default_value_t = 1.0, conflicts_with = "map")]
+    #[arg(
+        long,
+        default_value_t = 1.0,
+        allow_hyphen_values = true,
+        conflicts_with = "map",
+        value_parser = parse_resolution
+    )]
     resolution: f64,
     /// Derive the S-DEM grid from the reference scan and the search's step, truncation and
     /// refinement from its S-DEM (for a spinning LiDAR: `SdemConfig::for_scan`,
@@ -221,31 +247,54 @@ struct Report {
     error_deg: Option<f64>,
 }
 
-/// Parses three comma-separated finite numbers.
-fn parse_triple(flag: &str, text: &str) -> Result<[f64; 3]> {
-    parse_numbers(flag, text, "a,b,c")
-}
-
 /// Parses `--prior x,y,z,sigma` (metres).
-fn parse_prior(text: &str) -> Result<OffsetPrior> {
-    let [x, y, z, sigma_m] = parse_numbers("--prior", text, "x,y,z,sigma in metres")?;
+fn parse_prior(text: &str) -> Result<OffsetPrior, String> {
+    let [x, y, z, sigma_m] = numbers(text, "x,y,z,sigma in metres")?;
     let prior = OffsetPrior {
         offset: [x, y, z],
         sigma_m,
     };
-    prior
-        .validate()
-        .with_context(|| format!("--prior '{text}'"))?;
+    prior.validate().map_err(|e| e.to_string())?;
     Ok(prior)
+}
+
+/// Parses `--near x,y,z` (metres).
+fn parse_near(text: &str) -> Result<[f64; 3], String> {
+    numbers(text, "x,y,z in metres")
+}
+
+/// Parses `--attitude roll,pitch,yaw` (degrees).
+fn parse_attitude(text: &str) -> Result<[f64; 3], String> {
+    numbers(text, "roll,pitch,yaw in degrees")
+}
+
+/// Parses `--heading-window DEG`: 0 to 180 degrees.
+fn parse_heading_window(text: &str) -> Result<f64, String> {
+    (text.trim().parse::<f64>().ok())
+        .filter(|degrees| (0.0..=180.0).contains(degrees))
+        .ok_or_else(|| {
+            "must lie in [0, 180] degrees (0 trusts the compass, 180 searches a full turn)".into()
+        })
+}
+
+/// Parses `--resolution DEG`, checked as the S-DEM grid checks it.
+fn parse_resolution(text: &str) -> Result<f64, String> {
+    let resolution_deg = (text.trim().parse::<f64>())
+        .map_err(|_| "must be a number of degrees in (0, 45], the S-DEM's cell size".to_string())?;
+    let grid = SdemConfig {
+        resolution_deg,
+        ..Default::default()
+    };
+    grid.validate().map_err(|e| e.to_string())?;
+    Ok(resolution_deg)
 }
 
 /// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.
 fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     // The flags first, then the files.
-    let sigma = parse_sigma(args)?;
-    let attitude = match &args.attitude {
-        Some(text) => {
-            let [r, p, y] = parse_triple("--attitude", text)?;
+    let sigma = args.attitude_sigma_deg;
+    let attitude = match args.attitude {
+        Some([r, p, y]) => {
             let reading = Attitude::from_degrees(r, p, y);
             Some(Attitude {
                 sigma: sigma.unwrap_or(reading.sigma),
@@ -259,18 +308,15 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         }
         None => None,
     };
-    let near = match (&args.near, &args.prior) {
-        (Some(text), _) => Some(Near {
-            position: sdem::geometry::Vec3::from(parse_triple("--near", text)?),
+    let near = match (args.near, args.prior) {
+        (Some(position), _) => Some(Near {
+            position: sdem::geometry::Vec3::from(position),
             sigma_m: None,
         }),
-        (None, Some(text)) => {
-            let prior = parse_prior(text)?;
-            Some(Near {
-                position: sdem::geometry::Vec3::from(prior.offset),
-                sigma_m: Some(prior.sigma_m),
-            })
-        }
+        (None, Some(prior)) => Some(Near {
+            position: sdem::geometry::Vec3::from(prior.offset),
+            sigma_m: Some(prior.sigma_m),
+        }),
         (None, None) => None,
     };
     let folder = if map.join(sdem_io::MAP_MANIFEST).exists() {
@@ -359,9 +405,6 @@ pub fn run(args: Args) -> Result<Outcome> {
     else {
         bail!("give DATASET --reference I --query J, or --map DIR SCAN");
     };
-    if !(args.step.is_finite() && args.step > 0.0) {
-        bail!("--step {} must be a positive number of metres", args.step);
-    }
     let dataset = Dataset::open(&dataset_path)?;
     for (flag, index) in [("--reference", reference_index), ("--query", query_index)] {
         if index >= dataset.len() {
@@ -392,7 +435,7 @@ pub fn run(args: Args) -> Result<Outcome> {
         )
     };
     let pair = (reference_index, query_index);
-    let attitudes = attitudes_of(&dataset, &dataset_path, pair, &attitude_flags(&args)?)?;
+    let attitudes = attitudes_of(&dataset, &dataset_path, pair, &attitude_flags(&args))?;
     let (found, time_ms) = localize_scans(&dataset, pair, &attitudes, &sdem_config, &config)?;
     let truth = dataset
         .truth
@@ -416,16 +459,6 @@ pub fn run(args: Args) -> Result<Outcome> {
 /// The search's settings from the arguments, checked, over `base` (the defaults, or the ones
 /// matched to the scan) with grid step `step`.
 fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<LocalizeOptions> {
-    if let Some(window) = args.heading_window {
-        if !(window.is_finite() && (0.0..=180.0).contains(&window)) {
-            bail!("--heading-window {window} must lie in 0..=180 degrees (0 trusts the compass)");
-        }
-    }
-    if let Some(step) = args.heading_step {
-        if !(step.is_finite() && step > 0.0) {
-            bail!("--heading-step {step} must be a positive number of degrees");
-        }
-    }
     let mode = match (args.exhaustive, args.search) {
         (true, _) | (_, Search::Exhaustive) => SearchMode::Exhaustive,
         (_, Search::BranchAndBound) => SearchMode::BranchAndBound,
@@ -441,10 +474,6 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
              branch-and-bound search bounds the projective cost only"
         );
     }
-    let prior = match &args.prior {
-        Some(text) => Some(parse_prior(text)?),
-        None => None,
-    };
     Ok(LocalizeOptions {
         window: args.window.unwrap_or_else(SearchWindow::paper),
         step_m: step,
@@ -459,7 +488,7 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
         mode,
         cost: CostConfig {
             model,
-            prior,
+            prior: args.prior,
             ..base.cost.clone()
         },
         runner_up: !args.no_runner_up,
@@ -467,21 +496,13 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
     })
 }
 
-/// `--attitude-sigma-deg`, parsed, when given.
-fn parse_sigma(args: &Args) -> Result<Option<AttitudeSigma>> {
-    args.attitude_sigma_deg
-        .as_deref()
-        .map(parse_attitude_sigma)
-        .transpose()
-}
-
-/// The attitude flags, checked.
-fn attitude_flags(args: &Args) -> Result<AttitudeFlags> {
-    Ok(AttitudeFlags {
-        sigma: parse_sigma(args)?,
+/// The attitude flags.
+fn attitude_flags(args: &Args) -> AttitudeFlags {
+    AttitudeFlags {
+        sigma: args.attitude_sigma_deg,
         assume_level: args.assume_level,
         heading_window_deg: args.heading_window,
-    })
+    }
 }
 
 /// Reads scan `index` of the dataset: its points in the sensor frame.

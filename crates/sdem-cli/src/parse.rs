@@ -1,16 +1,32 @@
-//! Parsing of the command line's comma-separated number lists.
+//! Parsing of the command line's numbers: comma-separated lists, and clap's value parsers, whose
+//! refusals are usage errors (exit status 2; clap's message names the flag and the value, so
+//! theirs says only what the value must be).
 
-use anyhow::{Context, Result};
-
-/// Parses `N` comma-separated finite numbers given to `flag`; `form` names them in messages.
-pub fn parse_numbers<const N: usize>(flag: &str, text: &str, form: &str) -> Result<[f64; N]> {
+/// Parses `N` comma-separated finite numbers; `form` names them in the message (which does not
+/// name the flag: clap's, or the caller's, does).
+pub fn numbers<const N: usize>(text: &str, form: &str) -> Result<[f64; N], String> {
     let values: Vec<f64> = text
         .split(',')
         .map(|v| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()))
         .collect::<Option<Vec<f64>>>()
-        .with_context(|| format!("{flag} '{text}': expected {N} finite numbers {form}"))?;
+        .ok_or_else(|| format!("expected {N} finite numbers {form}"))?;
     let count = values.len();
     values
         .try_into()
-        .map_err(|_| anyhow::anyhow!("{flag} '{text}': expected {N} numbers {form}, got {count}"))
+        .map_err(|_| format!("expected {N} numbers {form}, got {count}"))
+}
+
+/// A clap value parser: a positive, finite number of metres.
+pub fn positive_metres(text: &str) -> Result<f64, String> {
+    positive(text).ok_or_else(|| "must be a positive number of metres (> 0)".into())
+}
+
+/// A clap value parser: a positive, finite number of degrees.
+pub fn positive_degrees(text: &str) -> Result<f64, String> {
+    positive(text).ok_or_else(|| "must be a positive number of degrees (> 0)".into())
+}
+
+/// `text` as a finite number > 0.
+fn positive(text: &str) -> Option<f64> {
+    (text.trim().parse::<f64>().ok()).filter(|v| v.is_finite() && *v > 0.0)
 }

@@ -222,12 +222,18 @@ fn a_bad_sigma_is_a_one_line_error_naming_where() {
     );
     std::fs::write(ds.join("sensor.toml"), &original).unwrap();
 
+    // A malformed σ is a usage error (exit status 2) naming the flag.
     for value in ["-1,3", "0.5,0", "nan,3", "a,b", "1", "1,2,3", "0.5,200"] {
-        let m = run_err(
+        let r = run(
             dir.path(),
             &localize_args(&ds, &["--attitude-sigma-deg", value]),
         );
-        assert!(m.contains("--attitude-sigma-deg"), "{value}: {m}");
+        assert_eq!(r.code, Some(2), "{value}: {}", r.stderr);
+        assert!(
+            r.stderr.contains("--attitude-sigma-deg"),
+            "{value}: {}",
+            r.stderr
+        );
     }
 
     // --assume-level with readings: they are used, the flag is refused.
@@ -247,10 +253,13 @@ fn a_bad_sigma_is_a_one_line_error_naming_where() {
             "--scan",
             "x.ply",
             "--attitude-sigma-deg",
-            "0.5,-3",
+            "0.5,3",
         ],
     );
-    assert!(m.contains("--attitude-sigma-deg"), "{m}");
+    assert!(
+        m.contains("--attitude-sigma-deg") && m.contains("--attitude R,P,Y"),
+        "{m}"
+    );
 }
 
 /// `sdem slam` passes each reading with its σ to the loop and reports where it came from;

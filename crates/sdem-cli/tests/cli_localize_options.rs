@@ -1,0 +1,72 @@
+//! `sdem localize`'s search options: a number out of its range is a usage error like a malformed
+//! `--window` (exit status 2, clap's message naming the flag and the range it allows), refused
+//! before any file is read.
+
+mod common;
+
+use common::run;
+use std::path::Path;
+
+fn s(path: &Path) -> &str {
+    path.to_str().expect("temporary paths are UTF-8")
+}
+
+/// `sdem ARGS` ended as a usage error (status 2, nothing on stdout, no panic) whose message
+/// contains every one of `wanted`; returns stderr.
+fn usage_error(dir: &Path, args: &[&str], wanted: &[&str]) -> String {
+    let r = run(dir, args);
+    assert_eq!(r.code, Some(2), "sdem {args:?}: {}", r.stderr);
+    assert!(
+        !r.stderr.contains("panicked"),
+        "sdem {args:?}: {}",
+        r.stderr
+    );
+    assert!(r.stdout.trim().is_empty(), "sdem {args:?}: {}", r.stdout);
+    for w in wanted {
+        assert!(
+            r.stderr.contains(w),
+            "sdem {args:?}: {:?} lacks {w:?}",
+            r.stderr
+        );
+    }
+    r.stderr
+}
+
+#[test]
+fn localize_numbers_out_of_range_are_usage_errors_naming_flag_and_range() {
+    let dir = tempfile::tempdir().unwrap();
+    // Not a dataset: every refusal comes before it is opened.
+    let ds = dir.path().join("nowhere");
+    let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    for (flag, value, range) in [
+        ("--step", "0", "positive number of metres"),
+        ("--step", "-0.01", "positive number of metres"),
+        ("--step", "nan", "positive number of metres"),
+        ("--resolution", "0", "(0, 45]"),
+        ("--resolution", "-1", "(0, 45]"),
+        ("--heading-window", "200", "[0, 180]"),
+        ("--heading-window", "-5", "[0, 180]"),
+        ("--heading-step", "0", "positive number of degrees"),
+        ("--prior", "0.1,0.2,0", "x,y,z,sigma"),
+        ("--prior", "a,b,c,d", "x,y,z,sigma"),
+        ("--prior", "0.1,0.2,0,0", "positive"),
+        ("--prior", "0.1,0.2,0,-1", "positive"),
+        ("--attitude-sigma-deg", "0,3", "σ"),
+    ] {
+        let args = [&pair[..], &[flag, value]].concat();
+        let e = usage_error(dir.path(), &args, &[flag, range]);
+        assert!(!e.contains("nowhere"), "{args:?}: {e}");
+    }
+    // With --map, its own numbers: the prediction, the place and the attitude reading.
+    let map = ["localize", "--map", "nomap", "scan.ply"];
+    for (flag, value, range) in [
+        ("--prior", "1,2,0,0", "positive"),
+        ("--near", "1,2", "x,y,z"),
+        ("--near", "1,inf,0", "x,y,z"),
+        ("--attitude", "0,nan,0", "roll,pitch,yaw"),
+    ] {
+        let args = [&map[..], &[flag, value]].concat();
+        let e = usage_error(dir.path(), &args, &[flag, range]);
+        assert!(!e.contains("nomap"), "{args:?}: {e}");
+    }
+}
