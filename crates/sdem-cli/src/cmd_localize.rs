@@ -8,7 +8,7 @@ use crate::output::{
     doubts_json, elapsed_ms, estimate_label, pose_line, print_doubts, print_json,
     with_doubt_messages, Outcome,
 };
-use crate::parse::{numbers, positive_degrees, positive_metres};
+use crate::parse::{fmt_number, numbers, positive_degrees, positive_metres, usage_error};
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, Attitude, AttitudeSigma, Pose, PoseRecord};
@@ -77,8 +77,8 @@ pub struct Args {
     /// known to stand level; faster than the search, wrong when it is not level.
     #[arg(long, conflicts_with = "map")]
     assume_level: bool,
-    /// With --map: where the scan was taken, roughly, x,y,z in metres in the map's frame
-    /// [default: the nodes whose place descriptors look most like the scan's].
+    /// With --map: where the scan was taken, roughly, x,y,z in metres in the map's frame, each
+    /// within ±1e6 m [default: the nodes whose place descriptors look most like the scan's].
     #[arg(
         long,
         requires = "map",
@@ -95,7 +95,8 @@ pub struct Args {
     /// more point off by the truncation at one sigma, so it decides only what the scans leave
     /// open (the position along a featureless corridor). With --map: the predicted position in
     /// the map's frame; it centres the search as --near does, and along a direction the scan
-    /// leaves free the position is the prediction's, as in `sdem slam` [default: none].
+    /// leaves free the position is the prediction's, as in `sdem slam`. Each coordinate within
+    /// ±1e6 m [default: none].
     #[arg(
         long,
         allow_hyphen_values = true,
@@ -104,7 +105,8 @@ pub struct Args {
         value_parser = parse_prior
     )]
     prior: Option<OffsetPrior>,
-    /// Grid step of the search, metres (with --map: the map's own).
+    /// Grid step of the search, metres, at most the window's longest side (with --map: the
+    /// map's own).
     #[arg(
         long,
         default_value_t = 0.01,
@@ -247,11 +249,30 @@ struct Report {
     error_deg: Option<f64>,
 }
 
+/// The farthest `--prior` and `--near` may put a position on any axis, metres: 1,000 km from
+/// the reference scan (or the map's origin) is beyond any map a robot makes, so a larger number
+/// is a mistake (millimetres, a georeferenced coordinate), which the search would only answer
+/// with "no candidate in the window matches".
+const MAX_POSITION_M: f64 = 1e6;
+
+/// Refuses a coordinate beyond ±[`MAX_POSITION_M`].
+fn check_position(xyz: [f64; 3]) -> Result<[f64; 3], String> {
+    match xyz.iter().find(|v| v.abs() > MAX_POSITION_M) {
+        Some(v) => Err(format!(
+            "{} m lies beyond ±{} m (1,000 km, farther than any map reaches): is it in \
+             millimetres, or a georeferenced coordinate?",
+            fmt_number(*v),
+            fmt_number(MAX_POSITION_M)
+        )),
+        None => Ok(xyz),
+    }
+}
+
 /// Parses `--prior x,y,z,sigma` (metres).
 fn parse_prior(text: &str) -> Result<OffsetPrior, String> {
     let [x, y, z, sigma_m] = numbers(text, "x,y,z,sigma in metres")?;
     let prior = OffsetPrior {
-        offset: [x, y, z],
+        offset: check_position([x, y, z])?,
         sigma_m,
     };
     prior.validate().map_err(|e| e.to_string())?;
@@ -260,7 +281,47 @@ fn parse_prior(text: &str) -> Result<OffsetPrior, String> {
 
 /// Parses `--near x,y,z` (metres).
 fn parse_near(text: &str) -> Result<[f64; 3], String> {
-    numbers(text, "x,y,z in metres")
+    check_position(numbers(text, "x,y,z in metres")?)
+}
+
+/// Refuses (a usage error) a `--step` longer than every side of the search window (`window`,
+/// or the paper's when `None`): the grid would hold the window's lowest corner alone. A window
+/// that is a single point holds one candidate at any step.
+fn check_step_fits_window(step: f64, window: Option<&SearchWindow>) -> Result<()> {
+    let given = window.copied();
+    let window = given.unwrap_or_else(SearchWindow::paper);
+    let longest = (0..3)
+        .map(|axis| window.max[axis] - window.min[axis])
+        .fold(0.0, f64::max);
+    if longest > 0.0 && step > longest * (1.0 + 1e-9) {
+        // To the micrometre: 0.6 − (−0.3) is 0.8999999999999999.
+        let longest = fmt_number((longest * 1e6).round() / 1e6);
+        let which = match given {
+            Some(_) => format!("--window {}", window_text(&window)),
+            None => format!("the default --window {}, the paper's", window_text(&window)),
+        };
+        return Err(usage_error(
+            "localize",
+            format!(
+                "--step {} m is longer than the search window's longest side, {longest} m \
+                 ({which}): the grid would hold its lowest corner alone; give a --step of at \
+                 most {longest} m, or a larger --window",
+                fmt_number(step)
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// A window as `--window` takes it: `x0:x1,y0:y1,z0:z1`.
+fn window_text(window: &SearchWindow) -> String {
+    (0..3)
+        .map(|axis| {
+            let (lo, hi) = (window.min[axis], window.max[axis]);
+            format!("{}:{}", fmt_number(lo), fmt_number(hi))
+        })
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 /// Parses `--attitude roll,pitch,yaw` (degrees).
@@ -405,6 +466,10 @@ pub fn run(args: Args) -> Result<Outcome> {
     else {
         bail!("give DATASET --reference I --query J, or --map DIR SCAN");
     };
+    // With --match-scan the step comes from the scan, not the command line.
+    if !args.match_scan {
+        check_step_fits_window(args.step, args.window.as_ref())?;
+    }
     let dataset = Dataset::open(&dataset_path)?;
     for (flag, index) in [("--reference", reference_index), ("--query", query_index)] {
         if index >= dataset.len() {

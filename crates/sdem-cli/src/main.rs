@@ -109,9 +109,14 @@ fn main() -> ExitCode {
             );
             ExitCode::from(EXIT_DOUBTS)
         }
-        Err(error) => {
-            eprintln!("sdem: error: {}", output::error_line(&error));
-            ExitCode::from(1)
-        }
+        Err(error) => match error.downcast::<clap::Error>() {
+            // Options that do not fit together, found after parsing (`parse::usage_error`): a
+            // usage error as clap's own, status 2.
+            Ok(usage) => usage.exit(),
+            Err(error) => {
+                eprintln!("sdem: error: {}", output::error_line(&error));
+                ExitCode::from(1)
+            }
+        },
     }
 }

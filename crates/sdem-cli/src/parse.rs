@@ -30,3 +30,28 @@ pub fn positive_degrees(text: &str) -> Result<f64, String> {
 fn positive(text: &str) -> Option<f64> {
     (text.trim().parse::<f64>().ok()).filter(|v| v.is_finite() && *v > 0.0)
 }
+
+/// A usage error of `sdem SUBCOMMAND` found after parsing (options that do not fit together),
+/// as clap reports its own: `main` prints it with the subcommand's usage and exits with status 2.
+pub fn usage_error(subcommand: &str, message: impl std::fmt::Display) -> anyhow::Error {
+    use clap::CommandFactory;
+    let mut cli = crate::Cli::command();
+    cli.build();
+    let kind = clap::error::ErrorKind::ArgumentConflict;
+    let error = match cli.find_subcommand_mut(subcommand) {
+        Some(command) => command.error(kind, message),
+        None => cli.error(kind, message),
+    };
+    anyhow::Error::new(error)
+}
+
+/// A number for a message: as `{}` for ordinary magnitudes, with an exponent (`1e9`) from 1e6
+/// up and below 1e-4, so that a value typed as `1e9` reads back as typed.
+pub fn fmt_number(value: f64) -> String {
+    let magnitude = value.abs();
+    if value == 0.0 || (1e-4..1e6).contains(&magnitude) || !value.is_finite() {
+        format!("{value}")
+    } else {
+        format!("{value:e}")
+    }
+}

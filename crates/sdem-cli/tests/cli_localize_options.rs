@@ -70,3 +70,57 @@ fn localize_numbers_out_of_range_are_usage_errors_naming_flag_and_range() {
         assert!(!e.contains("nomap"), "{args:?}: {e}");
     }
 }
+
+#[test]
+fn localize_refuses_a_step_larger_than_the_window_naming_both() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("nowhere");
+    let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    // The default window (the paper's: 1 m along x at most).
+    let e = usage_error(
+        dir.path(),
+        &[&pair[..], &["--step", "1e9"]].concat(),
+        &["--step 1e9 m", "1 m", "--window"],
+    );
+    assert!(!e.contains("nowhere"), "{e}");
+    let window = ["--window", "-0.1:0.1,-0.05:0.05,0:0"];
+    usage_error(
+        dir.path(),
+        &[&pair[..], &window, &["--step", "0.5"]].concat(),
+        &["--step 0.5 m", "0.2 m", "--window -0.1:0.1,-0.05:0.05,0:0"],
+    );
+    // A step as large as the window's longest side leaves two candidates on it: searched
+    // (here the missing dataset is the error).
+    let r = run(
+        dir.path(),
+        &[&pair[..], &window, &["--step", "0.2"]].concat(),
+    );
+    assert_eq!(r.code, Some(1), "{}", r.stderr);
+    assert!(r.stderr.contains("nowhere"), "{}", r.stderr);
+}
+
+#[test]
+fn localize_refuses_a_prior_or_place_beyond_a_million_metres() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("nowhere");
+    let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    for prior in ["1e9,0,0,0.1", "0,0,-2e6,0.1", "0,1e300,0,0.1"] {
+        let e = usage_error(
+            dir.path(),
+            &[&pair[..], &["--prior", prior]].concat(),
+            &["--prior", "1e6 m"],
+        );
+        assert!(!e.contains("no candidate"), "{e}");
+    }
+    let map = ["localize", "--map", "nomap", "scan.ply"];
+    usage_error(
+        dir.path(),
+        &[&map[..], &["--prior", "1e9,0,0,1"]].concat(),
+        &["--prior", "1e6 m"],
+    );
+    usage_error(
+        dir.path(),
+        &[&map[..], &["--near", "0,1e9,0"]].concat(),
+        &["--near", "1e6 m"],
+    );
+}
