@@ -443,6 +443,63 @@ fn simulate_zero_stops_is_rejected() {
     );
 }
 
+/// A finer scanner (`simulate --step-deg 0.5`): the dataset's sensor file says its step, a scan
+/// holds about four times the returns of the 1° sweep, and `sdem slam` maps it on an S-DEM grid
+/// of the same 0.5° within a centimetre of the truth. Steps outside 0.25..=5° are refused.
+#[test]
+fn a_finer_scanner_is_simulated_and_mapped_on_its_own_grid() {
+    let dir = TempDir::new().unwrap();
+    let (coarse, fine) = (dir.path().join("coarse"), dir.path().join("fine"));
+    let points = |ds: &Path, step: &str| -> f64 {
+        let summary = run_json(
+            dir.path(),
+            &[
+                "simulate",
+                "--out",
+                s(ds),
+                "--stops",
+                "3",
+                "--step-deg",
+                step,
+                "--json",
+            ],
+        );
+        let per_scan = summary["points_per_scan"].as_array().unwrap();
+        per_scan.iter().map(|n| n.as_f64().unwrap()).sum::<f64>() / per_scan.len() as f64
+    };
+    let ratio = points(&fine, "0.5") / points(&coarse, "1");
+    assert!(
+        (3.5..=4.5).contains(&ratio),
+        "0.5° against 1°: {ratio}× the returns"
+    );
+    let sensor = std::fs::read_to_string(fine.join("sensor.toml")).unwrap();
+    assert!(sensor.contains("pan_step_deg = 0.5"), "{sensor}");
+    assert!(sensor.contains("tilt_step_deg = 0.5"), "{sensor}");
+
+    let out = dir.path().join("map");
+    run_ok(dir.path(), &["slam", s(&fine), "--out", s(&out)]);
+    let config = std::fs::read_to_string(out.join("config.toml")).unwrap();
+    assert!(config.contains("resolution_deg = 0.5"), "{config}");
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let ate = num(&report["truth"], "ate_rmse_m");
+    assert!(ate < 0.01, "ATE {ate} m on the 0.5° scans");
+
+    for step in ["0.1", "6", "nan"] {
+        let message = run_err(
+            dir.path(),
+            &[
+                "simulate",
+                "--out",
+                s(&dir.path().join("bad")),
+                "--step-deg",
+                step,
+            ],
+        );
+        assert!(message.contains("--step-deg"), "{step}: {message}");
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // sdem localize
 // ---------------------------------------------------------------------------------------------
