@@ -124,3 +124,46 @@ fn localize_refuses_a_prior_or_place_beyond_a_million_metres() {
         &["--near", "1e6 m"],
     );
 }
+
+#[test]
+fn localize_refuses_an_exhaustive_search_beyond_its_candidate_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("ds");
+    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
+    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    // ±2 m at 1 cm with ±2° of heading: 401 × 401 × 21 positions, many headings. Refused
+    // before any is scored, naming the count, the limit and the flags that shrink it.
+    let big = [
+        "--exhaustive",
+        "--window",
+        "-2:2,-2:2,-0.1:0.1",
+        "--heading-window",
+        "2",
+    ];
+    let start = std::time::Instant::now();
+    let e = usage_error(
+        dir.path(),
+        &[&pair[..], &big].concat(),
+        &[
+            "401 × 401 × 21 positions",
+            "limit of 4000000",
+            "--window",
+            "--step",
+            "--exhaustive",
+        ],
+    );
+    assert!(start.elapsed().as_secs() < 20, "{:?}: {e}", start.elapsed());
+    // With --search exhaustive and no attitude (roll, pitch and every heading searched).
+    std::fs::remove_file(ds.join("attitude.csv")).unwrap();
+    let args = [
+        &pair[..],
+        &["--search", "exhaustive", "--window", "-1:1,-1:1,-0.1:0.1"],
+    ]
+    .concat();
+    usage_error(
+        dir.path(),
+        &args,
+        &["candidates", "limit of 4000000", "--search exhaustive"],
+    );
+}

@@ -83,6 +83,20 @@ fn sdem_exception<'py>(py: Python<'py>, error: &sdem::Error) -> Bound<'py, PyAny
                 ("max_cost_m2", py_value(py, max_cost_m2)),
             ],
         ),
+        E::TooManyCandidates {
+            candidates,
+            grid,
+            limit,
+        } => instance(
+            py,
+            "TooManyCandidatesError",
+            (message,),
+            vec![
+                ("candidates", py_value(py, candidates)),
+                ("grid", py_value(py, grid.to_vec())),
+                ("limit", py_value(py, limit)),
+            ],
+        ),
         E::NoMatch {
             matched,
             compared,

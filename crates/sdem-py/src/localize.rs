@@ -169,6 +169,8 @@ pub fn attitude_from(
 ///           to the scan's extent when ``None``.
 ///         - ``mode``: ``"branch_and_bound"`` (exact, the default), ``"exhaustive"`` (every
 ///           candidate: the oracle) or ``"coarse_to_fine"`` (a heuristic).
+///         - ``max_exhaustive_candidates`` (4,000,000): a larger exhaustive grid raises
+///           ``sdem.TooManyCandidatesError`` before it runs.
 ///         - ``cost``: eq. (1): ``model`` (``"projective"``, ``"virtual_sdem"``),
 ///           ``truncation_m`` (0.05), ``min_overlap_cells`` (100), ``min_overlap_fraction``
 ///           (0.2), ``min_inlier_fraction`` (0.1), ``search_voxel_m`` (0.08),
@@ -191,6 +193,8 @@ pub fn attitude_from(
 /// Raises:
 ///     sdem.InvalidError: invalid options (an unknown name, a value of the wrong type or out
 ///         of range) or scans on different grids.
+///     sdem.TooManyCandidatesError: an exhaustive search over more candidates than
+///         ``max_exhaustive_candidates``.
 ///     sdem.NoOverlapError, sdem.NoMatchError: nothing in the window matches.
 ///     sdem.NoSurfacesError: no attitude, and a scan shows no surface whose orientation can be
 ///         measured.

@@ -17,11 +17,12 @@ def points(pairs):
 
 def test_every_exception_is_an_sdem_error_and_the_natural_builtin():
     classes = [getattr(sdem, name) for name in sdem.__all__ if name.endswith("Error")]
-    assert len(classes) == 14
+    assert len(classes) == 15
     for cls in classes:
         assert issubclass(cls, sdem.Error), cls
         assert cls.__doc__, cls
-    for cls in (sdem.InvalidError, sdem.InvalidInputError, sdem.TooFewPointsError, sdem.ParseError):
+    for cls in (sdem.InvalidError, sdem.InvalidInputError, sdem.TooFewPointsError, sdem.ParseError,
+                sdem.TooManyCandidatesError):
         assert issubclass(cls, ValueError)
     assert issubclass(sdem.FileError, OSError)
     assert issubclass(sdem.NodeStoreError, OSError)

@@ -43,6 +43,24 @@ pub enum Error {
         /// The highest cost a match may have, m².
         max_cost_m2: f64,
     },
+    /// The exhaustive search's grid holds more candidates than
+    /// [`crate::localize::LocalizeOptions::max_exhaustive_candidates`]: it is refused before
+    /// any is scored.
+    #[error(
+        "the exhaustive search would score {candidates} candidates ({} × {} × {} positions × {} \
+         headings), more than its limit of {limit} (about a minute on 2 cores); use a smaller \
+         window, a coarser step or a narrower heading window, or the branch-and-bound search, \
+         which finds the same minimum",
+        grid[0], grid[1], grid[2], grid[3]
+    )]
+    TooManyCandidates {
+        /// Candidates in the grid.
+        candidates: usize,
+        /// The grid: positions along x, y and z, and headings.
+        grid: [usize; 4],
+        /// The most the exhaustive search scores.
+        limit: usize,
+    },
     /// The best candidate in the window matches too few of the query's points.
     #[error(
         "nothing in the window matches: at the best candidate only \

@@ -189,6 +189,77 @@ fn exhaustive_finds_on_grid_truth_without_noise() {
     }
 }
 
+/// The exhaustive search counts its candidates before scoring one: beyond
+/// `max_exhaustive_candidates` it is refused with the count, the grid and the limit (the
+/// oracle over ±2 m at 1 cm with ±10° of heading would run for most of an hour).
+#[test]
+fn exhaustive_search_beyond_its_candidate_limit_is_refused_up_front() {
+    let (reference, query) = pair_with_compass_off(
+        &pose_from_parts(Vec3::new(0.2, 0.1, 0.0), Attitude::default()),
+        0.0,
+        (1, 2),
+    );
+    let config = LocalizeOptions {
+        window: SearchWindow::around(&Vec3::zeros(), [2.0, 2.0, 0.1]),
+        heading: HeadingWindow {
+            half_range_deg: 10.0,
+            step_deg: Some(1.0),
+        },
+        mode: SearchMode::Exhaustive,
+        ..Default::default()
+    };
+    let start = std::time::Instant::now();
+    let err = localize(&reference, &query, &config).unwrap_err();
+    assert!(start.elapsed().as_secs_f64() < 5.0, "{:?}", start.elapsed());
+    let (x, y, z, headings) = (401, 401, 21, 21);
+    let total = x * y * z * headings;
+    match &err {
+        Error::TooManyCandidates {
+            candidates,
+            grid,
+            limit,
+        } => {
+            assert_eq!(*candidates, total);
+            assert_eq!(*grid, [x, y, z, headings]);
+            assert_eq!(*limit, MAX_EXHAUSTIVE_CANDIDATES);
+        }
+        other => panic!("{other}"),
+    }
+    let message = err.to_string();
+    for wanted in [
+        &total.to_string(),
+        &MAX_EXHAUSTIVE_CANDIDATES.to_string(),
+        "window",
+        "step",
+    ] {
+        assert!(message.contains(wanted), "{message} lacks {wanted}");
+    }
+    assert!(!err.is_no_match());
+    // The same grid under a raised limit, and the exact search, pass the check (a small window
+    // here, to keep the test quick).
+    let small = LocalizeOptions {
+        window: SearchWindow::around(&Vec3::new(0.2, 0.1, 0.0), [0.02, 0.02, 0.0]),
+        max_exhaustive_candidates: 5 * 5 * 21,
+        refine: false,
+        runner_up: false,
+        ..config.clone()
+    };
+    assert!(localize(&reference, &query, &small).is_ok());
+    let tight = LocalizeOptions {
+        max_exhaustive_candidates: 5 * 5 * 21 - 1,
+        ..small.clone()
+    };
+    assert!(matches!(
+        localize(&reference, &query, &tight),
+        Err(Error::TooManyCandidates { .. })
+    ));
+    let exact = LocalizeOptions {
+        mode: SearchMode::BranchAndBound,
+        ..tight
+    };
+    assert!(localize(&reference, &query, &exact).is_ok());
+}
+
 #[test]
 fn tilted_query_is_localized() {
     // The paper's second case: the body stands on a rock, tilted 8°; default search (exact

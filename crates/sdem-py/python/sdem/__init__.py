@@ -46,6 +46,7 @@ from ._errors import (
     ParseError,
     RefinementFailedError,
     TooFewPointsError,
+    TooManyCandidatesError,
 )
 from ._sdem import (
     DEFAULT_ATTITUDE_SIGMA_DEG,
@@ -88,6 +89,7 @@ __all__ = [
     "Slam",
     "Step",
     "TooFewPointsError",
+    "TooManyCandidatesError",
     "__version__",
     "grid_for_scan",
     "localize",

@@ -12,6 +12,7 @@ __all__ = [
     "InvalidError",
     "InvalidInputError",
     "TooFewPointsError",
+    "TooManyCandidatesError",
     "MatchError",
     "NoOverlapError",
     "NoMatchError",
@@ -62,6 +63,22 @@ class TooFewPointsError(Error, ValueError):
 
     usable: int
     needed: int
+
+
+class TooManyCandidatesError(InvalidError):
+    """The exhaustive search's grid holds more candidates than ``max_exhaustive_candidates``;
+    refused before any is scored (``Error::TooManyCandidates``). Shrink the window, coarsen the
+    step or narrow the heading window, or use the branch-and-bound search (the same minimum).
+
+    Attributes:
+        candidates: candidates in the grid.
+        grid: positions along x, y and z, and headings.
+        limit: the most the exhaustive search scores.
+    """
+
+    candidates: int
+    grid: list[int]
+    limit: int
 
 
 class MatchError(Error):
