@@ -390,6 +390,7 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         .context("--map needs the scan to relocalize: --map DIR SCAN (or --scan SCAN)")?;
     let saved = sdem_io::load_map(&folder)?;
     let points = sdem_io::read_points(scan)?;
+    check_usable(scan, &points, attitude.as_ref(), &saved.config.sdem)?;
     // The map's own search settings (its config.toml), not this command's --step.
     let nodes = match near {
         Some(_) => 3,
@@ -435,6 +436,54 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     print_doubts("  ", &found.doubts);
     print_accepted(found.trusted, args.accept_doubtful);
     Ok(outcome)
+}
+
+/// Refuses a scan of which the map's S-DEM grid can use no point, saying why: every point at
+/// the sensor's origin or within the grid's minimum range, none finite, or none in the grid's
+/// extent. The check `sdem slam` makes of each scan (an S-DEM with no known cell), made here
+/// before the map's places are searched.
+fn check_usable(
+    scan: &std::path::Path,
+    points: &[sdem::geometry::Vec3],
+    attitude: Option<&Attitude>,
+    grid: &SdemConfig,
+) -> Result<()> {
+    let sdem = Sdem::from_points(points, &attitude.copied().unwrap_or_default(), grid)?;
+    if sdem.known_cells() > 0 {
+        return Ok(());
+    }
+    let finite: Vec<_> = (points.iter())
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .collect();
+    let close = finite
+        .iter()
+        .filter(|p| p.norm() < grid.min_range_m)
+        .count();
+    let why = if finite.is_empty() {
+        "it holds no point but NaN (no return)".to_string()
+    } else if close == finite.len() {
+        format!(
+            "all {close} of its points lie within {} m of the sensor's origin (the map's S-DEM \
+             minimum range), where a return is the scanner itself",
+            grid.min_range_m
+        )
+    } else {
+        format!(
+            "none of its {} points lies in the map's S-DEM grid (elevation {}..{}°, azimuth \
+             {}..{}°, beyond {} m)",
+            finite.len(),
+            grid.elevation_min_deg,
+            grid.elevation_max_deg,
+            grid.azimuth_min_deg,
+            grid.azimuth_max_deg,
+            grid.min_range_m
+        )
+    };
+    bail!(
+        "{}: the scan has no usable point: {why}; check that the file holds the scan's points, \
+         in metres in the sensor frame",
+        scan.display()
+    )
 }
 
 /// The candidates a relocalization tried, in words: `node N (why); …`.

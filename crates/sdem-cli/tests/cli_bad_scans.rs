@@ -319,3 +319,47 @@ fn a_tilted_turned_query_without_attitude_is_found_or_doubted() {
         );
     }
 }
+
+/// A scan whose every point lies at the sensor's origin (a PLY of zeros) or within the S-DEM's
+/// 5 cm minimum range, relocalized in a saved map: refused before the map is searched, saying
+/// that the scan has no usable point and why, with and without `--near`.
+#[test]
+fn a_scan_at_the_origin_is_refused_in_a_map_before_the_search() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = write_dataset(
+        dir.path(),
+        "ds",
+        &[
+            room_scan(&Pose::identity(), 1),
+            room_scan(&Pose::identity(), 2),
+        ],
+        Some(&[Attitude::default(), Attitude::default()]),
+    );
+    let out = dir.path().join("out");
+    let slam = ["slam", s(&ds), "--out", s(&out), "--no-pictures"];
+    assert_eq!(run(dir.path(), &slam).code, Some(0));
+    let zeros = vec![Vec3::zeros(); 500];
+    let near: Vec<Vec3> = room_scan(&Pose::identity(), 3)
+        .iter()
+        .map(|p| p.normalize() * 0.03)
+        .collect();
+    for (name, points, wanted) in [
+        (
+            "zeros.ply",
+            zeros,
+            "all 500 of its points lie within 0.05 m",
+        ),
+        ("near.ply", near, "lie within 0.05 m"),
+    ] {
+        let scan = dir.path().join(name);
+        sdem_io::write_points_ply(&scan, &points).unwrap();
+        for extra in [&[][..], &["--near", "0,0,0"]] {
+            let args = [&["localize", "--map", s(&out), s(&scan)][..], extra].concat();
+            let m = run_err(dir.path(), &args);
+            for w in [name, "no usable point", wanted, "sensor's origin"] {
+                assert!(m.contains(w), "{args:?}: {m:?} lacks {w:?}");
+            }
+            assert!(!m.contains("not found"), "{m}");
+        }
+    }
+}
