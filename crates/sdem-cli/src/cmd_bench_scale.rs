@@ -356,7 +356,7 @@ impl SizeInput<'_> {
             &slam.map,
             &slam.edges,
             &slam.loop_closures,
-            None,
+            &[],
         )?;
         let save_ms = elapsed_ms(save_start);
         Ok(SizeReport {

@@ -226,6 +226,9 @@ struct Run {
     extends: Option<ExtendedMap>,
     /// OUT/map: the saved map, and the store of the nodes parked far from the robot.
     folder: Arc<MapFolder>,
+    /// The datasets of the map's runs before this one, by run (`sdem export` reads each
+    /// node's scan from its run's dataset).
+    earlier_datasets: Vec<Option<PathBuf>>,
 }
 
 /// What the run wrote after its last scan, for the report.
@@ -326,6 +329,8 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
         }
     }
     let next = saved.map.nodes.len();
+    let mut earlier_datasets = saved.datasets_by_run();
+    earlier_datasets.pop();
     let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
     let steps = read_steps(&args.out.join(STEPS_FILE), run_nodes(&slam))?;
     let folder = Arc::new(MapFolder::open(map_dir, saved.node_files)?);
@@ -336,6 +341,7 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
         resumed_at: Some(next),
         extends: None,
         folder,
+        earlier_datasets,
     })
 }
 
@@ -361,6 +367,7 @@ fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
         );
     }
     let nodes = saved.map.nodes.len();
+    let earlier_datasets = saved.datasets_by_run();
     let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
     slam.begin_run();
     let store = Arc::new(MapFolder::create(map_dir)?);
@@ -371,6 +378,7 @@ fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
         resumed_at: None,
         extends: Some(ExtendedMap { map: folder, nodes }),
         folder: store,
+        earlier_datasets,
     })
 }
 
@@ -420,6 +428,7 @@ fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
         resumed_at: None,
         extends: None,
         folder,
+        earlier_datasets: Vec::new(),
     })
 }
 
@@ -590,12 +599,14 @@ fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
     debug_assert_eq!(run.folder.path(), map_dir);
     // The dataset's whole path: `sdem export` and `--resume` find it from any folder.
     let dataset = std::fs::canonicalize(&args.dataset).unwrap_or_else(|_| args.dataset.clone());
+    let mut datasets = run.earlier_datasets.clone();
+    datasets.push(Some(dataset));
     run.folder.save(
         slam.config(),
         &slam.map,
         &slam.edges,
         &slam.loop_closures,
-        Some(&dataset),
+        &datasets,
     )?;
     let steps_text = serde_json::to_vec(&run.steps).context("cannot encode the step log")?;
     write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;

@@ -121,36 +121,48 @@ fn node_clouds(saved: &SavedMap) -> Vec<Vec<[f32; 3]>> {
         .collect()
 }
 
-/// Each node's full scan, from the dataset the map was made from.
+/// Each node's full scan, from the dataset its run was made from (a map extended by a second
+/// run holds nodes of two datasets, whose scans are numbered alike).
 fn dataset_clouds(saved: &SavedMap) -> Result<Vec<Vec<[f32; 3]>>> {
-    let root = saved
-        .dataset
-        .as_ref()
-        .context("the map does not name its dataset, so the nodes' S-DEM points were written")?;
-    let dataset = Dataset::open(root).with_context(|| {
-        format!(
-            "the map's dataset {} cannot be opened, so the nodes' S-DEM points were written \
-             (run from the folder sdem slam ran in, or pass --node-points)",
-            root.display()
-        )
-    })?;
-    saved
-        .map
-        .nodes
-        .iter()
-        .map(|node| {
-            let points = dataset.load_scan(node.scan_index).with_context(|| {
+    let by_run = saved.datasets_by_run();
+    let mut opened: Vec<Option<Dataset>> = by_run.iter().map(|_| None).collect();
+    let mut clouds = Vec::with_capacity(saved.map.nodes.len());
+    for node in &saved.map.nodes {
+        let root = by_run[node.run]
+            .as_ref()
+            .with_context(|| match by_run.len() {
+                1 => "the map does not name its dataset, so the nodes' S-DEM points were written"
+                    .to_string(),
+                _ => format!(
+                "the map does not name the dataset of its run {} (node {}), so the nodes' S-DEM \
+                 points were written",
+                node.run, node.node_id
+            ),
+            })?;
+        if opened[node.run].is_none() {
+            opened[node.run] = Some(Dataset::open(root).with_context(|| {
                 format!(
-                    "scan {} of the map's dataset {} cannot be read, so the nodes' S-DEM points \
-                     were written",
-                    node.scan_index,
+                    "the map's dataset {} cannot be opened, so the nodes' S-DEM points were \
+                     written (run from the folder sdem slam ran in, or pass --node-points)",
                     root.display()
                 )
-            })?;
-            Ok(points
+            })?);
+        }
+        let dataset = opened[node.run].as_ref().expect("opened above");
+        let points = dataset.load_scan(node.scan_index).with_context(|| {
+            format!(
+                "scan {} of the map's dataset {} cannot be read, so the nodes' S-DEM points \
+                 were written",
+                node.scan_index,
+                root.display()
+            )
+        })?;
+        clouds.push(
+            points
                 .iter()
                 .map(|p| [p.x as f32, p.y as f32, p.z as f32])
-                .collect())
-        })
-        .collect()
+                .collect(),
+        );
+    }
+    Ok(clouds)
 }

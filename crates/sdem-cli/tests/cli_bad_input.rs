@@ -218,7 +218,7 @@ fn localize_map_names_a_damaged_node_file() {
         &Map { nodes },
         &[],
         &[],
-        None,
+        &[],
     )
     .unwrap();
     let node = map_dir.join("nodes/000001.pts");

@@ -172,6 +172,27 @@ fn a_second_run_is_relocalized_in_the_saved_map_and_both_runs_are_saved() {
     .unwrap();
     let steps = saved["steps"].as_array().unwrap();
     assert_eq!(steps[0]["status"], "relocalized", "{}", steps[0]);
+    // Exported as E57, each node's full scan comes from its own run's dataset: scans 0–5 of
+    // the first, 0–2 of the second (numbered alike, different scans).
+    let exported = run_json(
+        dir.path(),
+        &["export", "both", "--e57", "both.e57", "--json"],
+    );
+    assert_eq!(exported["e57"]["points_from"], "dataset", "{exported}");
+    let vertices = |path: &str| -> u64 {
+        let text =
+            String::from_utf8_lossy(&std::fs::read(dir.path().join(path)).unwrap()).into_owned();
+        let line = text
+            .lines()
+            .find(|l| l.starts_with("element vertex"))
+            .unwrap();
+        line.rsplit(' ').next().unwrap().parse().unwrap()
+    };
+    let expected: u64 = (0..6)
+        .map(|i| vertices(&format!("data/scans/{i:06}.ply")))
+        .chain((0..3).map(|i| vertices(&format!("second/scans/{i:06}.ply"))))
+        .sum();
+    assert_eq!(exported["e57"]["points"], expected, "{exported}");
     // The text output names each stop's status.
     let text = run_ok(
         dir.path(),

@@ -23,7 +23,7 @@ use std::sync::Mutex;
 /// let mut slam = sdem::Slam::new(sdem::SlamOptions::default())?;
 /// slam.set_node_store(folder.clone());
 /// // … slam.add(…) at every stop, then:
-/// folder.save(slam.config(), &slam.map, &slam.edges, &slam.loop_closures, None)?;
+/// folder.save(slam.config(), &slam.map, &slam.edges, &slam.loop_closures, &[])?;
 /// assert!(dir.path().join("map/map.json").exists());
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
@@ -73,7 +73,7 @@ impl MapFolder {
         map: &Map,
         edges: &[Edge],
         loop_closures: &[LoopClosure],
-        dataset: Option<&Path>,
+        datasets: &[Option<PathBuf>],
     ) -> Result<()> {
         let mut files = self.lock();
         save_map(
@@ -83,7 +83,7 @@ impl MapFolder {
             map,
             edges,
             loop_closures,
-            dataset,
+            datasets,
         )
     }
 
@@ -156,7 +156,7 @@ mod tests {
         let original = map.nodes[1].points_in_sensor.clone();
         map.nodes[1].points_in_sensor.clear();
         folder
-            .save(&SlamOptions::default(), &map, &[], &[], None)
+            .save(&SlamOptions::default(), &map, &[], &[], &[])
             .unwrap();
         assert_eq!(folder.fetch(1).unwrap(), original);
         // The saved map is whole: node 1 with all its points.
@@ -191,7 +191,7 @@ mod tests {
             &map,
             &[],
             &[],
-            None,
+            &[],
         )
         .unwrap_err()
         .to_string();

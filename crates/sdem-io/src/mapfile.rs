@@ -87,10 +87,28 @@ pub struct SavedMap {
     pub edges: Vec<Edge>,
     /// The accepted loop closures.
     pub loop_closures: Vec<LoopClosure>,
-    /// The dataset the map was made from, as given to `sdem slam`.
+    /// The dataset the map's last run was made from, as given to `sdem slam`.
     pub dataset: Option<PathBuf>,
+    /// The datasets of the runs before the last, by run (`None` where not known: maps saved
+    /// before runs named their datasets say only the last run's).
+    pub earlier_datasets: Vec<Option<PathBuf>>,
     /// The node files checked on loading; pass them to [`save_map`] to go on with this map.
     pub node_files: NodeFiles,
+}
+
+impl SavedMap {
+    /// The dataset of each run of the map's nodes, by run (index = [`sdem::map::Node::run`]),
+    /// `None` where the map does not say: what [`save_map`] takes to save the map again.
+    pub fn datasets_by_run(&self) -> Vec<Option<PathBuf>> {
+        let runs = (self.map.nodes.iter())
+            .map(|n| n.run + 1)
+            .max()
+            .unwrap_or(1);
+        let mut datasets = self.earlier_datasets.clone();
+        datasets.resize(runs - 1, None);
+        datasets.push(self.dataset.clone());
+        datasets
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -113,7 +131,11 @@ struct BodyOnly {
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Body {
+    /// The last run's dataset.
     dataset: Option<PathBuf>,
+    /// The earlier runs' datasets, by run.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    earlier_datasets: Vec<Option<PathBuf>>,
     config: SlamOptions,
     nodes: Vec<NodeRecord>,
     edges: Vec<EdgeRecord>,
@@ -317,7 +339,9 @@ pub(crate) fn read_node_file(
 /// Saves the map into `folder` (created when missing): node files that `node_files` does not
 /// list yet, then the manifest, each atomically (see the module documentation). `node_files`
 /// is updated; start with [`NodeFiles::default`] for a new folder, or take
-/// [`SavedMap::node_files`] from [`load_map`] to go on with a saved one.
+/// [`SavedMap::node_files`] from [`load_map`] to go on with a saved one. `datasets`: the
+/// dataset each run's scans came from, by run, the last being the run mapped now
+/// ([`SavedMap::datasets_by_run`] of a loaded map); empty when none is known.
 ///
 /// # Errors
 /// The file system's errors, naming the file.
@@ -328,7 +352,7 @@ pub fn save_map(
     map: &Map,
     edges: &[Edge],
     loop_closures: &[LoopClosure],
-    dataset: Option<&Path>,
+    datasets: &[Option<PathBuf>],
 ) -> Result<()> {
     let nodes_dir = folder.join("nodes");
     std::fs::create_dir_all(&nodes_dir).map_err(|e| Error::io(&nodes_dir, e))?;
@@ -356,8 +380,13 @@ pub fn save_map(
             run: node.run,
         });
     }
+    let (dataset, earlier_datasets) = match datasets.split_last() {
+        Some((last, earlier)) => (last.clone(), earlier.to_vec()),
+        None => (None, Vec::new()),
+    };
     let body = Body {
-        dataset: dataset.map(Path::to_path_buf),
+        dataset,
+        earlier_datasets,
         config: config.clone(),
         nodes: records,
         edges: edges
@@ -435,6 +464,7 @@ pub fn load_map(folder: &Path) -> Result<SavedMap> {
         edges,
         loop_closures,
         dataset: body.dataset,
+        earlier_datasets: body.earlier_datasets,
     })
 }
 
@@ -654,6 +684,44 @@ mod tests {
         (SlamOptions::default(), Map { nodes }, edges, closures)
     }
 
+    /// Each run's dataset comes back by run; a map whose manifest names only its last run's
+    /// dataset (as maps saved before the earlier runs were named) leaves the earlier ones unknown.
+    #[test]
+    fn the_datasets_of_a_maps_runs_come_back_by_run() {
+        let dir = tempfile::tempdir().unwrap();
+        let (config, mut map, edges, closures) = small_map();
+        map.nodes[2].run = 1;
+        let datasets = [Some(PathBuf::from("day1")), Some(PathBuf::from("day2"))];
+        let mut files = NodeFiles::default();
+        save_map(
+            dir.path(),
+            &mut files,
+            &config,
+            &map,
+            &edges,
+            &closures,
+            &datasets,
+        )
+        .unwrap();
+        let saved = load_map(dir.path()).unwrap();
+        assert_eq!(saved.datasets_by_run(), datasets.to_vec());
+        assert_eq!(saved.dataset.as_deref(), Some(Path::new("day2")));
+
+        let manifest = dir.path().join(MAP_MANIFEST);
+        let mut value: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+        let body = value["body"].as_object_mut().unwrap();
+        assert!(body.remove("earlier_datasets").is_some());
+        let canonical = serde_json::to_vec(&value["body"]).unwrap();
+        value["checksum"] = crc32(&canonical).into();
+        std::fs::write(&manifest, serde_json::to_vec(&value).unwrap()).unwrap();
+        let saved = load_map(dir.path()).unwrap();
+        assert_eq!(
+            saved.datasets_by_run(),
+            vec![None, Some(PathBuf::from("day2"))]
+        );
+    }
+
     #[test]
     fn a_saved_map_loads_back_as_it_was() {
         let dir = tempfile::tempdir().unwrap();
@@ -666,7 +734,7 @@ mod tests {
             &map,
             &edges,
             &closures,
-            Some(Path::new("data/x")),
+            &[Some(PathBuf::from("data/x"))],
         )
         .unwrap();
         let saved = load_map(dir.path()).unwrap();
@@ -737,7 +805,7 @@ mod tests {
             &map,
             &edges,
             &closures,
-            Some(Path::new("data/x")),
+            &[Some(PathBuf::from("data/x"))],
         )
         .unwrap();
         assert_eq!(load_map(dir.path()).unwrap().map.nodes.len(), 3);
@@ -755,7 +823,7 @@ mod tests {
                 &map,
                 &edges,
                 &closures,
-                None,
+                &[],
             )
             .unwrap();
             dir
@@ -825,7 +893,7 @@ mod tests {
             nodes: map.nodes[..2].to_vec(),
         };
         let mut files = NodeFiles::default();
-        save_map(dir.path(), &mut files, &config, &two, &[], &[], None).unwrap();
+        save_map(dir.path(), &mut files, &config, &two, &[], &[], &[]).unwrap();
         std::fs::write(
             dir.path().join("nodes/000002.pts"),
             encode_points(&map.nodes[2].points_in_sensor),
@@ -847,7 +915,7 @@ mod tests {
             &map,
             &edges,
             &closures,
-            None,
+            &[],
         )
         .unwrap();
         assert_eq!(load_map(dir.path()).unwrap().map.nodes.len(), 3);

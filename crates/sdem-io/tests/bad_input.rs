@@ -396,7 +396,7 @@ fn save_small_map(root: &Path) {
         &Map { nodes },
         &edges,
         &closures,
-        None,
+        &[],
     )
     .unwrap();
 }

@@ -68,7 +68,7 @@ fn save(folder: &Path, files: &mut NodeFiles, map: &Map) {
         map,
         &edges,
         &[],
-        None,
+        &[],
     )
     .expect("a save");
 }

@@ -910,7 +910,7 @@ fn save_small_map(root: &Path) {
         &Map { nodes },
         &edges,
         &[],
-        None,
+        &[],
     )
     .unwrap();
 }

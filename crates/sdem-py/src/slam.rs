@@ -224,7 +224,7 @@ impl Slam {
                 &slam.map,
                 &slam.edges,
                 &slam.loop_closures,
-                None,
+                &[],
             )
         });
         // After a failed save the folder's node files are unknown: the next save writes all.
