@@ -116,9 +116,14 @@ pub struct Args {
     )]
     step: f64,
     /// Score every candidate of the window (the paper's search; slow): at most 4,000,000
-    /// candidates, about a minute on 2 cores. Same as `--search exhaustive`.
+    /// candidates, about a minute on 2 cores (see --max-candidates). Same as `--search
+    /// exhaustive`.
     #[arg(long, conflicts_with = "map")]
     exhaustive: bool,
+    /// With the exhaustive search: score up to this many candidates instead of 4,000,000 (the
+    /// paper's window with the default heading window is 6–10 million: two minutes or more).
+    #[arg(long, value_name = "N", conflicts_with = "map", value_parser = clap::value_parser!(u64).range(1..))]
+    max_candidates: Option<u64>,
     /// Which search: exact branch-and-bound (projective cost), the exhaustive oracle, or the
     /// coarse-to-fine heuristic.
     #[arg(long, value_enum, default_value_t = Search::BranchAndBound, conflicts_with = "map")]
@@ -582,6 +587,13 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
         Cost::Projective => CostModel::Projective,
         Cost::Virtual => CostModel::VirtualSdem,
     };
+    if args.max_candidates.is_some() && mode != SearchMode::Exhaustive {
+        return Err(usage_error(
+            "localize",
+            "--max-candidates limits the exhaustive search; give --exhaustive (or --search \
+             exhaustive) with it, or leave it out",
+        ));
+    }
     if mode == SearchMode::BranchAndBound && model == CostModel::VirtualSdem {
         bail!(
             "--cost virtual needs --search exhaustive or --search coarse-to-fine; the exact \
@@ -606,6 +618,8 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
             ..base.cost.clone()
         },
         runner_up: !args.no_runner_up,
+        max_exhaustive_candidates: (args.max_candidates)
+            .map_or(base.max_exhaustive_candidates, |n| n as usize),
         ..base
     })
 }
@@ -696,9 +710,11 @@ fn localize_scans(
                 format!(
                     "the exhaustive search (--exhaustive, --search exhaustive) would score \
                      {candidates} candidates ({x} × {y} × {z} positions × {headings} headings), \
-                     more than its limit of {limit} (about a minute on 2 cores): give a smaller \
-                     --window, a coarser --step or a narrower --heading-window, or leave the \
-                     search to the default branch-and-bound, which finds the same minimum"
+                     more than its limit of {limit}: give a smaller --window, a coarser \
+                     --step or a narrower --heading-window, raise the limit with \
+                     --max-candidates {candidates} (about 15 s a million candidates on 2 \
+                     cores), or leave the search to the default branch-and-bound, which finds \
+                     the same minimum"
                 ),
             ))
         }
