@@ -180,7 +180,9 @@ fn reason_kind(doubt: &Doubt) -> &'static str {
             "flat cost"
         }
         Doubt::FewInliers { .. } => "thin match",
-        Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. } => "other",
+        Doubt::OnWindowEdge | Doubt::TakenFromPrediction { .. } | Doubt::PriorConflict { .. } => {
+            "other"
+        }
         Doubt::AttitudeCorrected { .. } => "attitude corrected",
         Doubt::UnrefutedRotation { .. } => "rotation undecided",
     }

@@ -177,3 +177,39 @@ fn localize_refuses_an_exhaustive_search_beyond_its_candidate_limit() {
         &["candidates", "limit of 4000000", "--search exhaustive"],
     );
 }
+
+/// A `--prior` that claims a millimetre and lies 34 cm from where the scans put the query holds
+/// the pose, which is then doubtful (exit 3) with `prior_conflict`, said in words; a prior at
+/// the scans' pose leaves it trusted.
+#[test]
+fn a_prior_that_overrules_the_scans_is_doubtful() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("ds");
+    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
+    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    let wrong = run(
+        dir.path(),
+        &[&pair[..], &["--prior", "0,0,0,0.001"]].concat(),
+    );
+    assert_eq!(wrong.code, Some(3), "{}\n{}", wrong.stdout, wrong.stderr);
+    assert!(
+        wrong.stdout.contains("the prediction, not the scans"),
+        "{}",
+        wrong.stdout
+    );
+    let json = run(
+        dir.path(),
+        &[&pair[..], &["--prior", "0,0,0,0.001", "--json"]].concat(),
+    );
+    assert!(
+        json.stdout.contains("\"prior_conflict\""),
+        "{}",
+        json.stdout
+    );
+    let right = run(
+        dir.path(),
+        &[&pair[..], &["--prior", "0.337,0,0,0.001"]].concat(),
+    );
+    assert_eq!(right.code, Some(0), "{}\n{}", right.stdout, right.stderr);
+}

@@ -428,6 +428,8 @@ impl Localization {
 ///   overlaps less (``angle_deg``, ``overlap_fraction``, ``best_overlap_fraction``).
 /// - ``taken_from_prediction``: along a free direction the position is the prediction's
 ///   (``direction``, ``shift_m``).
+/// - ``prior_conflict``: the scans alone fit a place far from the pose much better; the
+///   prediction chose the pose (``distance_m``, ``cost``, ``best_cost``).
 ///
 /// A figure reads as an attribute (``doubt.fraction``) or from ``doubt.figures``.
 #[pyclass(module = "sdem", frozen)]

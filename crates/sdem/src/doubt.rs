@@ -107,6 +107,16 @@ pub enum Doubt {
         /// The same share at the optimum.
         best_overlap_fraction: f64,
     },
+    /// The scans alone fit a place far from the pose found much better than the pose: the
+    /// prediction in the cost (odometry, `--prior`) held the pose away from what the scans say.
+    PriorConflict {
+        /// How far that place lies from the pose's grid optimum, metres.
+        distance_m: f64,
+        /// Eq. (1) there, without the prediction's term, m².
+        cost: f64,
+        /// Eq. (1) at the pose's grid optimum, without the prediction's term, m².
+        best_cost: f64,
+    },
     /// Along a direction the scans leave free, the position was taken from the prediction
     /// (odometry or the last motion), not from the scans.
     TakenFromPrediction {
@@ -126,6 +136,7 @@ impl Doubt {
             self,
             Doubt::OnWindowEdge
                 | Doubt::TakenFromPrediction { .. }
+                | Doubt::PriorConflict { .. }
                 | Doubt::AttitudeCorrected { .. }
         )
     }
@@ -154,6 +165,7 @@ impl Doubt {
             Doubt::AnotherRotation { .. } => "another_rotation",
             Doubt::UnrefutedRotation { .. } => "unrefuted_rotation",
             Doubt::TakenFromPrediction { .. } => "taken_from_prediction",
+            Doubt::PriorConflict { .. } => "prior_conflict",
         }
     }
 }
@@ -263,6 +275,16 @@ impl fmt::Display for Doubt {
                  end)",
                 overlap_fraction * 100.0,
                 best_overlap_fraction * 100.0
+            ),
+            Doubt::PriorConflict {
+                distance_m,
+                cost,
+                best_cost,
+            } => write!(
+                f,
+                "the scans alone fit a place {:.0} cm away far better ({cost:.3e} m² against \
+                 {best_cost:.3e} m² here): the prediction, not the scans, put the pose here",
+                distance_m * 100.0
             ),
             Doubt::TakenFromPrediction {
                 direction: v,
@@ -381,6 +403,15 @@ mod tests {
                 "taken_from_prediction",
                 false,
             ),
+            (
+                Doubt::PriorConflict {
+                    distance_m: 0.34,
+                    cost: 4.5e-4,
+                    best_cost: 1.6e-3,
+                },
+                "prior_conflict",
+                false,
+            ),
         ];
         for (doubt, kind, ambiguity) in &all {
             let json = serde_json::to_value(doubt).unwrap();
@@ -399,7 +430,8 @@ mod tests {
                 | Doubt::FlatCovariance { .. }
                 | Doubt::Unconstrained { .. }
                 | Doubt::AnotherRotation { .. }
-                | Doubt::UnrefutedRotation { .. } => 3,
+                | Doubt::UnrefutedRotation { .. }
+                | Doubt::PriorConflict { .. } => 3,
                 Doubt::FlatCost { .. } => 4,
             };
             assert_eq!(fields, expected, "{json}");

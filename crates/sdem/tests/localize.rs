@@ -453,6 +453,72 @@ fn a_thin_match_and_an_unconfirmed_grid_pose_are_flagged() {
     assert!(has(&stuck, "refinement_failed"), "{stuck:?}");
 }
 
+/// A prediction that claims a millimetre and lies 20 cm from the truth holds the pose where it
+/// says, and the result says that the scans alone fit a place elsewhere far better; a right
+/// prediction, or a wrong one too loose to hold the pose, leaves the scans' pose trusted.
+#[test]
+fn a_prediction_that_overrules_the_scans_is_a_doubt() {
+    let grid = SdemConfig::default();
+    let sensor = SensorConfig::default();
+    let truth = Vec3::new(0.2, 0.05, 0.0);
+    let scene = sim::paper_room();
+    let r = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 31);
+    let q = sdem_at(
+        &scene,
+        &pose_from_parts(truth, Attitude::default()),
+        &sensor,
+        &grid,
+        32,
+    );
+    let with_prior = |offset: Vec3, sigma_m: f64| {
+        let config = LocalizeOptions {
+            window: SearchWindow::around(&Vec3::zeros(), [0.4, 0.4, 0.05]),
+            heading: HeadingWindow::none(),
+            cost: CostConfig {
+                prior: Some(OffsetPrior {
+                    offset: offset.into(),
+                    sigma_m,
+                }),
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        localize(&r, &q, &config).unwrap()
+    };
+    let conflict = |found: &Localization| found.doubts.iter().any(|d| d.kind() == "prior_conflict");
+    let pinned = with_prior(Vec3::new(0.0, 0.05, 0.0), 0.001);
+    let (error, _) = sdem::geometry::pose_error(
+        &pose_from_parts(truth, Attitude::default()),
+        &pinned.reference_from_query,
+    );
+    assert!(
+        error > 0.1,
+        "the prediction did not hold the pose: {error} m"
+    );
+    assert!(!pinned.trusted);
+    let Some(&Doubt::PriorConflict {
+        distance_m,
+        cost,
+        best_cost,
+    }) = (pinned.doubts.iter()).find(|d| matches!(d, Doubt::PriorConflict { .. }))
+    else {
+        panic!("no prior_conflict: {:?}", pinned.doubts);
+    };
+    assert!(
+        (0.1..0.3).contains(&distance_m) && cost * 2.0 <= best_cost,
+        "{distance_m} {cost} {best_cost}"
+    );
+    for (offset, sigma_m) in [(truth, 0.001), (Vec3::new(0.0, 0.05, 0.0), 0.3)] {
+        let found = with_prior(offset, sigma_m);
+        assert!(
+            !conflict(&found),
+            "{offset:?} ± {sigma_m}: {:?}",
+            found.doubts
+        );
+        assert_within_5mm_and_a_tenth_degree(&pose_from_parts(truth, Attitude::default()), &found);
+    }
+}
+
 #[test]
 fn bad_windows_and_steps_are_errors() {
     let scene = sim::paper_room();

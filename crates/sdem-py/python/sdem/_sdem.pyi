@@ -35,6 +35,7 @@ DoubtKind = Literal[
     "another_rotation",
     "unrefuted_rotation",
     "taken_from_prediction",
+    "prior_conflict",
 ]
 
 @final
