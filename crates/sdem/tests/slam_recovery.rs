@@ -197,6 +197,19 @@ fn a_scan_is_relocalized_in_a_saved_map_without_a_prior_or_reported_not_found() 
         Err(Error::NotFound { tried }) => assert_eq!(tried.len(), 2 * without_reading),
         other => panic!("a scan from nowhere came out as {other:?}"),
     }
+    // A scan whose points all lie at the sensor's origin is no scan of any place: said so,
+    // with or without a position, not "not found".
+    let nothing = vec![Vec3::zeros(); points.len()];
+    let near = Near {
+        position: fresh.world_from_sensor.translation.vector,
+        sigma_m: None,
+    };
+    for near in [None, Some(near)] {
+        match relocalize(&slam.map, slam.config(), &nothing, reading, near, 3) {
+            Err(Error::Invalid(why)) => assert!(why.contains("no usable point"), "{why}"),
+            other => panic!("a scan of nothing came out as {other:?}"),
+        }
+    }
 }
 
 #[test]

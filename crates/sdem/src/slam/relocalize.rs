@@ -87,8 +87,20 @@ pub fn relocalize(
             "the map has no node to relocalize in".into(),
         ));
     }
+    // The scan on the map's grid, levelled by its reading: a scan that fills no cell (every
+    // point at the sensor's origin or out of range) is said to be so, not "not found".
+    let query = Sdem::from_points(
+        points_in_sensor,
+        &attitude.unwrap_or_default(),
+        &config.sdem,
+    )?;
+    if query.known_cells() == 0 {
+        return Err(Error::Invalid(
+            "the scan has no usable point: none lies within the S-DEM's range gate".into(),
+        ));
+    }
     match near {
-        Some(near) => relocalize_near(map, config, points_in_sensor, attitude, near, max_nodes),
+        Some(near) => relocalize_near(map, config, &query, attitude, near, max_nodes),
         None => relocalize_anywhere(map, config, points_in_sensor, attitude, max_nodes),
     }
     .map(|mut found| {
@@ -161,17 +173,12 @@ fn relocalize_anywhere(
 fn relocalize_near(
     map: &Map,
     config: &SlamOptions,
-    points_in_sensor: &[Vec3],
+    query: &Sdem,
     attitude: Option<Attitude>,
     near: Near,
     max_nodes: usize,
 ) -> Result<Relocalization> {
     near.validate()?;
-    let level = attitude.unwrap_or_default();
-    let query = Sdem::from_points(points_in_sensor, &level, &config.sdem)?;
-    if query.known_cells() == 0 {
-        return Err(Error::Invalid("the scan has no usable point".into()));
-    }
     let candidates = nearest_nodes(map, &near.position, max_nodes);
     let heading = if attitude.is_some() {
         config.heading_half_compass_deg
@@ -185,7 +192,7 @@ fn relocalize_near(
         let reference = map.merged_reference(&[node_id], &origin, &config.sdem)?;
         let centre = near.position - origin;
         let localize_config = search_options(config, centre, Some(near), heading);
-        match localize(&reference, &query, &localize_config) {
+        match localize(&reference, query, &localize_config) {
             Ok(found)
                 if found.diagnostics.inlier_fraction >= config.loop_closure.min_inlier_fraction =>
             {
