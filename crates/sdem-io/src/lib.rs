@@ -252,7 +252,7 @@ mod voxels;
 pub use self::e57::{for_each_e57_scan, read_e57, write_e57, E57Scan, E57ScanOut};
 pub use attitude::{
     read_attitude_csv, read_attitude_readings, write_attitude_csv, AttitudeReadings,
-    ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG,
+    ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG, MAX_YAW_READING_DEG,
 };
 pub use dataset::{
     clear_dataset, write_dataset, write_dataset_streamed, Dataset, DatasetPlan, SigmaSource,

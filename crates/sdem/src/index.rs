@@ -20,7 +20,7 @@ struct Entry {
     descriptor_yaw: f64,
 }
 
-/// Node positions hashed on a grid of [`CELL_M`] cubes, with each node's descriptor.
+/// Node positions hashed on a grid of `CELL_M` cubes, with each node's descriptor.
 #[derive(Debug, Clone, Default)]
 pub struct NodeIndex {
     cells: HashMap<[i32; 3], Vec<usize>>,

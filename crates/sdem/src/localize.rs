@@ -653,7 +653,7 @@ fn prior_conflict(
     )
 }
 
-/// See [`prior_conflict`]: a place the scans fit this many times better than the pose found
+/// [`Doubt::PriorConflict`]: a place the scans fit this many times better than the pose found
 /// (eq. 1 at a right pose is the scans' noise and sampling; at a place 2× as costly they
 /// disagree plainly, while along a corridor's axis, where only the prediction can say, it
 /// varies by tens of per cent).

@@ -639,7 +639,7 @@ pub fn verify_loop_closure_against(
 }
 
 /// A search whose grid step is finer than this, metres, runs on this grid first
-/// ([`search_coarse_to_fine`]).
+/// (`search_coarse_to_fine`).
 pub const COARSE_STEP_M: f64 = 0.05;
 /// The fine search around a coarse optimum covers ± this, metres…
 const FINE_HALF_M: f64 = 0.08;

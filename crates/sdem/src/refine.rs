@@ -137,7 +137,7 @@ pub struct Refinement {
     pub rms_m: f64,
     /// Information matrix of `[x, y, z, rx, ry, rz]` (metres, radians; rotation about the
     /// reference levelled frame's axes), `JᵀWJ / (σ² d)`: `d` the residuals' [`design_effect`]
-    /// (their correlation between neighbours). [`crate::localize`] divides it further by the
+    /// (their correlation between neighbours). [`crate::localize()`] divides it further by the
     /// sampling bias measured by refining the other way ([`discrepancy::with_sampling_bias`]).
     pub information: Matrix6<f64>,
     /// The reference normals (levelled frame) of the last iteration's residuals within the

@@ -27,7 +27,7 @@
 //! What is exact is the search within each hypothesis's window. The hypotheses themselves
 //! come from the surfaces and can miss: a result then has a poor cost and comes out with
 //! doubts (`few_inliers`, `runner_up`, …), never as a trusted wrong pose. A scan that shows no
-//! floor or ceiling cannot be levelled this way and goes to [`tilted`]'s search over tilt and
+//! floor or ceiling cannot be levelled this way and goes to `tilted`'s search over tilt and
 //! heading together.
 
 mod tilted;

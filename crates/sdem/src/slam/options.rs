@@ -210,8 +210,8 @@ impl RecoveryOptions {
 const LIDAR_VOXEL_RANGE_M: f64 = 20.0;
 
 /// Whether `points_in_sensor` look like one turn of a spinning multi-beam LiDAR: their
-/// directions cover at least [`LIDAR_MIN_AZIMUTH_DEG`] of azimuth (in 1° bins) within at most
-/// [`LIDAR_MAX_ELEVATION_DEG`] of elevation (the 1st to 99th percentile). A tilting laser
+/// directions cover at least `LIDAR_MIN_AZIMUTH_DEG` of azimuth (in 1° bins) within at most
+/// `LIDAR_MAX_ELEVATION_DEG` of elevation (the 1st to 99th percentile). A tilting laser
 /// sweeps half the azimuth and 85° of elevation; a rotating 3D laser scanner the whole sphere.
 pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
     let mut azimuth_bins = vec![false; 360];
