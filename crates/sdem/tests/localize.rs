@@ -404,20 +404,23 @@ fn a_corridor_is_ambiguous_along_its_axis_and_a_room_is_not() {
     }
 }
 
+/// The paper's room scanned at the origin and at `truth` (seeds 31 and 32), levelled by their
+/// readings: reference, query.
+fn paper_room_pair(truth: &Vec3) -> (Sdem, Sdem) {
+    let (grid, sensor, scene) = (
+        SdemConfig::default(),
+        SensorConfig::default(),
+        sim::paper_room(),
+    );
+    let reference = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 31);
+    let at_truth = pose_from_parts(*truth, Attitude::default());
+    (reference, sdem_at(&scene, &at_truth, &sensor, &grid, 32))
+}
+
 #[test]
 fn a_thin_match_and_an_unconfirmed_grid_pose_are_flagged() {
-    let grid = SdemConfig::default();
-    let sensor = SensorConfig::default();
     let truth = Vec3::new(0.2, 0.05, 0.0);
-    let scene = sim::paper_room();
-    let r = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 31);
-    let q = sdem_at(
-        &scene,
-        &pose_from_parts(truth, Attitude::default()),
-        &sensor,
-        &grid,
-        32,
-    );
+    let (r, q) = paper_room_pair(&truth);
     let base = LocalizeOptions {
         window: SearchWindow::around(&truth, [0.05, 0.05, 0.03]),
         heading: HeadingWindow::none(),
@@ -458,18 +461,8 @@ fn a_thin_match_and_an_unconfirmed_grid_pose_are_flagged() {
 /// prediction, or a wrong one too loose to hold the pose, leaves the scans' pose trusted.
 #[test]
 fn a_prediction_that_overrules_the_scans_is_a_doubt() {
-    let grid = SdemConfig::default();
-    let sensor = SensorConfig::default();
     let truth = Vec3::new(0.2, 0.05, 0.0);
-    let scene = sim::paper_room();
-    let r = sdem_at(&scene, &Pose::identity(), &sensor, &grid, 31);
-    let q = sdem_at(
-        &scene,
-        &pose_from_parts(truth, Attitude::default()),
-        &sensor,
-        &grid,
-        32,
-    );
+    let (r, q) = paper_room_pair(&truth);
     let with_prior = |offset: Vec3, sigma_m: f64| {
         let config = LocalizeOptions {
             window: SearchWindow::around(&Vec3::zeros(), [0.4, 0.4, 0.05]),
