@@ -731,8 +731,33 @@ fn validate(config: &LocalizeOptions) -> Result<()> {
             config.step_m
         )));
     }
+    if let Some(prior) = &config.cost.prior {
+        // Every candidate lies many σ from the prediction: the two contradict each other, and
+        // the search would only return the window's edge nearest the prediction.
+        let (lo, hi) = (config.window.min, config.window.max);
+        let outside = (0..3)
+            .map(|a| {
+                (lo[a] - prior.offset[a])
+                    .max(prior.offset[a] - hi[a])
+                    .max(0.0)
+            })
+            .map(|d| d * d)
+            .sum::<f64>()
+            .sqrt();
+        if outside > PRIOR_OUTSIDE_SIGMAS * prior.sigma_m && outside > config.step_m {
+            return Err(Error::Invalid(format!(
+                "the prediction (prior) at ({:.3}, {:.3}, {:.3}) m lies {outside:.3} m outside \
+                 the search window, more than {PRIOR_OUTSIDE_SIGMAS} of its σ ({} m): centre \
+                 the window on it, or widen it",
+                prior.offset[0], prior.offset[1], prior.offset[2], prior.sigma_m
+            )));
+        }
+    }
     Ok(())
 }
+
+/// A prediction this many of its σ outside the search window contradicts it ([`validate`]).
+const PRIOR_OUTSIDE_SIGMAS: f64 = 5.0;
 
 /// What a search returns: its best candidate, its statistics, and what the exact search set
 /// aside for the runner-up search.

@@ -560,6 +560,23 @@ fn bad_windows_and_steps_are_errors() {
         ..Default::default()
     };
     assert!(localize(&s, &s, &bnb_on_virtual).is_err());
+    // A prediction 5 m outside the paper's window, σ 10 cm: the two contradict each other.
+    let prior_outside = |x: f64| LocalizeOptions {
+        cost: CostConfig {
+            prior: Some(OffsetPrior {
+                offset: [x, 0.0, 0.0],
+                sigma_m: 0.1,
+            }),
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    match localize(&s, &s, &prior_outside(5.0)) {
+        Err(Error::Invalid(why)) => assert!(why.contains("outside the search window"), "{why}"),
+        other => panic!("a prediction outside the window came out as {other:?}"),
+    }
+    // Inside the window, or within five σ of it, it is a prediction like any other.
+    assert!(localize(&s, &s, &prior_outside(0.9)).is_ok());
 }
 
 #[test]
