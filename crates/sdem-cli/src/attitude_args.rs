@@ -19,12 +19,8 @@ pub struct AttitudeFlags {
     pub heading_window_deg: Option<f64>,
 }
 
-/// Parses `--attitude-sigma-deg ROLL_PITCH,YAW` (degrees), checked as sensor.toml's σ is.
-pub fn parse_attitude_sigma(text: &str) -> Result<AttitudeSigma> {
-    attitude_sigma(text).map_err(|why| anyhow::anyhow!("--attitude-sigma-deg '{text}': {why}"))
-}
-
-/// [`parse_attitude_sigma`] as a clap value parser: the message does not name the flag.
+/// A clap value parser: `--attitude-sigma-deg ROLL_PITCH,YAW` (degrees), checked as
+/// sensor.toml's σ is; the message does not name the flag (clap's does).
 pub fn attitude_sigma(text: &str) -> std::result::Result<AttitudeSigma, String> {
     let [rp, yaw] = crate::parse::numbers(text, "ROLL_PITCH,YAW (standard deviations in degrees)")?;
     sdem_io::attitude_sigma_from_degrees(rp, yaw, "the roll/pitch σ", "the heading σ")

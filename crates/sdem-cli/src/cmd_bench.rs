@@ -13,6 +13,7 @@
 
 use crate::bench_tally::Tally;
 use crate::output::{elapsed_ms, print_json};
+use crate::parse::{positive_count, positive_metres};
 use anyhow::{Context, Result};
 use sdem::geometry::Vec3;
 use sdem::localize::{localize, HeadingWindow, LocalizeOptions, SearchMode, SearchWindow};
@@ -31,13 +32,18 @@ pub struct Args {
     #[arg(long)]
     quick: bool,
     /// Number of seeded pairs for the accuracy figures [default: 50, or 10 with --quick].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = positive_count)]
     pairs: Option<usize>,
     /// Seed of the pairs' scene.
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Grid step of the pairs' search, metres (the refinement goes below it).
-    #[arg(long, default_value_t = sdem_sim::benchmark::PAIRS_STEP_M)]
+    #[arg(
+        long,
+        default_value_t = sdem_sim::benchmark::PAIRS_STEP_M,
+        allow_hyphen_values = true,
+        value_parser = positive_metres
+    )]
     step: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -200,22 +206,9 @@ fn exact_vs_exhaustive(quick: bool, heading_deg: f64, say: &dyn Fn(&str)) -> Res
     })
 }
 
-/// The number of seeded pairs `args` asks for, checked with the search's step: both are
-/// checked before any measurement starts.
-fn pair_count(args: &Args) -> Result<usize> {
-    let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
-    if count == 0 {
-        anyhow::bail!("--pairs must be at least 1");
-    }
-    if !(args.step.is_finite() && args.step > 0.0) {
-        anyhow::bail!("--step {} must be a positive number of metres", args.step);
-    }
-    Ok(count)
-}
-
-/// The seeded pairs of `args` (checked), simulated once for every heading window measured.
+/// The seeded pairs of `args`, simulated once for every heading window measured.
 fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
-    let count = pair_count(args)?;
+    let count = args.pairs.unwrap_or(if args.quick { 10 } else { 50 });
     say(&format!("pairs: simulating {count} seeded pairs ..."));
     Ok(bench_pairs(args.seed, count, &PairConfig::default())?)
 }
@@ -325,6 +318,7 @@ pub fn run(args: Args) -> Result<()> {
     }
     if let Some(suite) = args.suites.suite {
         if suite == crate::cmd_bench_suites::Suite::Scale {
+            crate::cmd_bench_scale::check_sizes(&args.suites.sizes)?;
             // Before the suite runs: a saved picture is never written over without --force.
             crate::output::check_output_file(&args.suites.plot, "--plot", args.force)?;
         }
@@ -348,7 +342,6 @@ pub fn run(args: Args) -> Result<()> {
 /// Runs the three measurements: the exact search twice, the seeded pairs with and without the
 /// compass, and the pose graph.
 fn measure(args: &Args, say: &dyn Fn(&str)) -> Result<Report> {
-    pair_count(args)?;
     let exact = exact_vs_exhaustive(args.quick, 0.0, say)?;
     // The default heading window; --quick narrows it so the oracle stays short.
     let heading_deg = if args.quick {

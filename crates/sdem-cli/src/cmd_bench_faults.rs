@@ -190,12 +190,6 @@ fn reason_kind(doubt: &Doubt) -> &'static str {
 
 /// Runs `sdem bench --faults`.
 pub fn run(args: &FaultArgs, say: &dyn Fn(&str)) -> Result<()> {
-    if args.pairs == 0 {
-        bail!("--pairs must be at least 1");
-    }
-    if !(args.step.is_finite() && args.step > 0.0) {
-        bail!("--step {} must be a positive number of metres", args.step);
-    }
     let config = FaultConfig {
         step_m: args.step,
         ..FaultConfig::default()

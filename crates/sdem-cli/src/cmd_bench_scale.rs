@@ -11,7 +11,7 @@
 //! included), and the map is saved at each size as `sdem slam` saves it.
 
 use crate::output::{elapsed_ms, print_json};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use sdem::geometry::Pose;
 use sdem::sensor::SensorConfig;
 use sdem::slam::{trajectory_errors, Odometry, ScanInput, Slam, SlamOptions, StepReport};
@@ -143,14 +143,24 @@ struct Report {
     plot: Option<PathBuf>,
 }
 
+/// Refuses (a usage error) `--sizes` that do not increase; each size is at least 1 node
+/// (`parse::positive_count`).
+pub fn check_sizes(sizes: &[usize]) -> Result<()> {
+    match sizes.windows(2).find(|w| w[0] >= w[1]) {
+        Some(w) => Err(crate::parse::usage_error(
+            "bench",
+            format!(
+                "--sizes must increase, each map size larger than the last (e.g. \
+                 100,300,1000): {} is followed by {}",
+                w[0], w[1]
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// Runs the suite.
 pub fn run(args: &ScaleArgs, say: &dyn Fn(&str)) -> Result<()> {
-    if args.sizes.is_empty() || args.sizes.contains(&0) {
-        bail!("--sizes must name map sizes of at least 1 node (e.g. 100,300,1000)");
-    }
-    if args.sizes.windows(2).any(|w| w[0] >= w[1]) {
-        bail!("--sizes must increase (e.g. 100,300,1000)");
-    }
     let mut routes = Vec::new();
     for &route in &args.routes {
         routes.push(run_route(route, args, say)?);

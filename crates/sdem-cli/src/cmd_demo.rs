@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Stops of the stop-and-go run, 2 to 40 (the simulated building's route holds 40).
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, allow_hyphen_values = true, value_parser = parse_stops)]
     stops: usize,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -143,20 +143,20 @@ const OUTPUT_FILES: &[&str] = &[
 /// holds [`sdem_sim::sim::MAX_STOPS`].
 const STOPS: std::ops::RangeInclusive<usize> = 2..=sdem_sim::sim::MAX_STOPS;
 
-/// Checks the arguments before any work: `--stops` within [`STOPS`], and an `--out` folder
-/// that holds none of the files the demo writes, nor the `map/` of a `sdem slam` output (whose
-/// poses and pictures the demo's would replace), unless `--force`.
+/// Parses `--stops N`: within [`STOPS`].
+fn parse_stops(text: &str) -> Result<usize, String> {
+    let why = format!(
+        "the stop-and-go run needs 2 stops for one step, and the simulated building's route \
+         holds {}",
+        STOPS.end()
+    );
+    crate::parse::count_in(text, STOPS, &why)
+}
+
+/// Checks, before any work, that an `--out` folder holds none of the files the demo writes,
+/// nor the `map/` of a `sdem slam` output (whose poses and pictures the demo's would replace),
+/// unless `--force`.
 fn check_args(args: &Args) -> Result<()> {
-    if !STOPS.contains(&args.stops) {
-        bail!(
-            "--stops {} must lie in {}..={}: the stop-and-go run needs 2 stops for one step, and \
-             the simulated building's route holds {}",
-            args.stops,
-            STOPS.start(),
-            STOPS.end(),
-            STOPS.end()
-        );
-    }
     let names: Vec<&str> = OUTPUT_FILES
         .iter()
         .chain(crate::cmd_view::MAP_PICTURE_FILES)

@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     first: usize,
     /// How many scans to import from --first on [default: all].
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_count)]
     count: Option<usize>,
     /// 3DTK only: the folder of slam6D's scanNNN.frames, written as poses_slam6d.txt (a
     /// reference, not ground truth) [default: SOURCE/slam6d_frames_2009/, else SOURCE when it
@@ -119,7 +119,16 @@ fn clear_for_force(args: &Args) -> Result<()> {
     Ok(())
 }
 
-/// Checks the source, `--count`, and that `--out` is a folder that is empty or may be replaced.
+/// Parses `--count N`: at least 1.
+fn parse_count(text: &str) -> std::result::Result<usize, String> {
+    crate::parse::count_in(
+        text,
+        1..=usize::MAX,
+        "0 imports nothing (leave the flag out for all scans)",
+    )
+}
+
+/// Checks the source, and that `--out` is a folder that is empty or may be replaced.
 fn check_args(args: &Args) -> Result<()> {
     if !args.source.exists() {
         bail!(
@@ -127,9 +136,6 @@ fn check_args(args: &Args) -> Result<()> {
              bag or an .e57 file",
             args.source.display()
         );
-    }
-    if args.count == Some(0) {
-        bail!("--count 0 imports nothing; give at least 1 or leave it out for all scans");
     }
     if args.out.exists() {
         if !args.out.is_dir() {

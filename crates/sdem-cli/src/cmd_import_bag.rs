@@ -2,6 +2,7 @@
 //! summary.
 
 use crate::output::print_json;
+use crate::parse::{positive_degrees, positive_metres, positive_seconds};
 use anyhow::{bail, Result};
 use sdem_io::rosbag::{import_rosbag, BagImportOptions, BagImportSummary, StopPolicy, StopRules};
 use std::path::Path;
@@ -43,16 +44,16 @@ pub struct BagArgs {
     #[arg(long, value_enum)]
     stops: Option<Stops>,
     /// With travelled stops: the distance between stops, metres [default: 1].
-    #[arg(long, value_name = "M")]
+    #[arg(long, value_name = "M", allow_hyphen_values = true, value_parser = positive_metres)]
     stop_distance: Option<f64>,
     /// With travelled stops: the angle turned between stops, degrees [default: 10].
-    #[arg(long, value_name = "DEG")]
+    #[arg(long, value_name = "DEG", allow_hyphen_values = true, value_parser = positive_degrees)]
     stop_angle: Option<f64>,
     /// With travelled stops and no odometry: the time between stops, seconds [default: 1].
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_hyphen_values = true, value_parser = positive_seconds)]
     stop_interval: Option<f64>,
     /// The least tilt a laser's sweep spans to make a scan, degrees [default: 20].
-    #[arg(long, value_name = "DEG")]
+    #[arg(long, value_name = "DEG", allow_hyphen_values = true, value_parser = positive_degrees)]
     min_sweep: Option<f64>,
     /// Use everything readable before damage (a bag cut short), and leave out the messages that
     /// do not decode and the scans without an attitude or odometry reading; the summary lists

@@ -8,7 +8,10 @@ use crate::output::{
     doubts_json, elapsed_ms, estimate_label, pose_line, print_doubts, print_json,
     with_doubt_messages, Outcome,
 };
-use crate::parse::{fmt_number, numbers, positive_degrees, positive_metres, usage_error};
+use crate::parse::{
+    fmt_number, heading_window_degrees, numbers, positive_count, positive_degrees, positive_metres,
+    resolution_degrees, usage_error,
+};
 use anyhow::{bail, Context, Result};
 use sdem::cost::{CostConfig, CostModel};
 use sdem::geometry::{pose_error, Attitude, AttitudeSigma, Pose, PoseRecord};
@@ -122,8 +125,14 @@ pub struct Args {
     exhaustive: bool,
     /// With the exhaustive search: score up to this many candidates instead of 4,000,000 (the
     /// paper's window with the default heading window is 6–10 million: two minutes or more).
-    #[arg(long, value_name = "N", conflicts_with = "map", value_parser = clap::value_parser!(u64).range(1..))]
-    max_candidates: Option<u64>,
+    #[arg(
+        long,
+        value_name = "N",
+        allow_hyphen_values = true,
+        conflicts_with = "map",
+        value_parser = positive_count
+    )]
+    max_candidates: Option<usize>,
     /// Which search: exact branch-and-bound (projective cost), the exhaustive oracle, or the
     /// coarse-to-fine heuristic.
     #[arg(long, value_enum, default_value_t = Search::BranchAndBound, conflicts_with = "map")]
@@ -140,7 +149,7 @@ pub struct Args {
         allow_hyphen_values = true,
         conflicts_with = "map",
         value_name = "DEG",
-        value_parser = parse_heading_window
+        value_parser = heading_window_degrees
     )]
     heading_window: Option<f64>,
     /// Heading step, degrees [default: matched to the scan's extent and --step].
@@ -156,7 +165,7 @@ pub struct Args {
         default_value_t = 1.0,
         allow_hyphen_values = true,
         conflicts_with = "map",
-        value_parser = parse_resolution
+        value_parser = resolution_degrees
     )]
     resolution: f64,
     /// Derive the S-DEM grid from the reference scan and the search's step, truncation and
@@ -332,27 +341,6 @@ fn window_text(window: &SearchWindow) -> String {
 /// Parses `--attitude roll,pitch,yaw` (degrees).
 fn parse_attitude(text: &str) -> Result<[f64; 3], String> {
     numbers(text, "roll,pitch,yaw in degrees")
-}
-
-/// Parses `--heading-window DEG`: 0 to 180 degrees.
-fn parse_heading_window(text: &str) -> Result<f64, String> {
-    (text.trim().parse::<f64>().ok())
-        .filter(|degrees| (0.0..=180.0).contains(degrees))
-        .ok_or_else(|| {
-            "must lie in [0, 180] degrees (0 trusts the compass, 180 searches a full turn)".into()
-        })
-}
-
-/// Parses `--resolution DEG`, checked as the S-DEM grid checks it.
-fn parse_resolution(text: &str) -> Result<f64, String> {
-    let resolution_deg = (text.trim().parse::<f64>())
-        .map_err(|_| "must be a number of degrees in (0, 45], the S-DEM's cell size".to_string())?;
-    let grid = SdemConfig {
-        resolution_deg,
-        ..Default::default()
-    };
-    grid.validate().map_err(|e| e.to_string())?;
-    Ok(resolution_deg)
 }
 
 /// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.
@@ -618,8 +606,7 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
             ..base.cost.clone()
         },
         runner_up: !args.no_runner_up,
-        max_exhaustive_candidates: (args.max_candidates)
-            .map_or(base.max_exhaustive_candidates, |n| n as usize),
+        max_exhaustive_candidates: (args.max_candidates).unwrap_or(base.max_exhaustive_candidates),
         ..base
     })
 }

@@ -1,12 +1,14 @@
 //! `sdem simulate`: a simulated collapsed-building run written as a dataset folder.
 
 use crate::output::print_json;
-use anyhow::{bail, Context, Result};
+use crate::parse::{count_in, non_negative_degrees, number_in, usage_error};
+use anyhow::{Context, Result};
 use sdem::sensor::SensorConfig;
 use sdem_sim::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected};
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim::{self, LongRoute};
 use serde::Serialize;
+use std::ops::Bound;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `sdem simulate`.
@@ -20,7 +22,7 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Number of stops: up to 40 in the collapsed building, up to 100,000 on a --route.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 8, allow_hyphen_values = true, value_parser = parse_stops)]
     stops: usize,
     /// A long route instead of the collapsed building: room-laps (laps of a furnished room,
     /// 30 stops a lap), floor (3 x 3 rooms toured in three different laps), wings (two wings
@@ -29,17 +31,27 @@ pub struct Args {
     #[arg(long, value_name = "ROUTE", conflicts_with = "faults")]
     route: Option<String>,
     /// Standard deviation of the range noise, metres.
-    #[arg(long, default_value_t = 0.005)]
+    #[arg(
+        long,
+        default_value_t = 0.005,
+        allow_hyphen_values = true,
+        value_parser = parse_range_noise
+    )]
     range_noise: f64,
     /// Standard deviation of the compass heading reading, degrees.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = non_negative_degrees)]
     compass_noise_deg: Option<f64>,
     /// Drop returns beyond this range, metres (the paper trusts 3 m).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_trusted_range)]
     trusted_range: Option<f64>,
     /// The scanner's angular step, tilt and pan alike, degrees (the paper's 1°; 0.5° gives four
     /// times the points). The dataset's `sensor.toml` says it, so the S-DEM grid matches it.
-    #[arg(long, default_value_t = SensorConfig::default().pan_step_deg)]
+    #[arg(
+        long,
+        default_value_t = SensorConfig::default().pan_step_deg,
+        allow_hyphen_values = true,
+        value_parser = parse_step_deg
+    )]
     step_deg: f64,
     /// Do not write odometry.txt (the dead-reckoned poses, written by default).
     #[arg(long)]
@@ -49,14 +61,16 @@ pub struct Args {
     #[arg(
         long,
         default_value_t = OdometryNoise::default().translation_frac,
-        allow_hyphen_values = true
+        allow_hyphen_values = true,
+        value_parser = parse_odometry_noise
     )]
     odometry_noise: f64,
     /// Odometry heading (yaw) noise per step, degrees; it accumulates (dead reckoning drifts).
     #[arg(
         long,
         default_value_t = OdometryNoise::default().yaw_deg_per_step,
-        allow_hyphen_values = true
+        allow_hyphen_values = true,
+        value_parser = non_negative_degrees
     )]
     odometry_yaw_noise_deg: f64,
     /// Write into a folder that already holds a dataset: its scans, sweeps, attitudes, odometry,
@@ -98,9 +112,13 @@ pub fn run(args: Args) -> Result<()> {
         Some(name) => Some(name.parse::<LongRoute>().context("--route")?),
         None => None,
     };
-    check_out_and_stops(&args, route)?;
+    check_stops(args.stops, route)?;
+    crate::output::check_output_folder(&args.out, "--out", sdem_io::DATASET_ENTRIES, args.force)?;
     let sensor = sensor_config(&args)?;
-    let odometry_noise = odometry_noise(&args)?;
+    let odometry_noise = OdometryNoise {
+        translation_frac: args.odometry_noise,
+        yaw_deg_per_step: args.odometry_yaw_noise_deg,
+    };
     if let Some(route) = route {
         let summary = write_long_run(&args, route, &sensor, &odometry_noise)?;
         if args.json {
@@ -119,30 +137,56 @@ pub fn run(args: Args) -> Result<()> {
     Ok(())
 }
 
-/// Refuses, before any work, an `--out` that is a file, one that holds any file or folder of a
-/// dataset (the files simulate writes, and those `--force` clears: `sdem_io::DATASET_ENTRIES`)
-/// without `--force`, and a route longer than the scene's.
-fn check_out_and_stops(args: &Args, route: Option<LongRoute>) -> Result<()> {
-    crate::output::check_output_folder(&args.out, "--out", sdem_io::DATASET_ENTRIES, args.force)?;
-    if route.is_some() {
-        if !(1..=sim::MAX_LONG_STOPS).contains(&args.stops) {
-            bail!(
-                "--stops {} must lie in 1..={} on a long route",
-                args.stops,
+/// Parses `--stops N`: at least 1, and at most a long route's [`sim::MAX_LONG_STOPS`]
+/// ([`check_stops`] holds the collapsed building to its own).
+fn parse_stops(text: &str) -> std::result::Result<usize, String> {
+    let why = format!(
+        "up to {} in the collapsed building, {} on a --route",
+        sim::MAX_STOPS,
+        sim::MAX_LONG_STOPS
+    );
+    count_in(text, 1..=sim::MAX_LONG_STOPS, &why)
+}
+
+/// Refuses (a usage error) more `--stops` than the collapsed building's route holds when no
+/// `--route` is given.
+fn check_stops(stops: usize, route: Option<LongRoute>) -> Result<()> {
+    if route.is_none() && stops > sim::MAX_STOPS {
+        return Err(usage_error(
+            "simulate",
+            format!(
+                "--stops {stops} must lie in 1..={} in the collapsed building (its route holds \
+                 {} stops); a --route takes up to {}",
+                sim::MAX_STOPS,
+                sim::MAX_STOPS,
                 sim::MAX_LONG_STOPS
-            );
-        }
-        return Ok(());
-    }
-    if !(1..=sim::MAX_STOPS).contains(&args.stops) {
-        bail!(
-            "--stops {} must lie in 1..={} (the simulated route holds {} stops)",
-            args.stops,
-            sim::MAX_STOPS,
-            sim::MAX_STOPS
-        );
+            ),
+        ));
     }
     Ok(())
+}
+
+/// Parses `--range-noise M`: a standard deviation below the scanner's largest range.
+fn parse_range_noise(text: &str) -> std::result::Result<f64, String> {
+    let max_range_m = SensorConfig::default().max_range_m;
+    let what = format!(
+        "a number of metres in [0, {max_range_m}), a standard deviation below the scanner's \
+         {max_range_m} m range (the SICK's is 0.005)"
+    );
+    number_in(text, 0.0..max_range_m, &what)
+}
+
+/// Parses `--trusted-range M`: beyond the closest return kept.
+fn parse_trusted_range(text: &str) -> std::result::Result<f64, String> {
+    let min_range_m = SensorConfig::default().min_range_m;
+    let what = format!(
+        "a number of metres above {min_range_m}, the closest return kept (the paper trusts 3)"
+    );
+    number_in(
+        text,
+        (Bound::Excluded(min_range_m), Bound::Unbounded),
+        &what,
+    )
 }
 
 /// The finest `--step-deg`: 0.25° sweeps a scan of some 250,000 beams.
@@ -150,14 +194,26 @@ const MIN_STEP_DEG: f64 = 0.25;
 /// The coarsest `--step-deg`: coarser sweeps hold too few points a scan to localize.
 const MAX_STEP_DEG: f64 = 5.0;
 
-/// The sensor model from the arguments, validated.
+/// Parses `--step-deg DEG`: within [`MIN_STEP_DEG`] and [`MAX_STEP_DEG`].
+fn parse_step_deg(text: &str) -> std::result::Result<f64, String> {
+    let what = format!(
+        "a number of degrees in [{MIN_STEP_DEG}, {MAX_STEP_DEG}] ({MIN_STEP_DEG}° sweeps a scan \
+         of some 250,000 beams; coarser than {MAX_STEP_DEG}° leaves too few points to localize)"
+    );
+    number_in(text, MIN_STEP_DEG..=MAX_STEP_DEG, &what)
+}
+
+/// Parses `--odometry-noise FRACTION`.
+fn parse_odometry_noise(text: &str) -> std::result::Result<f64, String> {
+    number_in(
+        text,
+        0.0..,
+        "a finite fraction ≥ 0 of each step's length (0.05: a 35 cm step off by about 2 cm)",
+    )
+}
+
+/// The sensor model from the arguments (each in its range, by its parser), validated.
 fn sensor_config(args: &Args) -> Result<SensorConfig> {
-    if !(MIN_STEP_DEG..=MAX_STEP_DEG).contains(&args.step_deg) {
-        bail!(
-            "--step-deg {} must lie in {MIN_STEP_DEG}..={MAX_STEP_DEG} degrees",
-            args.step_deg
-        );
-    }
     let mut sensor = SensorConfig {
         range_noise_m: args.range_noise,
         trusted_range_m: args.trusted_range,
@@ -170,27 +226,6 @@ fn sensor_config(args: &Args) -> Result<SensorConfig> {
     }
     sensor.validate()?;
     Ok(sensor)
-}
-
-/// The odometry's noise from the arguments, checked.
-fn odometry_noise(args: &Args) -> Result<OdometryNoise> {
-    let odometry_noise = OdometryNoise {
-        translation_frac: args.odometry_noise,
-        yaw_deg_per_step: args.odometry_yaw_noise_deg,
-    };
-    if !(odometry_noise.translation_frac.is_finite() && odometry_noise.translation_frac >= 0.0) {
-        bail!(
-            "--odometry-noise {} must be a finite fraction ≥ 0",
-            args.odometry_noise
-        );
-    }
-    if !(odometry_noise.yaw_deg_per_step.is_finite() && odometry_noise.yaw_deg_per_step >= 0.0) {
-        bail!(
-            "--odometry-yaw-noise-deg {} must be a finite number of degrees ≥ 0",
-            args.odometry_yaw_noise_deg
-        );
-    }
-    Ok(odometry_noise)
 }
 
 /// The faults named by `--fault`.

@@ -32,8 +32,13 @@ pub struct Args {
     /// How far the attitude readings can be off, standard deviations in degrees:
     /// ROLL_PITCH,YAW (e.g. 0.5,20 for a compass near steel). Overrides attitude.csv's and
     /// sensor.toml's σ for every reading; needs attitude.csv.
-    #[arg(long, allow_hyphen_values = true, value_name = "RP,YAW")]
-    attitude_sigma_deg: Option<String>,
+    #[arg(
+        long,
+        allow_hyphen_values = true,
+        value_name = "RP,YAW",
+        value_parser = crate::attitude_args::attitude_sigma
+    )]
+    attitude_sigma_deg: Option<AttitudeSigma>,
     /// The output folder: poses.txt, poses.tum, report.json, map.ply, map.sdemvox, config.toml,
     /// the saved map in map/, pictures and viewer.html.
     #[arg(long)]
@@ -46,7 +51,7 @@ pub struct Args {
     #[arg(long)]
     config: Option<PathBuf>,
     /// Grid step of the search, metres [default: 0.02, or the config file's].
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, value_parser = crate::parse::positive_metres)]
     step: Option<f64>,
     /// Do not look for loop closures.
     #[arg(long)]
@@ -64,7 +69,7 @@ pub struct Args {
     #[arg(long)]
     force: bool,
     /// Process at most this many scans (of the dataset, counted from the first).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = parse_max_scans)]
     max_scans: Option<usize>,
     /// Compare the result with these poses too (KITTI format, one per scan; e.g. another
     /// tool's result), besides poses_truth.txt.
@@ -195,10 +200,18 @@ fn slam_attitude(dataset: &Dataset, sigma: Option<AttitudeSigma>) -> SlamAttitud
     }
 }
 
-/// Parses `--attitude-sigma-deg ROLL_PITCH,YAW` (degrees), checked as sensor.toml's σ is; it
-/// needs attitude.csv.
-fn parse_sigma(args: &Args, dataset: &Dataset) -> Result<Option<AttitudeSigma>> {
-    let Some(text) = &args.attitude_sigma_deg else {
+/// Parses `--max-scans N`: at least 1.
+fn parse_max_scans(text: &str) -> std::result::Result<usize, String> {
+    crate::parse::count_in(
+        text,
+        1..=usize::MAX,
+        "0 maps nothing (leave the flag out for every scan)",
+    )
+}
+
+/// `--attitude-sigma-deg` (parsed and checked as sensor.toml's σ is), which needs attitude.csv.
+fn attitude_sigma(args: &Args, dataset: &Dataset) -> Result<Option<AttitudeSigma>> {
+    let Some(sigma) = args.attitude_sigma_deg else {
         return Ok(None);
     };
     if dataset.attitudes.is_none() {
@@ -208,7 +221,7 @@ fn parse_sigma(args: &Args, dataset: &Dataset) -> Result<Option<AttitudeSigma>> 
             args.dataset.display()
         );
     }
-    crate::attitude_args::parse_attitude_sigma(text).map(Some)
+    Ok(Some(sigma))
 }
 
 const MAP_DIR: &str = "map";
@@ -246,11 +259,8 @@ struct Outputs {
 pub fn run(args: Args) -> Result<Outcome> {
     let start = Instant::now();
     let dataset = Dataset::open(&args.dataset)?;
-    let sigma = parse_sigma(&args, &dataset)?;
+    let sigma = attitude_sigma(&args, &dataset)?;
     let map_dir = args.out.join(MAP_DIR);
-    if args.max_scans == Some(0) {
-        bail!("--max-scans 0 maps nothing; give at least 1 (or leave it out for every scan)");
-    }
     if let Some(mcap) = &args.mcap {
         crate::export_mcap::check_target(mcap, args.force)?;
         check_beside_outputs(&args.out, mcap, "--mcap")?;
@@ -411,9 +421,6 @@ fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
         },
     };
     if let Some(step) = args.step {
-        if !(step.is_finite() && step > 0.0) {
-            bail!("--step {step} must be a positive number of metres");
-        }
         config.localize.step_m = step;
     }
     if args.no_loop_closure {

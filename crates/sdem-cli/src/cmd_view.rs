@@ -3,6 +3,10 @@
 
 use crate::cmd_localize::parse_window;
 use crate::output::{check_output_file, create_folder, print_json};
+use crate::parse::{
+    fmt_number, heading_window_degrees, number_in, positive_metres, resolution_degrees,
+    usage_error, POSITIVE,
+};
 use anyhow::{bail, Context, Result};
 use sdem::geometry::{Pose, Vec3};
 use sdem::localize::{localize, LocalizeOptions, SearchWindow};
@@ -56,7 +60,7 @@ struct ScanArgs {
     #[arg(long)]
     force: bool,
     /// S-DEM cell size, degrees.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = resolution_degrees)]
     resolution: f64,
 }
 
@@ -65,7 +69,7 @@ struct SliceArgs {
     #[command(flatten)]
     scan: ScanArgs,
     /// The elevation whose band is drawn, degrees (the paper's figures: -30).
-    #[arg(long, default_value_t = -30.0, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = -30.0, allow_hyphen_values = true, value_parser = elevation_degrees)]
     elevation: f64,
 }
 
@@ -98,22 +102,50 @@ struct CostArgs {
     #[arg(long, allow_hyphen_values = true, value_parser = parse_window)]
     window: Option<SearchWindow>,
     /// Heading searched around the compass, ± degrees.
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(
+        long,
+        default_value_t = 10.0,
+        allow_hyphen_values = true,
+        value_parser = heading_window_degrees
+    )]
     heading_window: f64,
     /// Grid step of the localization that finds the optimum, metres (it is refined below the
     /// grid afterwards).
-    #[arg(long, default_value_t = 0.02)]
+    #[arg(long, default_value_t = 0.02, allow_hyphen_values = true, value_parser = positive_metres)]
     search_step: f64,
     /// Half the side of the square drawn around the optimum, metres.
-    #[arg(long, default_value_t = 0.3)]
+    #[arg(long, default_value_t = 0.3, allow_hyphen_values = true, value_parser = parse_extent)]
     extent: f64,
     /// Sample spacing of the picture, metres: at least 3 samples across the extent, at most
     /// 401.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.01, allow_hyphen_values = true, value_parser = parse_step)]
     step: f64,
     /// S-DEM cell size, degrees.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true, value_parser = resolution_degrees)]
     resolution: f64,
+}
+
+/// Parses `--elevation DEG` of `sdem view slice`.
+fn elevation_degrees(text: &str) -> Result<f64, String> {
+    number_in(text, -90.0..=90.0, "a number of degrees in [-90, 90]")
+}
+
+/// Parses `--extent M` of `sdem view cost`.
+fn parse_extent(text: &str) -> Result<f64, String> {
+    number_in(
+        text,
+        POSITIVE,
+        "a positive number of metres (> 0), half the side of the picture (e.g. 0.3)",
+    )
+}
+
+/// Parses `--step M` of `sdem view cost`.
+fn parse_step(text: &str) -> Result<f64, String> {
+    number_in(
+        text,
+        POSITIVE,
+        "a positive number of metres (> 0), the picture's sample spacing (e.g. 0.01)",
+    )
 }
 
 /// Runs `sdem view`.
@@ -124,8 +156,8 @@ pub fn run(args: Args) -> Result<()> {
             check_output_file(&scan.out, "--out", scan.force)?;
         }
         What::Cost(cost) => {
-            check_output_file(&cost.out, "--out", cost.force)?;
             check_cost_sampling(cost)?;
+            check_output_file(&cost.out, "--out", cost.force)?;
         }
         What::Map(_) => {}
     }
@@ -157,12 +189,6 @@ pub fn run(args: Args) -> Result<()> {
 
 /// `sdem view slice`: one elevation band of a scan's S-DEM.
 fn write_slice(slice: &SliceArgs) -> Result<()> {
-    if !slice.elevation.is_finite() || slice.elevation.abs() > 90.0 {
-        bail!(
-            "--elevation {} must lie in -90..=90 degrees",
-            slice.elevation
-        );
-    }
     let (sdem, label) = scan_sdem(&slice.scan)?;
     write_png(
         &slice.scan.out,
@@ -413,7 +439,7 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
         resolution_deg: args.resolution,
         ..Default::default()
     };
-    let config = cost_localize_config(args)?;
+    let config = cost_localize_config(args);
     let build = |index: usize| -> Result<Sdem> {
         let attitude = dataset.attitude_or_level(index).unwrap_or_default();
         let points = dataset.load_scan(index)?;
@@ -453,24 +479,10 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
 /// 401 (as `sdem_viz::sample_cost_slice` allows).
 const COST_SAMPLES: std::ops::RangeInclusive<i64> = 3..=401;
 
-/// Checks `--extent` and `--step` of `sdem view cost` before the localization: positive, and
-/// giving a number of samples across the picture within [`COST_SAMPLES`] (counted as
-/// `sdem_viz::sample_cost_slice` counts them).
+/// Refuses (a usage error) an `--extent` and `--step` of `sdem view cost` (each positive, by
+/// its parser) whose number of samples across the picture lies outside [`COST_SAMPLES`]
+/// (counted as `sdem_viz::sample_cost_slice` counts them).
 fn check_cost_sampling(args: &CostArgs) -> Result<()> {
-    if !(args.extent.is_finite() && args.extent > 0.0) {
-        bail!(
-            "--extent {} must be a positive number of metres (half the side of the picture, \
-             e.g. 0.3)",
-            args.extent
-        );
-    }
-    if !(args.step.is_finite() && args.step > 0.0) {
-        bail!(
-            "--step {} must be a positive number of metres (the picture's sample spacing, e.g. \
-             0.01)",
-            args.step
-        );
-    }
     let half_count = (args.extent / args.step).round();
     let samples = if half_count < 1e9 {
         2 * half_count as i64 + 1
@@ -484,14 +496,17 @@ fn check_cost_sampling(args: &CostArgs) -> Result<()> {
             1 => "1 sample".to_string(),
             n => format!("{n} samples"),
         };
-        bail!(
-            "--step {} m over --extent ±{} m gives {count} a side; the picture needs \
-             {low} to {high}: choose a --step between {} and {} m, or another --extent",
-            args.step,
-            args.extent,
-            short_metres(2.0 * args.extent / (*high as f64 - 1.0)),
-            short_metres(2.0 * args.extent / (*low as f64 - 1.0)),
-        );
+        return Err(usage_error(
+            "view cost",
+            format!(
+                "--step {} m over --extent ±{} m gives {count} a side; the picture needs \
+                 {low} to {high}: choose a --step between {} and {} m, or another --extent",
+                fmt_number(args.step),
+                fmt_number(args.extent),
+                short_metres(2.0 * args.extent / (*high as f64 - 1.0)),
+                short_metres(2.0 * args.extent / (*low as f64 - 1.0)),
+            ),
+        ));
     }
     Ok(())
 }
@@ -507,27 +522,15 @@ fn short_metres(value: f64) -> String {
     }
 }
 
-/// The localization `sdem view cost` runs to find the optimum, from the arguments, checked.
-fn cost_localize_config(args: &CostArgs) -> Result<LocalizeOptions> {
-    if !(args.heading_window.is_finite() && (0.0..=180.0).contains(&args.heading_window)) {
-        bail!(
-            "--heading-window {} must lie in 0..=180 degrees",
-            args.heading_window
-        );
-    }
+/// The localization `sdem view cost` runs to find the optimum, from the arguments.
+fn cost_localize_config(args: &CostArgs) -> LocalizeOptions {
     let mut config = LocalizeOptions::default();
     if let Some(window) = args.window {
         config.window = window;
     }
     config.heading.half_range_deg = args.heading_window;
-    if !(args.search_step.is_finite() && args.search_step > 0.0) {
-        bail!(
-            "--search-step {} must be a positive number of metres",
-            args.search_step
-        );
-    }
     config.step_m = args.search_step;
     // The picture needs the optimum only, not the runner-up search.
     config.runner_up = false;
-    Ok(config)
+    config
 }

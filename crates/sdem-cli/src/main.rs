@@ -38,7 +38,7 @@ const EXIT_STATUS: &str = "\
 Exit status:
   0  done, and every result trusted
   1  an error: stderr says what was wrong, where, and how to fix it
-  2  a malformed command line
+  2  a malformed command line: a value out of its range, or options that do not fit together
   3  done, but a result has doubts (localize, slam): the pose is printed as a best guess,
      labelled \"best guess (doubtful)\" or DOUBTFUL with a \"DOUBT:\" line per reason, and with
      --json \"trusted\": false and its \"doubts\". --accept-doubtful takes the best guess: status

@@ -1,11 +1,12 @@
 //! Bad input at the command line: a dataset, saved map or import source with a malformed
 //! file makes `sdem` exit with status 1 and one line on stderr that names the file and the place
 //! (line, element or byte offset) — never a panic, never a result computed from garbage. The
-//! readers' own table of malformed inputs is `crates/sdem-io/tests/bad_input.rs`.
+//! readers' own table of malformed inputs is `crates/sdem-io/tests/bad_input.rs`. A number out
+//! of its flag's range is a usage error instead (status 2), refused before any file is touched.
 
 mod common;
 
-use common::run_err;
+use common::{run_err, usage_error};
 use sdem::geometry::{pose_from_parts, Attitude, Vec3};
 use sdem::map::{Map, Node};
 use std::path::Path;
@@ -248,4 +249,101 @@ fn import_names_a_bad_3dtk_pose() {
     let args = ["import", s(&source), "--out", s(&out)];
     error_naming(dir.path(), &args, &["scan001.pose:1:"]);
     assert!(!out.join("scans").exists(), "nothing may be imported");
+}
+
+/// Every subcommand with numeric flags refuses a number out of its range, or malformed, as a
+/// usage error (exit status 2, clap's message naming the flag and what it allows), before any
+/// file is read or written: the inputs named do not exist, and the folder stays empty.
+#[test]
+fn every_subcommand_refuses_a_bad_number_as_a_usage_error_before_any_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("out");
+    let out = s(&out_path);
+    let pair = ["nowhere", "--reference", "0", "--query", "1"];
+    let cases: Vec<(Vec<&str>, [&str; 2])> = vec![
+        (
+            vec!["demo", "--out", out, "--stops", "1"],
+            ["--stops", "2..=40"],
+        ),
+        (
+            vec!["simulate", "--out", out, "--stops", "41"],
+            ["--stops 41", "1..=40"],
+        ),
+        (
+            vec!["simulate", "--out", out, "--range-noise", "-0.1"],
+            ["--range-noise", "[0, 8)"],
+        ),
+        (
+            vec!["simulate", "--out", out, "--trusted-range", "0"],
+            ["--trusted-range", "above 0.05"],
+        ),
+        (
+            [&["localize"][..], &pair, &["--heading-step", "0"]].concat(),
+            ["--heading-step", "positive number of degrees"],
+        ),
+        (
+            vec!["slam", "nowhere", "--out", out, "--step", "0"],
+            ["--step", "positive number of metres"],
+        ),
+        (
+            vec!["slam", "nowhere", "--out", out, "--attitude-sigma-deg", "1"],
+            ["--attitude-sigma-deg", "ROLL_PITCH,YAW"],
+        ),
+        (vec!["bench", "--pairs", "0"], ["--pairs", "≥ 1"]),
+        (
+            vec!["bench", "--faults", "--step", "nan"],
+            ["--step", "positive"],
+        ),
+        (
+            vec!["bench", "--suite", "scale", "--sizes", "100,100"],
+            ["--sizes", "must increase"],
+        ),
+        (
+            vec!["import", "nowhere", "--out", out, "--stop-angle", "0"],
+            ["--stop-angle", "positive number of degrees"],
+        ),
+        (
+            vec!["import", "nowhere", "--out", out, "--count", "x"],
+            ["--count", "≥ 1"],
+        ),
+        (
+            [
+                &["view", "cost"][..],
+                &pair,
+                &["--out", "c.png", "--heading-window", "181"],
+            ]
+            .concat(),
+            ["--heading-window", "[0, 180]"],
+        ),
+        (
+            vec![
+                "view",
+                "panorama",
+                "nowhere",
+                "--out",
+                "p.png",
+                "--resolution",
+                "0",
+            ],
+            ["--resolution", "(0, 45]"],
+        ),
+        (
+            vec![
+                "view",
+                "slice",
+                "nowhere",
+                "--out",
+                "s.png",
+                "--elevation",
+                "-91",
+            ],
+            ["--elevation", "[-90, 90]"],
+        ),
+    ];
+    for (args, wanted) in cases {
+        let e = usage_error(dir.path(), &args, &wanted);
+        assert!(!e.contains("nowhere"), "{args:?}: {e}");
+        let written: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(written.is_empty(), "{args:?} wrote {written:?}");
+    }
 }

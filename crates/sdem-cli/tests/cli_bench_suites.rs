@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{run_err, sdem};
+use common::{run_err, sdem, usage_error};
 use serde_json::Value;
 use std::path::Path;
 
@@ -244,8 +244,11 @@ fn bad_suite_flags_are_clear_errors() {
     // A peers' folder without the script.
     let e = run_err(d, &["bench", "--suite", "unlevelled", "--peers", "kitti"]);
     assert!(e.contains("register_pair.py"), "{e}");
-    let e = run_err(d, &["bench", "--suite", "unlevelled", "--pairs", "0"]);
-    assert!(e.contains("--pairs"), "{e}");
+    usage_error(
+        d,
+        &["bench", "--suite", "unlevelled", "--pairs", "0"],
+        &["--pairs", "≥ 1"],
+    );
     // A route the suite does not have, or a route for a suite without routes.
     let e = run_err(d, &["bench", "--suite", "routes", "--route", "stairs"]);
     assert!(e.contains("stairs") && e.contains("second-run"), "{e}");

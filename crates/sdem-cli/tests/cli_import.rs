@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{run_err, run_json, run_ok};
+use common::{run_err, run_json, run_ok, usage_error};
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;
 
@@ -356,9 +356,13 @@ fn import_errors_name_the_problem() {
     let m = import(&kitti, &[]);
     assert!(m.contains("poses.txt:2"), "{m}");
 
-    // --count 0, and more scans asked than there are.
-    let m = import(&kitti, &["--count", "0"]);
-    assert!(m.contains("--count 0"), "{m}");
+    // --count 0 (a usage error), and more scans asked than there are.
+    usage_error(
+        dir.path(),
+        &["import", s(&kitti), "--out", s(&out), "--count", "0"],
+        &["'0' for '--count", "≥ 1", "0 imports nothing"],
+    );
+    assert!(!out.join("scans").exists());
     write(
         &kitti.join("poses.txt"),
         &"1 0 0 0 0 1 0 0 0 0 1 0\n".repeat(2),
@@ -464,7 +468,7 @@ fn simulate_writes_seeded_odometry() {
         ],
     );
     assert!(!a.join("odometry.txt").exists() && !a.join("odometry.tum").exists());
-    let m = run_err(
+    usage_error(
         dir.path(),
         &[
             "simulate",
@@ -474,8 +478,8 @@ fn simulate_writes_seeded_odometry() {
             "-1",
             "--force",
         ],
+        &["'-1' for '--odometry-noise", "≥ 0"],
     );
-    assert!(m.contains("--odometry-noise"), "{m}");
 }
 
 // ---------------------------------------------------------------------------------------------

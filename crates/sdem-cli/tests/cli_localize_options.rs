@@ -4,32 +4,11 @@
 
 mod common;
 
-use common::run;
+use common::{run, usage_error};
 use std::path::Path;
 
 fn s(path: &Path) -> &str {
     path.to_str().expect("temporary paths are UTF-8")
-}
-
-/// `sdem ARGS` ended as a usage error (status 2, nothing on stdout, no panic) whose message
-/// contains every one of `wanted`; returns stderr.
-fn usage_error(dir: &Path, args: &[&str], wanted: &[&str]) -> String {
-    let r = run(dir, args);
-    assert_eq!(r.code, Some(2), "sdem {args:?}: {}", r.stderr);
-    assert!(
-        !r.stderr.contains("panicked"),
-        "sdem {args:?}: {}",
-        r.stderr
-    );
-    assert!(r.stdout.trim().is_empty(), "sdem {args:?}: {}", r.stdout);
-    for w in wanted {
-        assert!(
-            r.stderr.contains(w),
-            "sdem {args:?}: {:?} lacks {w:?}",
-            r.stderr
-        );
-    }
-    r.stderr
 }
 
 #[test]

@@ -2,13 +2,13 @@
 //! options are refused before the work starts: `demo`, `simulate`, `view` and `bench --suite
 //! scale` refuse to write over an existing file unless `--force`; an `--out` that is a file (or
 //! a folder where a file is wanted) is named as such; an OS error is said once; `demo --stops`,
-//! `bench --pairs`/`--step` and `view cost --step`/`--extent` are checked up front.
+//! `bench --pairs`/`--step` and `view cost --step`/`--extent` are usage errors, checked up front.
 //!
 //! Each refusal exits before any simulation or localization, so these tests are quick.
 
 mod common;
 
-use common::{run, run_err, run_ok};
+use common::{run_err, run_ok, usage_error};
 use std::path::Path;
 use tempfile::TempDir;
 
@@ -267,12 +267,16 @@ fn a_file_where_a_folder_should_be_is_named() {
 fn demo_checks_stops_up_front() {
     let dir = TempDir::new().unwrap();
     let out = dir.path().join("demo");
-    for stops in ["0", "1", "41"] {
-        // run_err: one line on stderr, nothing on stdout (part 1 is not printed first).
-        let e = run_err(dir.path(), &["demo", "--out", s(&out), "--stops", stops]);
-        assert!(
-            e.contains(&format!("--stops {stops}")) && e.contains("2..=40"),
-            "{e}"
+    for stops in ["0", "1", "41", "-2", "x"] {
+        // A usage error: nothing on stdout (part 1 is not printed first).
+        let e = usage_error(
+            dir.path(),
+            &["demo", "--out", s(&out), "--stops", stops],
+            &[
+                &format!("'{stops}' for '--stops"),
+                "2..=40",
+                "route holds 40",
+            ],
         );
         assert!(!e.contains("collapsed_building_stops"), "{e}");
         assert!(!out.exists(), "a refused demo wrote {}", out.display());
@@ -283,15 +287,22 @@ fn demo_checks_stops_up_front() {
 fn bench_checks_pairs_and_step_before_measuring() {
     let dir = TempDir::new().unwrap();
     for (args, wanted) in [
-        (["bench", "--quick", "--pairs", "0"], "--pairs"),
-        (["bench", "--quick", "--step", "0"], "--step 0"),
+        (
+            ["bench", "--quick", "--pairs", "0"],
+            ["'0' for '--pairs", "≥ 1"],
+        ),
+        (
+            ["bench", "--faults", "--pairs", "0"],
+            ["'0' for '--pairs", "≥ 1"],
+        ),
+        (
+            ["bench", "--quick", "--step", "0"],
+            ["'0' for '--step", "positive"],
+        ),
     ] {
-        let r = run(dir.path(), &args);
-        assert_eq!(r.code, Some(1), "{args:?}: {}", r.stderr);
         // No progress line: nothing was measured before the refusal.
-        assert!(!r.stderr.contains("exact search"), "{args:?}: {}", r.stderr);
-        let e = run_err(dir.path(), &args);
-        assert!(e.contains(wanted), "{e}");
+        let e = usage_error(dir.path(), &args, &wanted);
+        assert!(!e.contains("exact search"), "{args:?}: {e}");
     }
 }
 
@@ -318,11 +329,18 @@ fn view_cost_refuses_a_step_leaving_too_few_samples() {
     ] {
         let args = [&base[..], &[extra]].concat();
         // Refused before the dataset is read, with the flag named.
-        let e = run_err(dir.path(), &args);
-        assert!(e.contains(flag), "{args:?}: {e}");
+        let e = usage_error(dir.path(), &args, &[flag]);
         assert!(!e.contains("nowhere"), "{args:?}: {e}");
     }
-    let e = run_err(dir.path(), &[&base[..], &["--step", "1e9"]].concat());
-    assert!(e.contains("1 sample") && e.contains("3 to 401"), "{e}");
+    usage_error(
+        dir.path(),
+        &[&base[..], &["--step", "1e9"]].concat(),
+        &[
+            "--step 1e9 m",
+            "1 sample",
+            "3 to 401",
+            "Usage: sdem view cost",
+        ],
+    );
     assert!(!dir.path().join("c.png").exists());
 }

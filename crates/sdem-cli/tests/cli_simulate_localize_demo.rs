@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{doubt_kinds, run, run_err, run_json, run_ok};
+use common::{doubt_kinds, run, run_err, run_json, run_ok, usage_error};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use tempfile::TempDir;
@@ -15,26 +15,6 @@ use tempfile::TempDir;
 // ---------------------------------------------------------------------------------------------
 // Helpers: running the binary
 // ---------------------------------------------------------------------------------------------
-
-/// Runs `args` expecting clap to reject the command line: non-zero exit (clap's 2), no panic,
-/// nothing on stdout; returns stderr.
-fn run_usage_err(dir: &Path, args: &[&str]) -> String {
-    let r = run(dir, args);
-    assert_eq!(
-        r.code,
-        Some(2),
-        "sdem {args:?}: expected a usage error (exit 2)\nstdout:\n{}\nstderr:\n{}",
-        r.stdout,
-        r.stderr
-    );
-    assert!(
-        !r.stderr.contains("panicked"),
-        "sdem {args:?} panicked:\n{}",
-        r.stderr
-    );
-    assert!(r.stdout.trim().is_empty(), "{}", r.stdout);
-    r.stderr
-}
 
 fn s(path: &Path) -> &str {
     path.to_str().expect("temporary paths are UTF-8")
@@ -431,16 +411,27 @@ fn simulate_refuses_an_existing_dataset_without_force() {
     );
 }
 
-/// `simulate --stops 0` is refused with one line (no panic).
+/// `simulate --stops` out of its range is a usage error (exit 2), and nothing is written.
 #[test]
-fn simulate_zero_stops_is_rejected() {
+fn simulate_stops_out_of_range_are_usage_errors() {
     let dir = TempDir::new().unwrap();
     let ds = dir.path().join("ds");
-    let message = run_err(dir.path(), &["simulate", "--out", s(&ds), "--stops", "0"]);
-    assert!(
-        message.contains("--stops 0 must lie in 1..=40"),
-        "{message}"
+    usage_error(
+        dir.path(),
+        &["simulate", "--out", s(&ds), "--stops", "0"],
+        &[
+            "'0' for '--stops",
+            "1..=100000",
+            "up to 40 in the collapsed building",
+        ],
     );
+    // More than the collapsed building holds: a usage error too, saying a --route takes more.
+    usage_error(
+        dir.path(),
+        &["simulate", "--out", s(&ds), "--stops", "41"],
+        &["--stops 41", "1..=40", "--route", "Usage: sdem simulate"],
+    );
+    assert!(!ds.exists());
 }
 
 /// A finer scanner (`simulate --step-deg 0.5`): the dataset's sensor file says its step, a scan
@@ -485,19 +476,15 @@ fn a_finer_scanner_is_simulated_and_mapped_on_its_own_grid() {
     let ate = num(&report["truth"], "ate_rmse_m");
     assert!(ate < 0.01, "ATE {ate} m on the 0.5° scans");
 
-    for step in ["0.1", "6", "nan"] {
-        let message = run_err(
+    let bad = dir.path().join("bad");
+    for step in ["0.1", "6", "nan", "-1"] {
+        usage_error(
             dir.path(),
-            &[
-                "simulate",
-                "--out",
-                s(&dir.path().join("bad")),
-                "--step-deg",
-                step,
-            ],
+            &["simulate", "--out", s(&bad), "--step-deg", step],
+            &[&format!("'{step}' for '--step-deg"), "[0.25, 5]"],
         );
-        assert!(message.contains("--step-deg"), "{step}: {message}");
     }
+    assert!(!bad.exists());
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -716,7 +703,7 @@ fn localize_bad_input_gives_one_line_errors() {
     ] {
         let mut args = vec!["localize", s(&ds), "--reference", "0", "--query", "1"];
         args.extend_from_slice(&[flag, value]);
-        let m = run_usage_err(dir.path(), &args);
+        let m = usage_error(dir.path(), &args, &[]);
         assert!(m.contains(flag) && m.contains(value), "{m}");
     }
     let m = base(&["--cost", "virtual"]);
@@ -743,7 +730,7 @@ fn localize_bad_input_gives_one_line_errors() {
     for window in ["0.1:-0.1,0:0,0:0", "0:1,0:1", "a:b,0:0,0:0"] {
         let mut args = vec!["localize", s(&ds), "--reference", "0", "--query", "1"];
         args.extend_from_slice(&["--window", window]);
-        let m = run_usage_err(dir.path(), &args);
+        let m = usage_error(dir.path(), &args, &[]);
         assert!(m.contains("--window"), "{m}");
     }
 

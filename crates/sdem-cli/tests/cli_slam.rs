@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{doubt_kinds, fails, run, run_ok};
+use common::{doubt_kinds, fails, run, run_ok, usage_error};
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -448,8 +448,12 @@ fn bad_datasets_are_refused_with_the_file_named() {
     // --resume with nothing to resume, and a bad --step.
     let err = fails(dir.path(), &["slam", "data", "--out", "o4", "--resume"]);
     assert!(err.contains("no saved map"), "{err}");
-    let err = fails(dir.path(), &["slam", "data", "--out", "o5", "--step", "-1"]);
-    assert!(err.contains("--step"), "{err}");
+    usage_error(
+        dir.path(),
+        &["slam", "data", "--out", "o5", "--step", "-1"],
+        &["'-1' for '--step", "positive number of metres"],
+    );
+    assert!(!dir.path().join("o5").exists());
 }
 
 /// Without `--config`, the S-DEM's cells match the scanner's step from `sensor.toml`; a config

@@ -125,7 +125,9 @@ pub struct SuiteArgs {
         long,
         value_name = "N,N,...",
         value_delimiter = ',',
-        requires = "suite"
+        requires = "suite",
+        allow_hyphen_values = true,
+        value_parser = parse_size
     )]
     pub sizes: Vec<usize>,
     /// With --suite scale or routes: the routes (repeat or separate by commas) [scale's
@@ -142,6 +144,15 @@ pub struct SuiteArgs {
     /// With --suite scale: where the plot of time per stop against stop number goes.
     #[arg(long, value_name = "FILE.png", default_value = crate::cmd_bench_scale::DEFAULT_PLOT, requires = "suite")]
     pub plot: PathBuf,
+}
+
+/// Parses one of `--sizes N,N,...`: a map size of at least 1 node.
+fn parse_size(text: &str) -> std::result::Result<usize, String> {
+    crate::parse::count_in(
+        text,
+        1..=usize::MAX,
+        "a map size in nodes (e.g. 100,300,1000)",
+    )
 }
 
 /// The flags `sdem bench` shares with its suites.
@@ -372,12 +383,6 @@ pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> 
     }
     if !args.routes.is_empty() && suite != Suite::Routes {
         bail!("--route applies to --suite scale and --suite routes only");
-    }
-    if common.pairs == Some(0) {
-        bail!("--pairs must be at least 1");
-    }
-    if !(common.step.is_finite() && common.step > 0.0) {
-        bail!("--step {} must be a positive number of metres", common.step);
     }
     if args.kitti.is_some() && !matches!(suite, Suite::Lidar | Suite::Routes) {
         bail!("--kitti applies to --suite lidar and --suite routes only");

@@ -88,6 +88,32 @@ pub fn run_err(dir: &Path, args: &[&str]) -> String {
     lines[0].to_string()
 }
 
+/// Runs `args`, expects a usage error (exit code 2, clap's message, no panic, nothing on
+/// stdout) whose stderr contains every one of `wanted`, and returns stderr.
+pub fn usage_error(dir: &Path, args: &[&str], wanted: &[&str]) -> String {
+    let r = run(dir, args);
+    assert_eq!(r.code, Some(2), "sdem {args:?}: {}", r.stderr);
+    assert!(
+        !r.stderr.contains("panicked"),
+        "sdem {args:?}: {}",
+        r.stderr
+    );
+    assert!(r.stdout.trim().is_empty(), "sdem {args:?}: {}", r.stdout);
+    assert!(
+        r.stderr.starts_with("error: "),
+        "sdem {args:?}: {}",
+        r.stderr
+    );
+    for w in wanted {
+        assert!(
+            r.stderr.contains(w),
+            "sdem {args:?}: {:?} lacks {w:?}",
+            r.stderr
+        );
+    }
+    r.stderr
+}
+
 /// Runs `args`, expects exit code 1 and no panic, and returns stderr (whatever its length).
 pub fn fails(dir: &Path, args: &[&str]) -> String {
     let r = run(dir, args);
