@@ -37,14 +37,9 @@ pub struct Args {
     /// Seed of the pairs' scene.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Grid step of the pairs' search, metres (the refinement goes below it).
-    #[arg(
-        long,
-        default_value_t = sdem_sim::benchmark::PAIRS_STEP_M,
-        allow_hyphen_values = true,
-        value_parser = positive_metres
-    )]
-    step: f64,
+    /// Grid step of the pairs' search, metres (the refinement goes below it) [default: 0.02].
+    #[arg(long, allow_hyphen_values = true, value_parser = positive_metres)]
+    step: Option<f64>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -54,7 +49,7 @@ pub struct Args {
     #[arg(long)]
     faults: bool,
     /// With --faults: only these cases (none, all, or a fault's name; repeat the flag).
-    #[arg(long = "case", value_name = "CASE", requires = "faults")]
+    #[arg(long = "case", value_name = "CASE", requires = "faults", value_parser = crate::cmd_bench_faults::case_names())]
     cases: Vec<String>,
     /// `--suite` and its flags.
     #[command(flatten)]
@@ -65,11 +60,16 @@ pub struct Args {
 }
 
 impl Args {
+    /// `--step`, or its default.
+    fn step(&self) -> f64 {
+        self.step.unwrap_or(sdem_sim::benchmark::PAIRS_STEP_M)
+    }
+
     fn fault_args(&self) -> crate::cmd_bench_faults::FaultArgs {
         crate::cmd_bench_faults::FaultArgs {
             pairs: self.pairs.unwrap_or(if self.quick { 10 } else { 100 }),
             seed: self.seed,
-            step: self.step,
+            step: self.step(),
             json: self.json,
             cases: self.cases.clone(),
         }
@@ -217,7 +217,7 @@ fn seeded_pairs(args: &Args, say: &dyn Fn(&str)) -> Result<Vec<BenchPair>> {
 fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
     let count = pairs.len();
     let mut config = LocalizeOptions {
-        step_m: args.step,
+        step_m: args.step(),
         ..localize_config(&PairConfig::default())
     };
     config.heading.half_range_deg = heading_deg;
@@ -255,7 +255,7 @@ fn accuracy(args: &Args, pairs: &[BenchPair], heading_deg: f64) -> PairsReport {
     PairsReport {
         count,
         seed: args.seed,
-        step_m: args.step,
+        step_m: args.step(),
         heading_window_deg: config.heading.half_range_deg,
         window: config.window,
         translation_error_mm: tally.translation_error_mm(),
@@ -317,6 +317,8 @@ pub fn run(args: Args) -> Result<()> {
         return crate::cmd_bench_faults::run(&args.fault_args(), &say);
     }
     if let Some(suite) = args.suites.suite {
+        let (pairs, step) = (args.pairs.is_some(), args.step.is_some());
+        crate::cmd_bench_suites::check_flags(&args.suites, suite, pairs, step)?;
         if suite == crate::cmd_bench_suites::Suite::Scale {
             crate::cmd_bench_scale::check_sizes(&args.suites.sizes)?;
             // Before the suite runs: a saved picture is never written over without --force.
@@ -326,7 +328,7 @@ pub fn run(args: Args) -> Result<()> {
             quick: args.quick,
             pairs: args.pairs,
             seed: args.seed,
-            step: args.step,
+            step: args.step(),
             json: args.json,
         };
         return crate::cmd_bench_suites::run(&args.suites, &common, &say);

@@ -61,6 +61,17 @@ struct Report {
     cases: Vec<CaseReport>,
 }
 
+/// The names `--case` takes, for clap (a usage error listing them, and `--help`): `none`, each
+/// fault's, `all`.
+pub fn case_names() -> clap::builder::PossibleValuesParser {
+    let faults = Fault::ALL.iter().map(|f| f.name());
+    clap::builder::PossibleValuesParser::new(
+        std::iter::once("none")
+            .chain(faults)
+            .chain(std::iter::once("all")),
+    )
+}
+
 /// The cases to run, by name: `none`, each fault, `all`.
 fn cases(selected: &[String]) -> Result<Vec<(String, Vec<Fault>)>> {
     let mut all: Vec<(String, Vec<Fault>)> = vec![("none".into(), Vec::new())];

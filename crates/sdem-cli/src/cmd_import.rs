@@ -63,6 +63,7 @@ enum Format {
 
 /// Runs `sdem import`.
 pub fn run(args: Args) -> Result<()> {
+    args.bag.check()?;
     check_args(&args)?;
     let is_bag = match args.format {
         Some(Format::Ros2) => true,

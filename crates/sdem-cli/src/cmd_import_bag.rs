@@ -3,7 +3,7 @@
 
 use crate::output::print_json;
 use crate::parse::{positive_degrees, positive_metres, positive_seconds};
-use anyhow::{bail, Result};
+use anyhow::Result;
 use sdem_io::rosbag::{import_rosbag, BagImportOptions, BagImportSummary, StopPolicy, StopRules};
 use std::path::Path;
 use std::time::Instant;
@@ -96,6 +96,32 @@ impl BagArgs {
         flags.iter().filter(|(_, g)| *g).map(|(f, _)| *f).collect()
     }
 
+    /// Refuses (a usage error, before anything is read) flags that contradict each other.
+    pub fn check(&self) -> Result<()> {
+        for (off, off_given, topic, topic_given) in [
+            (
+                "--no-imu",
+                self.no_imu,
+                "--imu-topic",
+                self.imu_topic.is_some(),
+            ),
+            (
+                "--no-odom",
+                self.no_odom,
+                "--odom-topic",
+                self.odom_topic.is_some(),
+            ),
+        ] {
+            if off_given && topic_given {
+                return Err(crate::parse::usage_error(
+                    "import",
+                    format!("{off} and {topic} contradict each other; give one"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     fn options(&self) -> BagImportOptions {
         let defaults = BagImportOptions::default();
         let rules = StopRules::default();
@@ -126,12 +152,6 @@ impl BagArgs {
 
 /// Imports the bag `source` into `out` and prints the summary.
 pub fn run(source: &Path, out: &Path, args: &BagArgs, json: bool) -> Result<()> {
-    if args.no_imu && args.imu_topic.is_some() {
-        bail!("--no-imu and --imu-topic contradict each other; give one");
-    }
-    if args.no_odom && args.odom_topic.is_some() {
-        bail!("--no-odom and --odom-topic contradict each other; give one");
-    }
     let start = Instant::now();
     let bar = crate::progress::bar(1, json, "reading");
     let summary = import_rosbag(source, out, &args.options(), &mut |p| {

@@ -431,10 +431,11 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     Ok(outcome)
 }
 
-/// Refuses a scan of which the map's S-DEM grid can use no point, saying why: every point at
-/// the sensor's origin or within the grid's minimum range, none finite, or none in the grid's
-/// extent. The check `sdem slam` makes of each scan (an S-DEM with no known cell), made here
-/// before the map's places are searched.
+/// Refuses a scan of which the S-DEM grid (the map's, or the pair's) can use no point, saying
+/// why: every point at the sensor's origin or within the grid's minimum range, none finite, or
+/// none in the grid's extent. The check `sdem slam` makes of each scan (an S-DEM with no known
+/// cell), made here before the map's places are searched, and for a pair's scan that fills too
+/// few cells.
 fn check_usable(
     scan: &std::path::Path,
     points: &[sdem::geometry::Vec3],
@@ -456,13 +457,13 @@ fn check_usable(
         "it holds no point but NaN (no return)".to_string()
     } else if close == finite.len() {
         format!(
-            "all {close} of its points lie within {} m of the sensor's origin (the map's S-DEM \
+            "all {close} of its points lie within {} m of the sensor's origin (the S-DEM's \
              minimum range), where a return is the scanner itself",
             grid.min_range_m
         )
     } else {
         format!(
-            "none of its {} points lies in the map's S-DEM grid (elevation {}..{}°, azimuth \
+            "none of its {} points lies in the S-DEM grid (elevation {}..{}°, azimuth \
              {}..{}°, beyond {} m)",
             finite.len(),
             grid.elevation_min_deg,
@@ -508,6 +509,7 @@ pub fn run(args: Args) -> Result<Outcome> {
     else {
         bail!("give DATASET --reference I --query J, or --map DIR SCAN");
     };
+    let search = search_of(&args)?;
     // With --match-scan the step comes from the scan, not the command line.
     if !args.match_scan {
         check_step_fits_window(args.step, args.window.as_ref())?;
@@ -530,7 +532,7 @@ pub fn run(args: Args) -> Result<Outcome> {
         let grid = SdemConfig::for_points(&points);
         let matched = LocalizeOptions::for_scan(&Sdem::from_points(&points, &attitude, &grid)?);
         let step = matched.step_m;
-        (grid, localize_config(&args, matched, step)?)
+        (grid, localize_config(&args, search, matched, step))
     } else {
         let grid = SdemConfig {
             resolution_deg: args.resolution,
@@ -538,7 +540,7 @@ pub fn run(args: Args) -> Result<Outcome> {
         };
         (
             grid,
-            localize_config(&args, LocalizeOptions::default(), args.step)?,
+            localize_config(&args, search, LocalizeOptions::default(), args.step),
         )
     };
     let pair = (reference_index, query_index);
@@ -563,9 +565,9 @@ pub fn run(args: Args) -> Result<Outcome> {
     Ok(outcome)
 }
 
-/// The search's settings from the arguments, checked, over `base` (the defaults, or the ones
-/// matched to the scan) with grid step `step`.
-fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<LocalizeOptions> {
+/// The search and its cost from the flags, checked (a usage error when they do not fit
+/// together), before anything is read.
+fn search_of(args: &Args) -> Result<(SearchMode, CostModel)> {
     let mode = match (args.exhaustive, args.search) {
         (true, _) | (_, Search::Exhaustive) => SearchMode::Exhaustive,
         (_, Search::BranchAndBound) => SearchMode::BranchAndBound,
@@ -583,12 +585,25 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
         ));
     }
     if mode == SearchMode::BranchAndBound && model == CostModel::VirtualSdem {
-        bail!(
+        return Err(usage_error(
+            "localize",
             "--cost virtual needs --search exhaustive or --search coarse-to-fine; the exact \
-             branch-and-bound search bounds the projective cost only"
-        );
+             branch-and-bound search bounds the projective cost only",
+        ));
     }
-    Ok(LocalizeOptions {
+    Ok((mode, model))
+}
+
+/// The search's settings from the arguments, with the checked search and cost of
+/// [`search_of`], over `base` (the defaults, or the ones matched to the scan) with grid step
+/// `step`.
+fn localize_config(
+    args: &Args,
+    (mode, model): (SearchMode, CostModel),
+    base: LocalizeOptions,
+    step: f64,
+) -> LocalizeOptions {
+    LocalizeOptions {
         window: args.window.unwrap_or_else(SearchWindow::paper),
         step_m: step,
         // Without --heading-window, sdem::localize sets the range from the readings' σ (or
@@ -608,7 +623,7 @@ fn localize_config(args: &Args, base: LocalizeOptions, step: f64) -> Result<Loca
         runner_up: !args.no_runner_up,
         max_exhaustive_candidates: (args.max_candidates).unwrap_or(base.max_exhaustive_candidates),
         ..base
-    })
+    }
 }
 
 /// The attitude flags.
@@ -638,8 +653,12 @@ fn make_scan(
     attitude: Option<Attitude>,
     sdem_config: &SdemConfig,
 ) -> Result<Scan> {
-    Scan::with_grid(points, attitude, sdem_config)
-        .with_context(|| format!("scan {index} ({})", dataset.scan_paths[index].display()))
+    let path = &dataset.scan_paths[index];
+    Scan::with_grid(points, attitude, sdem_config).or_else(|error| {
+        let points: Vec<_> = points.iter().map(|p| p.coords).collect();
+        check_usable(path, &points, attitude.as_ref(), sdem_config)?;
+        Err(error).with_context(|| format!("scan {index} ({})", path.display()))
+    })
 }
 
 /// Localizes scan `query` of the dataset against scan `reference` with `attitudes`; returns the

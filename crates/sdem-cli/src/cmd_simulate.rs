@@ -3,6 +3,7 @@
 use crate::output::print_json;
 use crate::parse::{count_in, non_negative_degrees, number_in, usage_error};
 use anyhow::{Context, Result};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use sdem::sensor::SensorConfig;
 use sdem_sim::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected};
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
@@ -28,8 +29,8 @@ pub struct Args {
     /// 30 stops a lap), floor (3 x 3 rooms toured in three different laps), wings (two wings
     /// joined by a low ditch and a corridor). Lap after lap, as many stops as --stops asks,
     /// with loops to close. Faults cannot be injected on them.
-    #[arg(long, value_name = "ROUTE", conflicts_with = "faults")]
-    route: Option<String>,
+    #[arg(long, value_name = "ROUTE", conflicts_with = "faults", value_parser = named::<LongRoute>(LongRoute::ALL.map(LongRoute::name)))]
+    route: Option<LongRoute>,
     /// Standard deviation of the range noise, metres.
     #[arg(
         long,
@@ -82,8 +83,8 @@ pub struct Args {
     /// return from dust), missing (30 % of returns lost), rubble (a block moved in view before
     /// each stop), person (someone walks through each sweep). `tilt` is measured by `sdem bench
     /// --faults`, not injected into a route.
-    #[arg(long = "fault", value_name = "FAULT")]
-    faults: Vec<String>,
+    #[arg(long = "fault", value_name = "FAULT", value_parser = named::<Fault>(Fault::ALL.map(Fault::name)))]
+    faults: Vec<Fault>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -108,10 +109,7 @@ struct Summary {
 
 /// Runs `sdem simulate`.
 pub fn run(args: Args) -> Result<()> {
-    let route = match &args.route {
-        Some(name) => Some(name.parse::<LongRoute>().context("--route")?),
-        None => None,
-    };
+    let route = args.route;
     check_stops(args.stops, route)?;
     crate::output::check_output_folder(&args.out, "--out", sdem_io::DATASET_ENTRIES, args.force)?;
     let sensor = sensor_config(&args)?;
@@ -127,7 +125,7 @@ pub fn run(args: Args) -> Result<()> {
         print_text(&args, &summary);
         return Ok(());
     }
-    let faults = parse_faults(&args.faults)?;
+    let faults = args.faults.clone();
     let (run, injected) = simulate(&args, &sensor, &faults)?;
     let summary = write(&args, &sensor, &odometry_noise, &run, faults, injected)?;
     if args.json {
@@ -228,15 +226,13 @@ fn sensor_config(args: &Args) -> Result<SensorConfig> {
     Ok(sensor)
 }
 
-/// The faults named by `--fault`.
-fn parse_faults(names: &[String]) -> Result<Vec<Fault>> {
-    names
-        .iter()
-        .map(|name| {
-            name.parse::<Fault>()
-                .with_context(|| format!("--fault {name}"))
-        })
-        .collect::<Result<Vec<_>>>()
+/// A parser of the names `names` (a usage error listing them, and `--help`), each read as a `T`.
+fn named<T>(names: impl IntoIterator<Item = &'static str>) -> impl TypedValueParser<Value = T>
+where
+    T: std::str::FromStr + Clone + Send + Sync + 'static,
+    T::Err: std::fmt::Debug,
+{
+    PossibleValuesParser::new(names).map(|name| name.parse().expect("one of the names"))
 }
 
 /// Simulates the route's sweeps, with `faults` injected at every stop; returns the stops and,

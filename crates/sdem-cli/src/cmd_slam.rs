@@ -257,6 +257,7 @@ struct Outputs {
 /// Runs `sdem slam`: done, or done with doubts (exit status 3) when a step of the map has
 /// doubts and `--accept-doubtful` was not given.
 pub fn run(args: Args) -> Result<Outcome> {
+    check_resume_flags(&args)?;
     let start = Instant::now();
     let dataset = Dataset::open(&args.dataset)?;
     let sigma = attitude_sigma(&args, &dataset)?;
@@ -320,12 +321,22 @@ fn same_dataset(saved: &Path, given: &Path) -> bool {
     }
 }
 
+/// Refuses (a usage error, before anything is read) `--resume` with the flags that would
+/// change the saved map's configuration.
+fn check_resume_flags(args: &Args) -> Result<()> {
+    if args.resume && (args.config.is_some() || args.step.is_some() || args.no_loop_closure) {
+        return Err(crate::parse::usage_error(
+            "slam",
+            "--resume continues with the saved map's configuration; drop --config, --step and \
+             --no-loop-closure",
+        ));
+    }
+    Ok(())
+}
+
 /// `--resume`: the saved map and step log, with the saved configuration.
 fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
     let saved = load_map(map_dir)?;
-    if args.config.is_some() || args.step.is_some() || args.no_loop_closure {
-        bail!("--resume continues with the saved map's configuration; drop --config, --step and --no-loop-closure");
-    }
     if let Some(made_from) = &saved.dataset {
         if !same_dataset(made_from, &args.dataset) {
             bail!(

@@ -2,7 +2,8 @@
 //! file makes `sdem` exit with status 1 and one line on stderr that names the file and the place
 //! (line, element or byte offset) — never a panic, never a result computed from garbage. The
 //! readers' own table of malformed inputs is `crates/sdem-io/tests/bad_input.rs`. A number out
-//! of its flag's range is a usage error instead (status 2), refused before any file is touched.
+//! of its flag's range, or flags that do not fit together, are a usage error instead (status 2),
+//! refused before any file is touched.
 
 mod common;
 
@@ -343,6 +344,134 @@ fn every_subcommand_refuses_a_bad_number_as_a_usage_error_before_any_file() {
     for (args, wanted) in cases {
         let e = usage_error(dir.path(), &args, &wanted);
         assert!(!e.contains("nowhere"), "{args:?}: {e}");
+        let written: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
+        assert!(written.is_empty(), "{args:?} wrote {written:?}");
+    }
+}
+
+/// Options that are each well formed but do not fit the subcommand, or a name that is none of
+/// the flag's choices: a usage error (status 2) saying what and how to fix it, before any file
+/// is read or written.
+#[test]
+fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("out");
+    let out = s(&out_path);
+    let pair = ["localize", "nowhere", "--reference", "0", "--query", "1"];
+    let cases: Vec<(Vec<&str>, &[&str])> = vec![
+        (
+            vec!["bench", "--suite", "scale", "--pairs", "3"],
+            &["--pairs applies to", "--sizes and --route choose them"],
+        ),
+        (
+            vec!["bench", "--suite", "routes", "--pairs", "3"],
+            &["--pairs applies to"],
+        ),
+        (
+            vec!["bench", "--suite", "scale", "--step", "0.1"],
+            &["--step applies to", "the loop's own step"],
+        ),
+        (
+            vec!["bench", "--suite", "routes", "--step", "0.1"],
+            &["--step applies to"],
+        ),
+        (
+            vec!["bench", "--suite", "unlevelled", "--sizes", "10"],
+            &["--sizes applies to --suite scale only"],
+        ),
+        (
+            vec!["bench", "--suite", "lidar", "--route", "revisit"],
+            &["--route applies to --suite scale and --suite routes only"],
+        ),
+        (
+            vec!["bench", "--suite", "unlevelled", "--kitti", "nowhere"],
+            &["--kitti applies to --suite lidar and --suite routes only"],
+        ),
+        (
+            vec!["bench", "--suite", "lidar", "--scan", "nowhere"],
+            &["--scan applies to --suite real-geometry only"],
+        ),
+        (
+            vec!["bench", "--suite", "scale", "--route", "stairs"],
+            &["--route stairs", "room-laps, floor and wings"],
+        ),
+        (
+            vec!["bench", "--suite", "routes", "--route", "stairs"],
+            &["--route stairs", "long-steps", "second-run"],
+        ),
+        (
+            vec!["bench", "--faults", "--case", "hail"],
+            &["'hail'", "--case", "none, compass", "person, all"],
+        ),
+        (
+            vec!["simulate", "--out", out, "--route", "stairs"],
+            &["'stairs'", "--route", "room-laps, floor, wings"],
+        ),
+        (
+            vec!["simulate", "--out", out, "--fault", "smoke"],
+            &["'smoke'", "--fault", "compass, gyro-drift"],
+        ),
+        (
+            [&pair[..], &["--cost", "virtual"]].concat(),
+            &["--cost virtual needs --search exhaustive or --search coarse-to-fine"],
+        ),
+        (
+            vec![
+                "import",
+                "nowhere",
+                "--out",
+                out,
+                "--no-imu",
+                "--imu-topic",
+                "/imu",
+            ],
+            &["--no-imu and --imu-topic contradict each other; give one"],
+        ),
+        (
+            vec![
+                "import",
+                "nowhere",
+                "--out",
+                out,
+                "--no-odom",
+                "--odom-topic",
+                "/odom",
+            ],
+            &["--no-odom and --odom-topic contradict each other; give one"],
+        ),
+        (
+            vec!["slam", "nowhere", "--out", out, "--resume", "--step", "0.1"],
+            &[
+                "--resume continues",
+                "drop --config, --step and --no-loop-closure",
+            ],
+        ),
+        (
+            vec![
+                "slam",
+                "nowhere",
+                "--out",
+                out,
+                "--resume",
+                "--no-loop-closure",
+            ],
+            &["--resume continues"],
+        ),
+        (
+            vec![
+                "slam",
+                "nowhere",
+                "--out",
+                out,
+                "--resume",
+                "--config",
+                "nowhere.toml",
+            ],
+            &["--resume continues"],
+        ),
+    ];
+    for (args, wanted) in cases {
+        usage_error(dir.path(), &args, wanted);
         let written: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert!(written.is_empty(), "{args:?} wrote {written:?}");
     }

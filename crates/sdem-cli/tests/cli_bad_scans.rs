@@ -208,14 +208,15 @@ fn a_floor_alone_is_never_a_trusted_pose() {
 }
 
 /// Every point outside the range gates: all beyond 1 km (not metres) is refused on reading;
-/// all within the S-DEM's 5 cm minimum range leaves no cell filled.
+/// all within the S-DEM's 5 cm minimum range is refused saying so.
 #[test]
 fn every_point_outside_the_range_gates_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
     let good = room_scan(&Pose::identity(), 1);
     let far: Vec<Vec3> = good.iter().map(|p| p * 2000.0).collect();
     let near: Vec<Vec3> = good.iter().map(|p| p.normalize() * 0.03).collect();
-    for (name, bad, wanted) in [("far", far, "millimetres"), ("near", near, "cells")] {
+    let close = "lie within 0.05 m of the sensor's origin";
+    for (name, bad, wanted) in [("far", far, "millimetres"), ("near", near, close)] {
         let ds = write_dataset(dir.path(), name, &[good.clone(), bad], None);
         let m = run_err(
             dir.path(),
@@ -317,6 +318,39 @@ fn a_tilted_turned_query_without_attitude_is_found_or_doubted() {
             metres * 100.0,
             radians.to_degrees()
         );
+    }
+}
+
+/// A pair whose query or reference has every point at the sensor's origin: refused (status 1)
+/// naming the scan and saying why, in the words `localize --map` uses.
+#[test]
+fn a_scan_at_the_origin_is_refused_in_a_pair_saying_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let zeros = vec![Vec3::zeros(); 500];
+    let ds = write_dataset(
+        dir.path(),
+        "ds",
+        &[room_scan(&Pose::identity(), 1), zeros],
+        None,
+    );
+    for (reference, query) in [("0", "1"), ("1", "0")] {
+        let args = [
+            "localize",
+            s(&ds),
+            "--reference",
+            reference,
+            "--query",
+            query,
+        ];
+        let m = run_err(dir.path(), &args);
+        for w in [
+            "000001.ply",
+            "the scan has no usable point",
+            "all 500 of its points lie within 0.05 m of the sensor's origin",
+        ] {
+            assert!(m.contains(w), "{args:?}: {m:?} lacks {w:?}");
+        }
+        assert!(!m.contains("fills 0"), "{m}");
     }
 }
 

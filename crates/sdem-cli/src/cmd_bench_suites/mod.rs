@@ -18,7 +18,7 @@
 use crate::bench_kitti::{self, Kitti};
 use crate::bench_peers::{self, MethodReport, PeerResult, PeerSettings, Peers};
 use crate::output::{elapsed_ms, print_json};
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use nalgebra::Point3;
 use print::print_report;
 use sdem::geometry::{pose_error, Attitude, Pose, PoseRecord, Vec3};
@@ -359,9 +359,7 @@ fn scale_args(args: &SuiteArgs, common: &Common) -> Result<crate::cmd_bench_scal
             sdem_sim::sim::LongRoute::ALL.to_vec()
         }
     } else {
-        (args.routes.iter())
-            .map(|r| r.parse().with_context(|| format!("--route {r}")))
-            .collect::<Result<_>>()?
+        long_routes(&args.routes)?
     };
     Ok(crate::cmd_bench_scale::ScaleArgs {
         sizes,
@@ -372,23 +370,67 @@ fn scale_args(args: &SuiteArgs, common: &Common) -> Result<crate::cmd_bench_scal
     })
 }
 
-/// Runs `sdem bench --suite`.
+/// Refuses (a usage error, before anything is read or run) a flag the suite does not take,
+/// and a `--route` the suite does not have. `pairs` and `step`: whether `--pairs` and `--step`
+/// were given.
+pub fn check_flags(args: &SuiteArgs, suite: Suite, pairs: bool, step: bool) -> Result<()> {
+    let takes_routes = matches!(suite, Suite::Scale | Suite::Routes);
+    let refused = [
+        (
+            !args.sizes.is_empty() && suite != Suite::Scale,
+            "--sizes applies to --suite scale only",
+        ),
+        (
+            !args.routes.is_empty() && !takes_routes,
+            "--route applies to --suite scale and --suite routes only",
+        ),
+        (
+            args.kitti.is_some() && !matches!(suite, Suite::Lidar | Suite::Routes),
+            "--kitti applies to --suite lidar and --suite routes only",
+        ),
+        (
+            !args.scans.is_empty() && suite != Suite::RealGeometry,
+            "--scan applies to --suite real-geometry only",
+        ),
+        (
+            pairs && takes_routes,
+            "--pairs applies to --suite unlevelled, compass-noise, lidar and real-geometry only \
+             (scale and routes run whole routes: --sizes and --route choose them)",
+        ),
+        (
+            step && takes_routes,
+            "--step applies to --suite unlevelled, compass-noise and real-geometry only (scale \
+             and routes search with the loop's own step)",
+        ),
+    ];
+    if let Some((_, message)) = refused.iter().find(|(given, _)| *given) {
+        return Err(crate::parse::usage_error("bench", message));
+    }
+    match suite {
+        Suite::Routes => routes::parse_routes(&args.routes).map(|_| ()),
+        Suite::Scale => long_routes(&args.routes).map(|_| ()),
+        _ => Ok(()),
+    }
+}
+
+/// The long routes of `--suite scale` named by `--route`.
+///
+/// # Errors
+/// A usage error for a name that is not a long route's, with the names there are.
+fn long_routes(names: &[String]) -> Result<Vec<sdem_sim::sim::LongRoute>> {
+    (names.iter())
+        .map(|r| {
+            (r.trim().parse())
+                .map_err(|e| crate::parse::usage_error("bench", format!("--route {r}: {e}")))
+        })
+        .collect()
+}
+
+/// Runs `sdem bench --suite`, its flags checked by [`check_flags`].
 pub fn run(args: &SuiteArgs, common: &Common, say: &dyn Fn(&str)) -> Result<()> {
     let suite = args.suite.context("no --suite given")?;
     if suite == Suite::Scale {
         return crate::cmd_bench_scale::run(&scale_args(args, common)?, say);
-    }
-    if !args.sizes.is_empty() {
-        bail!("--sizes applies to --suite scale only");
-    }
-    if !args.routes.is_empty() && suite != Suite::Routes {
-        bail!("--route applies to --suite scale and --suite routes only");
-    }
-    if args.kitti.is_some() && !matches!(suite, Suite::Lidar | Suite::Routes) {
-        bail!("--kitti applies to --suite lidar and --suite routes only");
-    }
-    if !args.scans.is_empty() && suite != Suite::RealGeometry {
-        bail!("--scan applies to --suite real-geometry only");
     }
     let peers = bench_peers::find(args.peers.as_deref())?;
     if suite == Suite::Routes {

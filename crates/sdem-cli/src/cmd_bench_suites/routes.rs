@@ -84,8 +84,12 @@ struct KittiPart {
 pub(super) fn parse_routes(names: &[String]) -> Result<Vec<RouteKind>> {
     (names.iter())
         .map(|name| {
-            (name.trim().parse())
-                .with_context(|| format!("--route {name}: no such route of --suite routes"))
+            (name.trim().parse()).map_err(|e| {
+                crate::parse::usage_error(
+                    "bench",
+                    format!("--route {name}: no such route of --suite routes: {e}"),
+                )
+            })
         })
         .collect()
 }
