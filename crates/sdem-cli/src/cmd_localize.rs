@@ -356,9 +356,10 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
             })
         }
         None if sigma.is_some() => {
-            bail!(
-                "--attitude-sigma-deg describes the --attitude reading; give --attitude R,P,Y too"
-            )
+            return Err(usage_error(
+                "localize",
+                "--attitude-sigma-deg describes the --attitude reading; give --attitude R,P,Y too",
+            ));
         }
         None => None,
     };

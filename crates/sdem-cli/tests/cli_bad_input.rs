@@ -376,6 +376,13 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
             &["--step applies to"],
         ),
         (
+            vec!["bench", "--suite", "lidar", "--step", "0.1"],
+            &[
+                "--step applies to",
+                "lidar searches each scan's grid at 5 cm",
+            ],
+        ),
+        (
             vec!["bench", "--suite", "unlevelled", "--sizes", "10"],
             &["--sizes applies to --suite scale only"],
         ),
@@ -410,6 +417,17 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
         (
             vec!["simulate", "--out", out, "--fault", "smoke"],
             &["'smoke'", "--fault", "compass, gyro-drift"],
+        ),
+        (
+            vec![
+                "localize",
+                "--map",
+                "map",
+                "scan.ply",
+                "--attitude-sigma-deg",
+                "1,5",
+            ],
+            &["--attitude-sigma-deg describes the --attitude reading"],
         ),
         (
             [&pair[..], &["--cost", "virtual"]].concat(),

@@ -398,9 +398,9 @@ pub fn check_flags(args: &SuiteArgs, suite: Suite, pairs: bool, step: bool) -> R
              (scale and routes run whole routes: --sizes and --route choose them)",
         ),
         (
-            step && takes_routes,
-            "--step applies to --suite unlevelled, compass-noise and real-geometry only (scale \
-             and routes search with the loop's own step)",
+            step && (takes_routes || suite == Suite::Lidar),
+            "--step applies to --suite unlevelled, compass-noise and real-geometry only (lidar \
+             searches each scan's grid at 5 cm, scale and routes with the loop's own step)",
         ),
     ];
     if let Some((_, message)) = refused.iter().find(|(given, _)| *given) {
