@@ -21,16 +21,7 @@ fn s(path: &Path) -> &str {
 fn dataset(dir: &Path) -> std::path::PathBuf {
     let ds = dir.join("ds");
     std::fs::create_dir_all(ds.join("scans")).unwrap();
-    let mut scan = String::new();
-    for i in 0..200 {
-        let a = f64::from(i) * 0.0314;
-        scan.push_str(&format!(
-            "{} {} {}\n",
-            3.0 * a.cos(),
-            2.0 * a.sin(),
-            0.5 * (3.0 * a).sin()
-        ));
-    }
+    let scan = common::wavy_ellipse_xyz();
     for i in 0..3 {
         std::fs::write(ds.join(format!("scans/{i:06}.xyz")), &scan).unwrap();
     }

@@ -37,18 +37,8 @@ fn assert_kept(path: &Path) {
 
 /// A scan file of 200 points on a wavy ellipse, which `view panorama` draws.
 fn scan_file(dir: &Path) -> std::path::PathBuf {
-    let mut scan = String::new();
-    for i in 0..200 {
-        let a = f64::from(i) * 0.0314;
-        scan.push_str(&format!(
-            "{} {} {}\n",
-            3.0 * a.cos(),
-            2.0 * a.sin(),
-            0.5 * (3.0 * a).sin()
-        ));
-    }
     let path = dir.join("scan.xyz");
-    std::fs::write(&path, scan).unwrap();
+    std::fs::write(&path, common::wavy_ellipse_xyz()).unwrap();
     path
 }
 

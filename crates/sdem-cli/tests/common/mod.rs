@@ -6,6 +6,22 @@ use assert_cmd::Command;
 use serde_json::Value;
 use std::path::Path;
 
+/// A scan of 200 points on a wavy ellipse (3 m by 2 m, ±0.5 m in height) as `.xyz` text: a
+/// valid scan that tests copy and damage.
+pub fn wavy_ellipse_xyz() -> String {
+    (0..200)
+        .map(|i| {
+            let a = f64::from(i) * 0.0314;
+            format!(
+                "{} {} {}\n",
+                3.0 * a.cos(),
+                2.0 * a.sin(),
+                0.5 * (3.0 * a).sin()
+            )
+        })
+        .collect()
+}
+
 /// The `sdem` binary, run in `dir`.
 pub fn sdem(dir: &Path) -> Command {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_sdem"));
