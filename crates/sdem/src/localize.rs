@@ -26,7 +26,8 @@ pub use crate::cost::{correlate, Correlation, CostConfig, OffsetPrior};
 pub use crate::search::{HeadingWindow, SearchWindow};
 
 mod diagnose;
-use diagnose::{attitude_corrected, diagnose, in_query_frame};
+pub use diagnose::PRIOR_CONFLICT_RATIO;
+use diagnose::{attitude_corrected, diagnose, in_query_frame, prior_conflict};
 
 /// Which search runs over the window.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -585,79 +586,6 @@ pub(crate) fn localize_below(
         time: start.elapsed(),
     }))
 }
-
-/// With a prediction in the cost ([`CostConfig::prior`]), a candidate that the scans alone
-/// fit [`PRIOR_CONFLICT_RATIO`] times better than the optimum found (`data_cost`, eq. 1 at
-/// `grid_offset` without the prediction's term), more than three of the prediction's σ from
-/// it: the prediction, not the scans, chose the pose ([`Doubt::PriorConflict`]). `cost`: the
-/// optimum's cost with the prediction's term. Searched exactly below that cost, and only where
-/// the prediction's term rises across the window by more than the scans could gain (else the
-/// search would have found such a place itself).
-fn prior_conflict(
-    reference: &Sdem,
-    query: &Sdem,
-    config: &LocalizeOptions,
-    correlator: &Correlator,
-    grid_offset: &Vec3,
-    cost: f64,
-) -> Result<Option<Doubt>> {
-    let Some(prior) = config.cost.prior else {
-        return Ok(None);
-    };
-    let at_optimum = correlator.prior_cost(grid_offset);
-    let data_cost = cost - at_optimum;
-    let farthest = Vec3::from_fn(|axis, _| {
-        let (lo, hi) = (config.window.min[axis], config.window.max[axis]);
-        let o = prior.offset[axis];
-        if (lo - o).abs() > (hi - o).abs() {
-            lo
-        } else {
-            hi
-        }
-    });
-    if correlator.prior_cost(&farthest) - at_optimum
-        < data_cost * (1.0 - 1.0 / PRIOR_CONFLICT_RATIO)
-    {
-        return Ok(None);
-    }
-    let scans_alone = LocalizeOptions {
-        cost: CostConfig {
-            prior: None,
-            ..config.cost.clone()
-        },
-        refine: false,
-        runner_up: false,
-        // The exact search finds the oracle's minimum; the oracle itself is not run twice.
-        mode: match config.cost.model {
-            CostModel::Projective => SearchMode::BranchAndBound,
-            _ => config.mode,
-        },
-        ..config.clone()
-    };
-    let Some(found) = localize_below(
-        reference,
-        query,
-        &scans_alone,
-        data_cost / PRIOR_CONFLICT_RATIO,
-    )?
-    else {
-        return Ok(None);
-    };
-    let from_prediction = (found.grid_offset - Vec3::from(prior.offset)).norm();
-    Ok(
-        (from_prediction > 3.0 * prior.sigma_m).then(|| Doubt::PriorConflict {
-            distance_m: (found.grid_offset - grid_offset).norm(),
-            cost: found.cost,
-            best_cost: data_cost,
-        }),
-    )
-}
-
-/// [`Doubt::PriorConflict`]: a place the scans fit this many times better than the pose found
-/// (eq. 1 at a right pose is the scans' noise and sampling; at a place 2× as costly they
-/// disagree plainly, while along a corridor's axis, where only the prediction can say, it
-/// varies by tens of per cent).
-pub const PRIOR_CONFLICT_RATIO: f64 = 2.0;
 
 /// Whether a grid optimum on the window's edge (`idx`) is one in truth: without a refinement,
 /// always; with one (`refined`: its offset and heading correction), when the refined pose lies

@@ -1,10 +1,14 @@
 //! What a match's figures say about it ([`super::Diagnostics`]): its overlap, runner-up,
-//! covariance and the shape of its cost, and the doubts they raise.
+//! covariance and the shape of its cost, and the doubts they raise, a prediction that
+//! overrules the scans among them.
 
-use super::{Diagnostics, LocalizeOptions};
+use super::{localize_below, CostConfig, Diagnostics, LocalizeOptions, SearchMode};
+use crate::cost::{Correlator, CostModel};
 use crate::doubt::Doubt;
+use crate::error::Result;
 use crate::geometry::{Attitude, Pose, Vec3};
 use crate::refine::Refinement;
+use crate::sdem::Sdem;
 use nalgebra::{Matrix6, SymmetricEigen, UnitQuaternion, Vector3, U3};
 
 /// The diagnostics of a match (overlap, runner-up, covariance) and its doubts. `refinement` is
@@ -267,3 +271,76 @@ pub(super) fn in_query_frame(
         .copy_from(&r.transpose());
     query_from_level * covariance_in_level * query_from_level.transpose()
 }
+
+/// With a prediction in the cost ([`CostConfig::prior`]), a candidate that the scans alone
+/// fit [`PRIOR_CONFLICT_RATIO`] times better than the optimum found (`data_cost`, eq. 1 at
+/// `grid_offset` without the prediction's term), more than three of the prediction's σ from
+/// it: the prediction, not the scans, chose the pose ([`Doubt::PriorConflict`]). `cost`: the
+/// optimum's cost with the prediction's term. Searched exactly below that cost, and only where
+/// the prediction's term rises across the window by more than the scans could gain (else the
+/// search would have found such a place itself).
+pub(super) fn prior_conflict(
+    reference: &Sdem,
+    query: &Sdem,
+    config: &LocalizeOptions,
+    correlator: &Correlator,
+    grid_offset: &Vec3,
+    cost: f64,
+) -> Result<Option<Doubt>> {
+    let Some(prior) = config.cost.prior else {
+        return Ok(None);
+    };
+    let at_optimum = correlator.prior_cost(grid_offset);
+    let data_cost = cost - at_optimum;
+    let farthest = Vec3::from_fn(|axis, _| {
+        let (lo, hi) = (config.window.min[axis], config.window.max[axis]);
+        let o = prior.offset[axis];
+        if (lo - o).abs() > (hi - o).abs() {
+            lo
+        } else {
+            hi
+        }
+    });
+    if correlator.prior_cost(&farthest) - at_optimum
+        < data_cost * (1.0 - 1.0 / PRIOR_CONFLICT_RATIO)
+    {
+        return Ok(None);
+    }
+    let scans_alone = LocalizeOptions {
+        cost: CostConfig {
+            prior: None,
+            ..config.cost.clone()
+        },
+        refine: false,
+        runner_up: false,
+        // The exact search finds the oracle's minimum; the oracle itself is not run twice.
+        mode: match config.cost.model {
+            CostModel::Projective => SearchMode::BranchAndBound,
+            _ => config.mode,
+        },
+        ..config.clone()
+    };
+    let Some(found) = localize_below(
+        reference,
+        query,
+        &scans_alone,
+        data_cost / PRIOR_CONFLICT_RATIO,
+    )?
+    else {
+        return Ok(None);
+    };
+    let from_prediction = (found.grid_offset - Vec3::from(prior.offset)).norm();
+    Ok(
+        (from_prediction > 3.0 * prior.sigma_m).then(|| Doubt::PriorConflict {
+            distance_m: (found.grid_offset - grid_offset).norm(),
+            cost: found.cost,
+            best_cost: data_cost,
+        }),
+    )
+}
+
+/// [`Doubt::PriorConflict`]: a place the scans fit this many times better than the pose found
+/// (eq. 1 at a right pose is the scans' noise and sampling; at a place 2× as costly they
+/// disagree plainly, while along a corridor's axis, where only the prediction can say, it
+/// varies by tens of per cent).
+pub const PRIOR_CONFLICT_RATIO: f64 = 2.0;
