@@ -125,44 +125,41 @@ fn node_clouds(saved: &SavedMap) -> Vec<Vec<[f32; 3]>> {
 /// run holds nodes of two datasets, whose scans are numbered alike).
 fn dataset_clouds(saved: &SavedMap) -> Result<Vec<Vec<[f32; 3]>>> {
     let by_run = saved.datasets_by_run();
-    let mut opened: Vec<Option<Dataset>> = by_run.iter().map(|_| None).collect();
-    let mut clouds = Vec::with_capacity(saved.map.nodes.len());
-    for node in &saved.map.nodes {
-        let root = by_run[node.run]
-            .as_ref()
-            .with_context(|| match by_run.len() {
+    let datasets = (by_run.iter().enumerate())
+        .map(|(run, root)| {
+            let root = root.as_ref().with_context(|| match by_run.len() {
                 1 => "the map does not name its dataset, so the nodes' S-DEM points were written"
                     .to_string(),
                 _ => format!(
-                "the map does not name the dataset of its run {} (node {}), so the nodes' S-DEM \
-                 points were written",
-                node.run, node.node_id
-            ),
+                    "the map does not name the dataset of its run {run}, so the nodes' S-DEM \
+                     points were written"
+                ),
             })?;
-        if opened[node.run].is_none() {
-            opened[node.run] = Some(Dataset::open(root).with_context(|| {
+            let dataset = Dataset::open(root).with_context(|| {
                 format!(
                     "the map's dataset {} cannot be opened, so the nodes' S-DEM points were \
                      written (run from the folder sdem slam ran in, or pass --node-points)",
                     root.display()
                 )
-            })?);
-        }
-        let dataset = opened[node.run].as_ref().expect("opened above");
-        let points = dataset.load_scan(node.scan_index).with_context(|| {
-            format!(
-                "scan {} of the map's dataset {} cannot be read, so the nodes' S-DEM points \
-                 were written",
-                node.scan_index,
-                root.display()
-            )
-        })?;
-        clouds.push(
-            points
+            })?;
+            Ok((root, dataset))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    (saved.map.nodes.iter())
+        .map(|node| {
+            let (root, dataset) = &datasets[node.run];
+            let points = dataset.load_scan(node.scan_index).with_context(|| {
+                format!(
+                    "scan {} of the map's dataset {} cannot be read, so the nodes' S-DEM points \
+                     were written",
+                    node.scan_index,
+                    root.display()
+                )
+            })?;
+            Ok(points
                 .iter()
                 .map(|p| [p.x as f32, p.y as f32, p.z as f32])
-                .collect(),
-        );
-    }
-    Ok(clouds)
+                .collect())
+        })
+        .collect()
 }
