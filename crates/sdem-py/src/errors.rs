@@ -60,6 +60,16 @@ fn sdem_exception<'py>(py: Python<'py>, error: &sdem::Error) -> Bound<'py, PyAny
                 ("problem", py_value(py, problem)),
             ],
         ),
+        E::NoUsablePoints { reason } => instance(
+            py,
+            "NoUsablePointsError",
+            (message,),
+            vec![
+                ("reason", py_value(py, reason)),
+                ("usable", py_value(py, 0)),
+                ("needed", py_value(py, sdem::scan::MIN_KNOWN_CELLS)),
+            ],
+        ),
         E::TooFewPoints { usable, needed } => instance(
             py,
             "TooFewPointsError",

@@ -38,7 +38,8 @@ use serde_json::{json, Value};
 /// Raises:
 ///     sdem.InvalidInputError: points that are not an ``(N, 3)`` float array, an infinite
 ///         coordinate, a non-finite attitude or a standard deviation that is not positive.
-///     sdem.TooFewPointsError: fewer than 100 S-DEM cells hold a return.
+///     sdem.TooFewPointsError: fewer than 100 S-DEM cells hold a return;
+///         sdem.NoUsablePointsError (a TooFewPointsError) when none does, with the reason.
 ///     sdem.InvalidError: an invalid grid.
 #[pyclass(module = "sdem", frozen)]
 pub struct Scan {

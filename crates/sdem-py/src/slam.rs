@@ -404,7 +404,8 @@ impl Map {
     ///
     /// Raises:
     ///     sdem.NotFoundError: no node matches (``tried`` says why for each).
-    ///     sdem.InvalidInputError, sdem.TooFewPointsError: bad input.
+    ///     sdem.InvalidInputError, sdem.TooFewPointsError: bad input;
+    ///         sdem.NoUsablePointsError (a TooFewPointsError) when no point is usable, saying why.
     #[pyo3(signature = (points, attitude_deg=None, *, near=None, near_sigma_m=None, max_nodes=None, roll_pitch_sigma_deg=None, yaw_sigma_deg=None))]
     #[allow(clippy::too_many_arguments)]
     fn localize(

@@ -17,7 +17,7 @@ def points(pairs):
 
 def test_every_exception_is_an_sdem_error_and_the_natural_builtin():
     classes = [getattr(sdem, name) for name in sdem.__all__ if name.endswith("Error")]
-    assert len(classes) == 15
+    assert len(classes) == 16
     for cls in classes:
         assert issubclass(cls, sdem.Error), cls
         assert cls.__doc__, cls
@@ -65,6 +65,29 @@ def test_too_few_points_carry_their_figures(points):
         sdem.Scan(points[:20])
     assert info.value.usable < info.value.needed == 100
     assert "fewer than the 100" in str(info.value)
+
+
+def test_a_scan_with_no_usable_point_says_why_in_scan_and_map_localize(tmp_path, run):
+    at_origin = np.zeros((500, 3))
+    with pytest.raises(sdem.NoUsablePointsError) as info:
+        sdem.Scan(at_origin)
+    wanted = "all 500 of its points lie within 0.05 m of the sensor's origin"
+    assert wanted in info.value.reason
+    assert str(info.value).startswith("the scan has no usable point: " + wanted)
+    # A TooFewPointsError with no usable cell, for code that catches that.
+    assert isinstance(info.value, sdem.TooFewPointsError) and isinstance(info.value, ValueError)
+    assert info.value.usable == 0 and info.value.needed == 100
+    with pytest.raises(sdem.NoUsablePointsError, match="none of its 2 points is finite"):
+        sdem.Scan(np.full((2, 3), np.nan))
+    # Map.localize names it the same way, with and without a position.
+    slam = sdem.Slam()
+    slam.add(run["points"][0], attitude_deg=run["attitude_deg"][0])
+    slam.save(tmp_path / "map")
+    saved = sdem.Map.load(tmp_path / "map")
+    for near in (None, (0.0, 0.0, 0.0)):
+        with pytest.raises(sdem.NoUsablePointsError) as info:
+            saved.localize(at_origin, near=near)
+        assert wanted in info.value.reason
 
 
 def test_a_bad_attitude_is_invalid_input(points):

@@ -17,6 +17,18 @@ pub enum Error {
         /// What is wrong with it.
         problem: String,
     },
+    /// A scan of which the S-DEM grid can use no point, with why
+    /// ([`crate::sdem::Sdem::from_usable_points`]): it is empty, none of its points is finite,
+    /// every one lies within the grid's minimum range of the sensor's origin, or none lies in
+    /// the grid's extent. A scan that fills some cells but too few is [`Error::TooFewPoints`].
+    #[error(
+        "the scan has no usable point: {reason}; check that it holds the scan's points, in \
+         metres in the sensor frame"
+    )]
+    NoUsablePoints {
+        /// Why no point fills a cell, with the counts.
+        reason: String,
+    },
     /// A scan fills too few S-DEM cells to be localized or to localize against.
     #[error(
         "the scan fills {usable} cells of its S-DEM, fewer than the {needed} a localization \

@@ -12,8 +12,10 @@ use serde::{Deserialize, Serialize};
 
 mod cell_means;
 mod patch;
+mod usable;
 
 pub(crate) use patch::patch_moments;
+pub(crate) use usable::no_usable_points;
 
 /// The angular grid of an S-DEM: resolution and extent, in degrees.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

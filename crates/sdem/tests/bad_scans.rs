@@ -51,10 +51,32 @@ fn too_few_points_is_an_error_saying_how_many() {
         }
         other => panic!("expected TooFewPoints, got {other:?}"),
     }
-    assert!(matches!(
-        Scan::from_points(&[], None),
-        Err(Error::TooFewPoints { usable: 0, .. })
-    ));
+}
+
+/// A scan that fills no cell at all is refused saying why, in the words `relocalize` and
+/// `sdem localize` use: not as "0 cells, fewer than 100".
+#[test]
+fn a_scan_that_fills_no_cell_says_why() {
+    let at_origin = vec![Point3::origin(); 500];
+    let nan = [Point3::new(f64::NAN, 0.0, 0.0); 3];
+    for (points, wanted) in [
+        (&[][..], "it holds no point"),
+        (
+            &at_origin[..],
+            "all 500 of its points lie within 0.05 m of the sensor's origin",
+        ),
+        (&nan[..], "none of its 3 points is finite"),
+    ] {
+        match Scan::from_points(points, None) {
+            Err(e @ Error::NoUsablePoints { .. }) => {
+                let message = e.to_string();
+                for w in ["the scan has no usable point", wanted] {
+                    assert!(message.contains(w), "{message:?} lacks {w:?}");
+                }
+            }
+            other => panic!("expected NoUsablePoints, got {other:?}"),
+        }
+    }
 }
 
 #[test]

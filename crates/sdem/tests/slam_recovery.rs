@@ -198,7 +198,7 @@ fn a_scan_is_relocalized_in_a_saved_map_without_a_prior_or_reported_not_found() 
         other => panic!("a scan from nowhere came out as {other:?}"),
     }
     // A scan whose points all lie at the sensor's origin is no scan of any place: said so,
-    // with or without a position, not "not found".
+    // and why, with or without a position, not "not found".
     let nothing = vec![Vec3::zeros(); points.len()];
     let near = Near {
         position: fresh.world_from_sensor.translation.vector,
@@ -206,7 +206,10 @@ fn a_scan_is_relocalized_in_a_saved_map_without_a_prior_or_reported_not_found() 
     };
     for near in [None, Some(near)] {
         match relocalize(&slam.map, slam.config(), &nothing, reading, near, 3) {
-            Err(Error::Invalid(why)) => assert!(why.contains("no usable point"), "{why}"),
+            Err(Error::NoUsablePoints { reason }) => assert!(
+                reason.contains(&format!("all {} of its points lie within", points.len())),
+                "{reason}"
+            ),
             other => panic!("a scan of nothing came out as {other:?}"),
         }
     }

@@ -12,6 +12,7 @@ __all__ = [
     "InvalidError",
     "InvalidInputError",
     "TooFewPointsError",
+    "NoUsablePointsError",
     "TooManyCandidatesError",
     "MatchError",
     "NoOverlapError",
@@ -63,6 +64,19 @@ class TooFewPointsError(Error, ValueError):
 
     usable: int
     needed: int
+
+
+class NoUsablePointsError(TooFewPointsError):
+    """A scan of which the S-DEM grid can use no point (``Error::NoUsablePoints``): it is
+    empty, none of its points is finite, they all lie at the sensor's origin (within the grid's
+    minimum range), or outside the grid. A ``TooFewPointsError`` with ``usable == 0``; raised
+    by ``Scan`` and ``Map.localize`` alike, and worded as ``sdem localize`` words it.
+
+    Attributes:
+        reason: why no point is usable, with the counts.
+    """
+
+    reason: str
 
 
 class TooManyCandidatesError(InvalidError):

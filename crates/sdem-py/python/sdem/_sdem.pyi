@@ -233,7 +233,7 @@ class Map:
         yaw_sigma_deg: float | None = None,
     ) -> Relocalization:
         """Finds where a scan was taken in the map; raises ``NotFoundError`` when no node
-        matches."""
+        matches, ``NoUsablePointsError`` when the scan has no usable point (saying why)."""
     def poses(self) -> npt.NDArray[np.float64]: ...
     @property
     def options(self) -> dict[str, Any]: ...

@@ -2,7 +2,7 @@
 
 use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Vec3};
-use crate::sdem::{Sdem, SdemConfig};
+use crate::sdem::{no_usable_points, Sdem, SdemConfig};
 use nalgebra::Point3;
 
 /// The fewest S-DEM cells a scan must fill to be localized: the search compares at least this
@@ -49,8 +49,9 @@ impl Scan {
     ///
     /// # Errors
     /// [`Error::InvalidInput`] for an infinite coordinate or a non-finite attitude (naming
-    /// which), [`Error::TooFewPoints`] when fewer than [`MIN_KNOWN_CELLS`] cells of the S-DEM
-    /// hold a return.
+    /// which), [`Error::NoUsablePoints`] when no cell of the S-DEM holds a return (saying why:
+    /// no point, every point at the sensor's origin, …), [`Error::TooFewPoints`] when fewer
+    /// than [`MIN_KNOWN_CELLS`] do.
     pub fn from_points(
         points_in_sensor: &[Point3<f64>],
         attitude: Option<Attitude>,
@@ -68,7 +69,13 @@ impl Scan {
         grid: &SdemConfig,
     ) -> Result<Self> {
         let points = checked_input(points_in_sensor, attitude.as_ref())?;
-        let sdem = Sdem::from_points(&points, &attitude.unwrap_or_default(), grid)?;
+        let reading = attitude.unwrap_or_default();
+        let sdem = Sdem::from_points(&points, &reading, grid)?;
+        if sdem.known_cells() == 0 {
+            // Said over every point given, the NaN ones ("no return") among them.
+            let given: Vec<Vec3> = points_in_sensor.iter().map(|p| p.coords).collect();
+            return Err(no_usable_points(&given, &reading, grid));
+        }
         if sdem.known_cells() < MIN_KNOWN_CELLS {
             return Err(Error::TooFewPoints {
                 usable: sdem.known_cells(),

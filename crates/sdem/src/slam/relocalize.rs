@@ -71,8 +71,9 @@ pub struct Near {
 ///   searched again over a full turn of heading, exactly, before it is said not to be found.
 ///
 /// # Errors
-/// An empty map or scan, a `near` that is not finite or whose σ is not a positive length, or
-/// ([`Error::NotFound`]) no node that matches with confidence, each tried node with its reason.
+/// An empty map, a scan of which no point is usable ([`Error::NoUsablePoints`], saying why), a
+/// `near` that is not finite or whose σ is not a positive length, or ([`Error::NotFound`]) no
+/// node that matches with confidence, each tried node with its reason.
 pub fn relocalize(
     map: &Map,
     config: &SlamOptions,
@@ -88,17 +89,12 @@ pub fn relocalize(
         ));
     }
     // The scan on the map's grid, levelled by its reading: a scan that fills no cell (every
-    // point at the sensor's origin or out of range) is said to be so, not "not found".
-    let query = Sdem::from_points(
+    // point at the sensor's origin or out of range) is said to be so, and why, not "not found".
+    let query = Sdem::from_usable_points(
         points_in_sensor,
         &attitude.unwrap_or_default(),
         &config.sdem,
     )?;
-    if query.known_cells() == 0 {
-        return Err(Error::Invalid(
-            "the scan has no usable point: none lies within the S-DEM's range gate".into(),
-        ));
-    }
     match near {
         Some(near) => relocalize_near(map, config, &query, attitude, near, max_nodes),
         None => relocalize_anywhere(map, config, points_in_sensor, attitude, max_nodes),
