@@ -384,7 +384,6 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         .context("--map needs the scan to relocalize: --map DIR SCAN (or --scan SCAN)")?;
     let saved = sdem_io::load_map(&folder)?;
     let points = sdem_io::read_points(scan)?;
-    check_usable(scan, &points, attitude.as_ref(), &saved.config.sdem)?;
     // The map's own search settings (its config.toml), not this command's --step.
     let nodes = match near {
         Some(_) => 3,
@@ -430,55 +429,6 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     print_doubts("  ", &found.doubts);
     print_accepted(found.trusted, args.accept_doubtful);
     Ok(outcome)
-}
-
-/// Refuses a scan of which the S-DEM grid (the map's, or the pair's) can use no point, saying
-/// why: every point at the sensor's origin or within the grid's minimum range, none finite, or
-/// none in the grid's extent. The check `sdem slam` makes of each scan (an S-DEM with no known
-/// cell), made here before the map's places are searched, and for a pair's scan that fills too
-/// few cells.
-fn check_usable(
-    scan: &std::path::Path,
-    points: &[sdem::geometry::Vec3],
-    attitude: Option<&Attitude>,
-    grid: &SdemConfig,
-) -> Result<()> {
-    let sdem = Sdem::from_points(points, &attitude.copied().unwrap_or_default(), grid)?;
-    if sdem.known_cells() > 0 {
-        return Ok(());
-    }
-    let finite: Vec<_> = (points.iter())
-        .filter(|p| p.iter().all(|v| v.is_finite()))
-        .collect();
-    let close = finite
-        .iter()
-        .filter(|p| p.norm() < grid.min_range_m)
-        .count();
-    let why = if finite.is_empty() {
-        "it holds no point but NaN (no return)".to_string()
-    } else if close == finite.len() {
-        format!(
-            "all {close} of its points lie within {} m of the sensor's origin (the S-DEM's \
-             minimum range), where a return is the scanner itself",
-            grid.min_range_m
-        )
-    } else {
-        format!(
-            "none of its {} points lies in the S-DEM grid (elevation {}..{}°, azimuth \
-             {}..{}°, beyond {} m)",
-            finite.len(),
-            grid.elevation_min_deg,
-            grid.elevation_max_deg,
-            grid.azimuth_min_deg,
-            grid.azimuth_max_deg,
-            grid.min_range_m
-        )
-    };
-    bail!(
-        "{}: the scan has no usable point: {why}; check that the file holds the scan's points, \
-         in metres in the sensor frame",
-        scan.display()
-    )
 }
 
 /// The candidates a relocalization tried, in words: `node N (why); …`.
@@ -646,7 +596,8 @@ fn load_points(dataset: &Dataset, index: usize) -> Result<Vec<nalgebra::Point3<f
 }
 
 /// Scan `index` of the dataset as a [`Scan`] with its attitude (checked: finite points and
-/// attitude, enough points in the S-DEM).
+/// attitude, enough points in the S-DEM; a scan that fills no cell is refused saying why, as
+/// `localize --map` refuses it).
 fn make_scan(
     dataset: &Dataset,
     index: usize,
@@ -655,11 +606,8 @@ fn make_scan(
     sdem_config: &SdemConfig,
 ) -> Result<Scan> {
     let path = &dataset.scan_paths[index];
-    Scan::with_grid(points, attitude, sdem_config).or_else(|error| {
-        let points: Vec<_> = points.iter().map(|p| p.coords).collect();
-        check_usable(path, &points, attitude.as_ref(), sdem_config)?;
-        Err(error).with_context(|| format!("scan {index} ({})", path.display()))
-    })
+    Scan::with_grid(points, attitude, sdem_config)
+        .with_context(|| format!("scan {index} ({})", path.display()))
 }
 
 /// Localizes scan `query` of the dataset against scan `reference` with `attitudes`; returns the

@@ -415,11 +415,9 @@ fn scan_sdem(args: &ScanArgs) -> Result<(Sdem, String)> {
     } else {
         bail!("{}: no such file or dataset folder", input.display());
     };
-    let sdem = Sdem::from_points(&points, &attitude, &config)
+    // A scan that fills no cell is refused saying why, as `sdem localize` refuses it.
+    let sdem = Sdem::from_usable_points(&points, &attitude, &config)
         .with_context(|| format!("cannot build the S-DEM of {}", input.display()))?;
-    if sdem.known_cells() == 0 {
-        bail!("{}: the scan holds no usable point", input.display());
-    }
     Ok((sdem, label))
 }
 

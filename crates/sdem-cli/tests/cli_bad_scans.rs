@@ -322,7 +322,8 @@ fn a_tilted_turned_query_without_attitude_is_found_or_doubted() {
 }
 
 /// A pair whose query or reference has every point at the sensor's origin: refused (status 1)
-/// naming the scan and saying why, in the words `localize --map` uses.
+/// naming the scan and saying why, in the words `localize --map` uses (the library's
+/// `Error::NoUsablePoints`).
 #[test]
 fn a_scan_at_the_origin_is_refused_in_a_pair_saying_why() {
     let dir = tempfile::tempdir().unwrap();
@@ -356,7 +357,7 @@ fn a_scan_at_the_origin_is_refused_in_a_pair_saying_why() {
 
 /// A scan whose every point lies at the sensor's origin (a PLY of zeros) or within the S-DEM's
 /// 5 cm minimum range, relocalized in a saved map: refused before the map is searched, saying
-/// that the scan has no usable point and why, with and without `--near`.
+/// that the scan has no usable point and why, with and without `--near`, and naming the map.
 #[test]
 fn a_scan_at_the_origin_is_refused_in_a_map_before_the_search() {
     let dir = tempfile::tempdir().unwrap();
@@ -390,10 +391,35 @@ fn a_scan_at_the_origin_is_refused_in_a_map_before_the_search() {
         for extra in [&[][..], &["--near", "0,0,0"]] {
             let args = [&["localize", "--map", s(&out), s(&scan)][..], extra].concat();
             let m = run_err(dir.path(), &args);
-            for w in [name, "no usable point", wanted, "sensor's origin"] {
+            for w in [
+                name,
+                "in the map",
+                "no usable point",
+                wanted,
+                "sensor's origin",
+            ] {
                 assert!(m.contains(w), "{args:?}: {m:?} lacks {w:?}");
             }
             assert!(!m.contains("not found"), "{m}");
         }
     }
+}
+
+/// `sdem view panorama` of a scan with every point at the sensor's origin: refused (status 1)
+/// saying why, in the words `localize` uses (the library's one explanation).
+#[test]
+fn a_scan_at_the_origin_is_refused_by_view_saying_why() {
+    let dir = tempfile::tempdir().unwrap();
+    let scan = dir.path().join("zeros.ply");
+    sdem_io::write_points_ply(&scan, &vec![Vec3::zeros(); 500]).unwrap();
+    let args = ["view", "panorama", s(&scan), "--out", "p.png"];
+    let m = run_err(dir.path(), &args);
+    for w in [
+        "zeros.ply",
+        "the scan has no usable point",
+        "all 500 of its points lie within 0.05 m of the sensor's origin",
+    ] {
+        assert!(m.contains(w), "{args:?}: {m:?} lacks {w:?}");
+    }
+    assert!(!dir.path().join("p.png").exists());
 }
