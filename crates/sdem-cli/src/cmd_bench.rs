@@ -54,9 +54,6 @@ pub struct Args {
     /// `--suite` and its flags.
     #[command(flatten)]
     suites: crate::cmd_bench_suites::SuiteArgs,
-    /// With --suite scale: write the plot over an existing --plot file (refused without it).
-    #[arg(long, requires = "suite")]
-    force: bool,
 }
 
 impl Args {
@@ -322,7 +319,8 @@ pub fn run(args: Args) -> Result<()> {
         if suite == crate::cmd_bench_suites::Suite::Scale {
             crate::cmd_bench_scale::check_sizes(&args.suites.sizes)?;
             // Before the suite runs: a saved picture is never written over without --force.
-            crate::output::check_output_file(&args.suites.plot, "--plot", args.force)?;
+            let (plot, force) = (args.suites.plot(), args.suites.force);
+            crate::output::check_output_file(&plot, "--plot", force)?;
         }
         let common = crate::cmd_bench_suites::Common {
             quick: args.quick,

@@ -398,6 +398,37 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
             &["--route stairs", "long-steps", "second-run"],
         ),
         (
+            vec!["bench", "--suite", "unlevelled", "--force"],
+            &[
+                "--force applies to --suite scale only",
+                "the other suites write no file",
+            ],
+        ),
+        (
+            vec!["bench", "--suite", "lidar", "--plot", "p.png"],
+            &["--plot applies to --suite scale only"],
+        ),
+        (
+            vec!["bench", "--suite", "scale", "--peers", "nowhere"],
+            &[
+                "--peers applies to --suite unlevelled, compass-noise, lidar, routes and \
+                 real-geometry only",
+                "scale runs no peer",
+            ],
+        ),
+        (
+            vec!["bench", "--suite", "routes", "--peer-pairs", "3"],
+            &[
+                "--peer-pairs applies to --suite unlevelled, compass-noise, lidar and \
+                 real-geometry only",
+                "routes gives KISS-ICP every KITTI frame",
+            ],
+        ),
+        (
+            vec!["bench", "--suite", "scale", "--peer-pairs", "3"],
+            &["--peer-pairs applies to"],
+        ),
+        (
             vec!["bench", "--faults", "--case", "hail"],
             &["'hail'", "--case", "none, compass", "person, all"],
         ),

@@ -92,9 +92,20 @@ pub struct SuiteArgs {
         requires = "suite"
     )]
     pub routes: Vec<String>,
-    /// With --suite scale: where the plot of time per stop against stop number goes.
-    #[arg(long, value_name = "FILE.png", default_value = crate::cmd_bench_scale::DEFAULT_PLOT, requires = "suite")]
-    pub plot: PathBuf,
+    /// With --suite scale: where the plot of time per stop against stop number goes [default:
+    /// scale.png].
+    #[arg(long, value_name = "FILE.png", requires = "suite")]
+    pub plot: Option<PathBuf>,
+    /// With --suite scale: write the plot over an existing --plot file (refused without it).
+    #[arg(long, requires = "suite")]
+    pub force: bool,
+}
+
+impl SuiteArgs {
+    /// `--plot`, or its default ([`crate::cmd_bench_scale::DEFAULT_PLOT`]).
+    pub fn plot(&self) -> PathBuf {
+        (self.plot.clone()).unwrap_or_else(|| crate::cmd_bench_scale::DEFAULT_PLOT.into())
+    }
 }
 
 /// Parses one of `--sizes N,N,...`: a map size of at least 1 node.
@@ -143,15 +154,15 @@ pub(super) fn scale_args(
     Ok(crate::cmd_bench_scale::ScaleArgs {
         sizes,
         routes,
-        plot: args.plot.clone(),
+        plot: args.plot(),
         seed: common.seed,
         json: common.json,
     })
 }
 
 /// Refuses (a usage error, before anything is read or run) a flag the suite does not take,
-/// and a `--route` the suite does not have. `pairs` and `step`: whether `--pairs` and `--step`
-/// were given.
+/// naming the suites that take it, and a `--route` the suite does not have. `pairs` and
+/// `step`: whether `--pairs` and `--step` were given.
 pub fn check_flags(args: &SuiteArgs, suite: Suite, pairs: bool, step: bool) -> Result<()> {
     let takes_routes = matches!(suite, Suite::Scale | Suite::Routes);
     let refused = [
@@ -180,6 +191,26 @@ pub fn check_flags(args: &SuiteArgs, suite: Suite, pairs: bool, step: bool) -> R
             step && (takes_routes || suite == Suite::Lidar),
             "--step applies to --suite unlevelled, compass-noise and real-geometry only (lidar \
              searches each scan's grid at 5 cm, scale and routes with the loop's own step)",
+        ),
+        (
+            args.plot.is_some() && suite != Suite::Scale,
+            "--plot applies to --suite scale only (its plot of time per stop); the other suites \
+             write no file",
+        ),
+        (
+            args.force && suite != Suite::Scale,
+            "--force applies to --suite scale only (it writes the plot over an existing --plot \
+             file); the other suites write no file",
+        ),
+        (
+            args.peers.is_some() && suite == Suite::Scale,
+            "--peers applies to --suite unlevelled, compass-noise, lidar, routes and \
+             real-geometry only (scale runs no peer)",
+        ),
+        (
+            args.peer_pairs.is_some() && takes_routes,
+            "--peer-pairs applies to --suite unlevelled, compass-noise, lidar and real-geometry \
+             only (routes gives KISS-ICP every KITTI frame; scale runs no peer)",
         ),
     ];
     if let Some((_, message)) = refused.iter().find(|(given, _)| *given) {
