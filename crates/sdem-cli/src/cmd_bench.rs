@@ -49,8 +49,8 @@ pub struct Args {
     #[arg(long)]
     faults: bool,
     /// With --faults: only these cases (none, all, or a fault's name; repeat the flag).
-    #[arg(long = "case", value_name = "CASE", requires = "faults", value_parser = crate::cmd_bench_faults::case_names())]
-    cases: Vec<String>,
+    #[arg(long = "case", value_name = "CASE", requires = "faults", value_parser = crate::cmd_bench_faults::case_parser())]
+    cases: Vec<crate::cmd_bench_faults::Case>,
     /// `--suite` and its flags.
     #[command(flatten)]
     suites: crate::cmd_bench_suites::SuiteArgs,

@@ -9,7 +9,7 @@
 
 use crate::bench_tally::Tally;
 use crate::output::print_json;
-use anyhow::{bail, Result};
+use anyhow::Result;
 use sdem::doubt::Doubt;
 use sdem::sdem::SdemConfig;
 use sdem_sim::benchmark::Stats;
@@ -28,7 +28,7 @@ pub struct FaultArgs {
     /// One JSON object instead of text.
     pub json: bool,
     /// Only these cases (empty: all).
-    pub cases: Vec<String>,
+    pub cases: Vec<Case>,
 }
 
 /// One case: a set of faults.
@@ -61,39 +61,51 @@ struct Report {
     cases: Vec<CaseReport>,
 }
 
-/// The names `--case` takes, for clap (a usage error listing them, and `--help`): `none`, each
-/// fault's, `all`.
-pub fn case_names() -> clap::builder::PossibleValuesParser {
-    let faults = Fault::ALL.iter().map(|f| f.name());
-    clap::builder::PossibleValuesParser::new(
-        std::iter::once("none")
-            .chain(faults)
-            .chain(std::iter::once("all")),
-    )
+/// One case of `--case`: its name and the faults injected together.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Case {
+    /// `none`, a fault's name, or `all`.
+    pub name: &'static str,
+    /// The faults injected.
+    pub faults: Vec<Fault>,
 }
 
-/// The cases to run, by name: `none`, each fault, `all`.
-fn cases(selected: &[String]) -> Result<Vec<(String, Vec<Fault>)>> {
-    let mut all: Vec<(String, Vec<Fault>)> = vec![("none".into(), Vec::new())];
-    all.extend(Fault::ALL.iter().map(|f| (f.name().to_string(), vec![*f])));
-    all.push(("all".into(), Fault::ALL.to_vec()));
+/// Every case, in the order the bench runs them: `none`, each fault alone, `all`.
+fn all_cases() -> Vec<Case> {
+    let alone = Fault::ALL.iter().map(|&f| Case {
+        name: f.name(),
+        faults: vec![f],
+    });
+    std::iter::once(Case {
+        name: "none",
+        faults: Vec::new(),
+    })
+    .chain(alone)
+    .chain(std::iter::once(Case {
+        name: "all",
+        faults: Fault::ALL.to_vec(),
+    }))
+    .collect()
+}
+
+/// The parser of `--case`, for clap: one of the cases' names (anything else is a usage error
+/// listing them, as in `--help`), as its [`Case`]. The names are the cases', so every name
+/// clap takes is a case; were one not, clap would refuse it as a usage error too.
+pub fn case_parser() -> impl clap::builder::TypedValueParser<Value = Case> {
+    use clap::builder::TypedValueParser;
+    let cases = all_cases();
+    let names: Vec<&'static str> = cases.iter().map(|c| c.name).collect();
+    clap::builder::PossibleValuesParser::new(names).try_map(move |name| {
+        (cases.iter().find(|c| c.name == name).cloned()).ok_or_else(|| format!("no case {name}"))
+    })
+}
+
+/// The cases to run: those `--case` chose, in its order, or every one.
+fn cases(selected: &[Case]) -> Vec<Case> {
     if selected.is_empty() {
-        return Ok(all);
+        return all_cases();
     }
-    let mut chosen = Vec::new();
-    for name in selected {
-        match all.iter().find(|(n, _)| n == name) {
-            Some(case) => chosen.push(case.clone()),
-            None => {
-                let names: Vec<&str> = all.iter().map(|(n, _)| n.as_str()).collect();
-                bail!(
-                    "--case {name}: no such case; the cases are {}",
-                    names.join(", ")
-                );
-            }
-        }
-    }
-    Ok(chosen)
+    selected.to_vec()
 }
 
 fn run_case(
@@ -206,8 +218,8 @@ pub fn run(args: &FaultArgs, say: &dyn Fn(&str)) -> Result<()> {
         ..FaultConfig::default()
     };
     let mut reports = Vec::new();
-    for (name, faults) in cases(&args.cases)? {
-        reports.push(run_case(&name, &faults, args, &config, say)?);
+    for case in cases(&args.cases) {
+        reports.push(run_case(case.name, &case.faults, args, &config, say)?);
     }
     let report = Report {
         threads: rayon::current_num_threads(),

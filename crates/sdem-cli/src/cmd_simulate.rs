@@ -3,9 +3,9 @@
 use crate::output::print_json;
 use crate::parse::{count_in, non_negative_degrees, number_in, usage_error};
 use anyhow::{Context, Result};
-use clap::builder::{PossibleValuesParser, TypedValueParser};
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use sdem::sensor::SensorConfig;
-use sdem_sim::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected};
+use sdem_sim::faults::{simulate_run_with_faults, Fault, FaultConfig, Injected, TILT_NOT_INJECTED};
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim::{self, LongRoute};
 use serde::Serialize;
@@ -83,7 +83,7 @@ pub struct Args {
     /// return from dust), missing (30 % of returns lost), rubble (a block moved in view before
     /// each stop), person (someone walks through each sweep). `tilt` is measured by `sdem bench
     /// --faults`, not injected into a route.
-    #[arg(long = "fault", value_name = "FAULT", value_parser = named::<Fault>(Fault::ALL.map(Fault::name)))]
+    #[arg(long = "fault", value_name = "FAULT", value_parser = fault_parser())]
     faults: Vec<Fault>,
     /// Print one JSON object instead of text.
     #[arg(long)]
@@ -227,12 +227,27 @@ fn sensor_config(args: &Args) -> Result<SensorConfig> {
 }
 
 /// A parser of the names `names` (a usage error listing them, and `--help`), each read as a `T`.
-fn named<T>(names: impl IntoIterator<Item = &'static str>) -> impl TypedValueParser<Value = T>
+/// The names are `T`'s own, so each reads; were one not to, clap would refuse it as a usage
+/// error too.
+fn named<T>(
+    names: impl IntoIterator<Item = impl Into<PossibleValue>>,
+) -> impl TypedValueParser<Value = T>
 where
     T: std::str::FromStr + Clone + Send + Sync + 'static,
     T::Err: std::fmt::Debug,
 {
-    PossibleValuesParser::new(names).map(|name| name.parse().expect("one of the names"))
+    PossibleValuesParser::new(names).try_map(|name| name.parse().map_err(|e| format!("{e:?}")))
+}
+
+/// The parser of `--fault`: a fault's name (a usage error listing them, and `--help`), and
+/// `tilt`, which no run can inject, a usage error saying what measures it instead
+/// ([`TILT_NOT_INJECTED`]). `tilt` is left out of the names listed.
+fn fault_parser() -> impl TypedValueParser<Value = Fault> {
+    let names = Fault::ALL.map(|f| PossibleValue::new(f.name()).hide(f == Fault::Tilt));
+    named::<Fault>(names).try_map(|fault| match fault {
+        Fault::Tilt => Err(TILT_NOT_INJECTED),
+        fault => Ok(fault),
+    })
 }
 
 /// Simulates the route's sweeps, with `faults` injected at every stop; returns the stops and,

@@ -433,6 +433,10 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
             &["'hail'", "--case", "none, compass", "person, all"],
         ),
         (
+            vec!["simulate", "--out", out, "--fault", "tilt"],
+            &["'tilt'", "`sdem bench --faults --case tilt` measures"],
+        ),
+        (
             vec!["simulate", "--out", out, "--route", "stairs"],
             &["'stairs'", "--route", "room-laps, floor, wings"],
         ),

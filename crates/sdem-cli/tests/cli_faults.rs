@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{fails, run_json, usage_error};
+use common::{run_json, usage_error};
 use nalgebra::Vector3;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -137,8 +137,18 @@ fn simulate_injects_faults_at_every_stop() {
         assert!(i["compass_error_deg"].as_f64().unwrap().abs() <= 20.0);
     }
 
-    let e = fails(dir.path(), &["simulate", "--out", "x", "--fault", "tilt"]);
-    assert!(e.contains("bench --faults"), "{e}");
+    // Tilt is not injected into a run: a usage error that says what measures it, before the
+    // folder is made.
+    usage_error(
+        dir.path(),
+        &["simulate", "--out", "x", "--fault", "tilt"],
+        &[
+            "'tilt'",
+            "--fault",
+            "`sdem bench --faults --case tilt` measures",
+        ],
+    );
+    assert!(!dir.path().join("x").exists());
     usage_error(
         dir.path(),
         &["simulate", "--out", "x", "--fault", "smoke"],

@@ -46,7 +46,7 @@ pub use inject::{add_dust, add_walking_person, drop_returns, WalkingPerson};
 pub use pairs::{
     fault_pair, fault_pairs, localize_config, localize_fault_pair, FaultPair, MIN_PRIOR_SIGMA_M,
 };
-pub use run::simulate_run_with_faults;
+pub use run::{simulate_run_with_faults, TILT_NOT_INJECTED};
 
 use crate::benchmark::PairConfig;
 use sdem::error::{Error, Result};

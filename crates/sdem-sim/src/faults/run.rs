@@ -15,6 +15,12 @@ use sdem::geometry::{Attitude, Pose, Vec3};
 use sdem::sensor::{SensorConfig, Sweep};
 use std::borrow::Cow;
 
+/// Why [`Fault::Tilt`] is not injected into a run, and what measures it instead (the words
+/// [`simulate_run_with_faults`] and `sdem simulate --fault tilt` refuse it with).
+pub const TILT_NOT_INJECTED: &str = "fault 'tilt' cannot be injected into a run: the route \
+     decides how the robot stands; `sdem bench --faults --case tilt` measures stops tilted up to \
+     30°";
+
 /// Simulates a run like [`sim::simulate_run`] (same scene, stops, noise and seed) with `faults`
 /// injected at every stop, for a dataset to map (`sdem simulate --fault ...`):
 ///
@@ -44,11 +50,7 @@ pub fn simulate_run_with_faults(
 ) -> Result<(Vec<sim::SimStop>, Vec<Injected>)> {
     config.validate()?;
     if faults.contains(&Fault::Tilt) {
-        return Err(Error::Invalid(
-            "fault 'tilt' cannot be injected into a run: the route decides how the robot \
-             stands; `sdem bench --faults --case tilt` measures stops tilted up to 30°"
-                .into(),
-        ));
+        return Err(Error::Invalid(TILT_NOT_INJECTED.into()));
     }
     let draw = RunDraw {
         scene,
