@@ -20,6 +20,7 @@ use sdem::localize::{
     RefinementSummary, SearchMode, SearchWindow,
 };
 use sdem::sdem::{Sdem, SdemConfig};
+use sdem::search::{MAX_GRID_CANDIDATES, MAX_MATCHED_HEADING_STEP_DEG};
 use sdem::slam::Near;
 use sdem::Scan;
 use sdem_io::Dataset;
@@ -327,6 +328,97 @@ fn check_step_fits_window(step: f64, window: Option<&SearchWindow>) -> Result<()
     Ok(())
 }
 
+/// Refuses (a usage error, before any file is read) a search grid that the window and the step
+/// alone make too large: an axis of more than [`sdem::search::MAX_AXIS_STEPS`] positions, more
+/// candidates than any search takes ([`MAX_GRID_CANDIDATES`]), or, for the exhaustive search,
+/// more than its limit (`--max-candidates`, or 4,000,000). The candidates are counted at the
+/// fewest headings the flags allow: one, or those of `--heading-window` at `--heading-step` (at
+/// the coarsest step matched to a scan, [`MAX_MATCHED_HEADING_STEP_DEG`], without it). The
+/// search counts them again once the scans are read, and refuses the whole grid then.
+fn check_grid_size(args: &Args, mode: SearchMode) -> Result<()> {
+    let window = args.window.unwrap_or_else(SearchWindow::paper);
+    let [x, y, z] = window.positions(args.step).map_err(|e| {
+        usage_error(
+            "localize",
+            format!(
+                "--window {} at --step {} m: {e}",
+                window_text(&window),
+                fmt_number(args.step)
+            ),
+        )
+    })?;
+    let headings = match args.heading_window {
+        Some(half_range_deg) => {
+            let step_deg = args.heading_step.unwrap_or(MAX_MATCHED_HEADING_STEP_DEG);
+            let heading = HeadingWindow {
+                half_range_deg,
+                step_deg: Some(step_deg),
+            };
+            heading.samples(step_deg.to_radians()).len()
+        }
+        None => 1,
+    };
+    let candidates = (x * y * z).saturating_mul(headings);
+    let limit = match mode {
+        SearchMode::Exhaustive => (args.max_candidates)
+            .unwrap_or(LocalizeOptions::default().max_exhaustive_candidates)
+            .min(MAX_GRID_CANDIDATES),
+        _ => MAX_GRID_CANDIDATES,
+    };
+    if candidates > limit {
+        let at_least = args.heading_window.is_none() || args.heading_step.is_none();
+        return Err(too_many_candidates(
+            (candidates, at_least),
+            [x, y, z, headings],
+            limit,
+            mode,
+        ));
+    }
+    Ok(())
+}
+
+/// The usage error of a search over more candidates than it takes: `candidates` (and whether
+/// it is a lower bound, counted before the scans are read), the grid (positions along x, y and
+/// z, and headings), the limit, and the flags that shrink it.
+fn too_many_candidates(
+    (candidates, at_least): (usize, bool),
+    [x, y, z, headings]: [usize; 4],
+    limit: usize,
+    mode: SearchMode,
+) -> anyhow::Error {
+    let some = if at_least { "at least " } else { "" };
+    let grid = match (at_least, headings) {
+        // The headings are not known before the scans are read.
+        (true, 1) => format!(
+            "at least {candidates} candidates ({x} × {y} × {z} positions, each at every heading \
+             searched)"
+        ),
+        _ => format!(
+            "{some}{candidates} candidates ({x} × {y} × {z} positions × {some}{headings} \
+             headings)"
+        ),
+    };
+    let message = if mode == SearchMode::Exhaustive && limit < MAX_GRID_CANDIDATES {
+        let raise = match at_least {
+            true => format!("--max-candidates (to {candidates} or more; "),
+            false => format!("--max-candidates {candidates} ("),
+        };
+        format!(
+            "the exhaustive search (--exhaustive, --search exhaustive) would score {grid}, more \
+             than its limit of {limit}: give a smaller --window, a coarser --step or a narrower \
+             --heading-window, raise the limit with {raise}about 15 s a million candidates on 2 \
+             cores), or leave the search to the default branch-and-bound, which finds the same \
+             minimum"
+        )
+    } else {
+        format!(
+            "the search grid would hold {grid}, more than the {limit} any search takes: give a \
+             smaller --window, a coarser --step or a narrower --heading-window"
+        )
+    };
+    usage_error("localize", message)
+}
+
 /// A window as `--window` takes it: `x0:x1,y0:y1,z0:z1`.
 fn window_text(window: &SearchWindow) -> String {
     (0..3)
@@ -464,6 +556,7 @@ pub fn run(args: Args) -> Result<Outcome> {
     // With --match-scan the step comes from the scan, not the command line.
     if !args.match_scan {
         check_step_fits_window(args.step, args.window.as_ref())?;
+        check_grid_size(&args, search.0)?;
     }
     let dataset = Dataset::open(&dataset_path)?;
     for (flag, index) in [("--reference", reference_index), ("--query", query_index)] {
@@ -657,20 +750,14 @@ fn localize_scans(
     let found = match found {
         Err(sdem::Error::TooManyCandidates {
             candidates,
-            grid: [x, y, z, headings],
+            grid,
             limit,
         }) => {
-            return Err(usage_error(
-                "localize",
-                format!(
-                    "the exhaustive search (--exhaustive, --search exhaustive) would score \
-                     {candidates} candidates ({x} × {y} × {z} positions × {headings} headings), \
-                     more than its limit of {limit}: give a smaller --window, a coarser \
-                     --step or a narrower --heading-window, raise the limit with \
-                     --max-candidates {candidates} (about 15 s a million candidates on 2 \
-                     cores), or leave the search to the default branch-and-bound, which finds \
-                     the same minimum"
-                ),
+            return Err(too_many_candidates(
+                (candidates, false),
+                grid,
+                limit,
+                SearchMode::Exhaustive,
             ))
         }
         other => {

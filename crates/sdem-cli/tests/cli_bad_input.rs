@@ -437,6 +437,41 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
             &["'tilt'", "`sdem bench --faults --case tilt` measures"],
         ),
         (
+            [&pair[..], &["--exhaustive", "--max-candidates", "1000"]].concat(),
+            &[
+                "at least 193011 candidates (101 × 91 × 21 positions, each at every heading",
+                "more than its limit of 1000",
+                "--max-candidates (to 193011 or more;",
+            ],
+        ),
+        (
+            [
+                &pair[..],
+                &["--search", "exhaustive", "--window", "-2:2,-2:2,-0.1:0.1"],
+                &["--heading-window", "2", "--heading-step", "1"],
+            ]
+            .concat(),
+            &[
+                "would score 16884105 candidates (401 × 401 × 21 positions × 5 headings)",
+                "limit of 4000000",
+                "--max-candidates 16884105",
+            ],
+        ),
+        (
+            [&pair[..], &["--window", "-2000:2000,-2:2,-0.1:0.1"]].concat(),
+            &[
+                "--window -2000:2000,-2:2,-0.1:0.1 at --step 0.01 m",
+                "spans 400001 steps",
+            ],
+        ),
+        (
+            [&pair[..], &["--window", "-200:200,-200:200,-1:1"]].concat(),
+            &[
+                "at least 321616080201 candidates",
+                "more than the 2000000000 any search takes",
+            ],
+        ),
+        (
             vec!["simulate", "--out", out, "--route", "stairs"],
             &["'stairs'", "--route", "room-laps, floor, wings"],
         ),

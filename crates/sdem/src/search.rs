@@ -56,7 +56,49 @@ impl SearchWindow {
         }
         Ok(())
     }
+
+    /// The candidate positions along x, y and z on a grid of step `step_m`: the window's lowest
+    /// corner, then every whole step that stays within it. A search scores each at every
+    /// heading; the window and the step alone fix them, so a caller can size a search before
+    /// any scan is read.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] for an invalid window, a step that is not a positive number, or an
+    /// axis of more than [`MAX_AXIS_STEPS`] positions.
+    ///
+    /// # Example
+    /// ```
+    /// let window = sdem::SearchWindow::paper(); // x -0.5..0.5, y -0.3..0.6, z -0.1..0.1 m
+    /// assert_eq!(window.positions(0.01)?, [101, 91, 21]);
+    /// # Ok::<(), sdem::Error>(())
+    /// ```
+    pub fn positions(&self, step_m: f64) -> Result<[usize; 3]> {
+        self.validate()?;
+        if !(step_m.is_finite() && step_m > 0.0) {
+            return Err(Error::Invalid(format!(
+                "search step {step_m} m must be a positive number"
+            )));
+        }
+        let mut counts = [0; 3];
+        for (axis, count) in counts.iter_mut().enumerate() {
+            let n = ((self.max[axis] - self.min[axis]) / step_m + 1e-9).floor() + 1.0;
+            if n > MAX_AXIS_STEPS as f64 {
+                return Err(Error::Invalid(format!(
+                    "search window {} spans {n} steps; use a larger step or a smaller window",
+                    AXES[axis]
+                )));
+            }
+            *count = n as usize;
+        }
+        Ok(counts)
+    }
 }
+
+/// The most positions a search window may hold along one axis ([`SearchWindow::positions`]).
+pub const MAX_AXIS_STEPS: usize = 100_000;
+
+/// The most candidates (positions × headings) any search's grid may hold.
+pub const MAX_GRID_CANDIDATES: usize = 2_000_000_000;
 
 /// The heading search around the compass reading.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -127,9 +169,17 @@ impl HeadingWindow {
     }
 }
 
+/// The finest heading step [`matched_heading_step`] gives, degrees.
+pub const MIN_MATCHED_HEADING_STEP_DEG: f64 = 0.05;
+
+/// The coarsest heading step [`matched_heading_step`] gives, degrees: a heading window holds at
+/// least as many headings as at this step, whatever the scan.
+pub const MAX_MATCHED_HEADING_STEP_DEG: f64 = 2.0;
+
 /// The heading step matched to a query's extent: a point at the median horizontal range moves by
-/// one translation step (clamped to 0.05°..2°). Farther points move more; the 6-DoF refinement
-/// takes the heading below the step.
+/// one translation step (clamped to [`MIN_MATCHED_HEADING_STEP_DEG`]..
+/// [`MAX_MATCHED_HEADING_STEP_DEG`]). Farther points move more; the 6-DoF refinement takes the
+/// heading below the step.
 pub fn matched_heading_step(query: &Sdem, step_m: f64) -> f64 {
     let mut ranges: Vec<f32> = query
         .points()
@@ -142,7 +192,10 @@ pub fn matched_heading_step(query: &Sdem, step_m: f64) -> f64 {
     let k = ranges.len() / 2;
     let (_, r, _) = ranges.select_nth_unstable_by(k, f32::total_cmp);
     let extent = (*r as f64).max(0.1);
-    (step_m / extent).clamp(0.05f64.to_radians(), 2f64.to_radians())
+    (step_m / extent).clamp(
+        MIN_MATCHED_HEADING_STEP_DEG.to_radians(),
+        MAX_MATCHED_HEADING_STEP_DEG.to_radians(),
+    )
 }
 
 /// The regular grid of candidates: translation on `counts[0..3]`, heading on `yaws`.
@@ -164,25 +217,10 @@ pub type Index = [usize; 4];
 
 impl CandidateGrid {
     pub fn new(window: &SearchWindow, step: f64, yaws: Vec<f64>) -> Result<Self> {
-        window.validate()?;
-        if !(step.is_finite() && step > 0.0) {
-            return Err(Error::Invalid(format!(
-                "search step {step} m must be a positive number"
-            )));
-        }
-        let mut counts = [0, 0, 0, yaws.len().max(1)];
-        for axis in 0..3 {
-            let n = ((window.max[axis] - window.min[axis]) / step + 1e-9).floor() + 1.0;
-            if n > 100_000.0 {
-                return Err(Error::Invalid(format!(
-                    "search window {} spans {n} steps; use a larger step or a smaller window",
-                    AXES[axis]
-                )));
-            }
-            counts[axis] = n as usize;
-        }
+        let [x, y, z] = window.positions(step)?;
+        let counts = [x, y, z, yaws.len().max(1)];
         let total = counts.iter().product::<usize>();
-        if total > 2_000_000_000 {
+        if total > MAX_GRID_CANDIDATES {
             return Err(Error::Invalid(format!(
                 "the search grid has {total} candidates; use a larger step or a smaller window"
             )));
