@@ -57,8 +57,9 @@ pub struct Args {
     /// as the first argument.
     #[arg(long, requires = "map", conflicts_with = "dataset")]
     scan: Option<PathBuf>,
-    /// With --map: the gyro/compass reading of the scan, roll,pitch,yaw in degrees [default:
-    /// none: the tilt and the heading are searched]. Without --near or --prior every heading is
+    /// With --map: the gyro/compass reading of the scan, roll,pitch,yaw in degrees, held to
+    /// attitude.csv's bounds (roll and pitch within ±360°, yaw within ±1e6°) [default: none:
+    /// the tilt and the heading are searched]. Without --near or --prior every heading is
     /// searched (the surfaces' heading hypotheses) whatever the reading says.
     #[arg(
         long,
@@ -430,9 +431,14 @@ fn window_text(window: &SearchWindow) -> String {
         .join(",")
 }
 
-/// Parses `--attitude roll,pitch,yaw` (degrees).
+/// Parses `--attitude roll,pitch,yaw` (degrees), held to the bounds of an attitude.csv reading
+/// ([`sdem_io::attitude_reading_problem`]).
 fn parse_attitude(text: &str) -> Result<[f64; 3], String> {
-    numbers(text, "roll,pitch,yaw in degrees")
+    let [roll, pitch, yaw] = numbers(text, "roll,pitch,yaw in degrees")?;
+    match sdem_io::attitude_reading_problem(roll, pitch, yaw) {
+        Some(why) => Err(why),
+        None => Ok([roll, pitch, yaw]),
+    }
 }
 
 /// `sdem localize --map DIR --scan FILE`: relocalizes a scan in a saved map.

@@ -491,6 +491,39 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
             &["--attitude-sigma-deg describes the --attitude reading"],
         ),
         (
+            vec![
+                "localize",
+                "--map",
+                "map",
+                "scan.ply",
+                "--attitude",
+                "400,0,0",
+            ],
+            &["--attitude", "roll is 400 degrees", "within ±360°"],
+        ),
+        (
+            vec![
+                "localize",
+                "--map",
+                "map",
+                "scan.ply",
+                "--attitude",
+                "0,-1e4,0",
+            ],
+            &["--attitude", "pitch is -10000 degrees"],
+        ),
+        (
+            vec![
+                "localize",
+                "--map",
+                "map",
+                "scan.ply",
+                "--attitude",
+                "0,0,2e6",
+            ],
+            &["--attitude", "yaw is 2.000e6 degrees", "±1.000e6°"],
+        ),
+        (
             [&pair[..], &["--cost", "virtual"]].concat(),
             &["--cost virtual needs --search exhaustive or --search coarse-to-fine"],
         ),

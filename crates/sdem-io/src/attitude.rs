@@ -68,6 +68,21 @@ pub(super) fn yaw_reading_problem(yaw_deg: f64) -> Option<String> {
     })
 }
 
+/// The error text for an attitude reading (degrees) beyond the bounds `attitude.csv` holds its
+/// readings to — a roll or pitch beyond ±[`MAX_TILT_READING_DEG`], a yaw beyond
+/// ±[`MAX_YAW_READING_DEG`] — or `None` within them: for a reading given elsewhere (`sdem
+/// localize --attitude`) to be held to the same bounds, in the same words.
+///
+/// # Example
+/// ```
+/// assert_eq!(sdem_io::attitude_reading_problem(0.5, -1.0, 725.0), None);
+/// let why = sdem_io::attitude_reading_problem(1500.0, 0.0, 90.0).unwrap();
+/// assert!(why.starts_with("roll is 1500 degrees, more than a full turn"), "{why}");
+/// ```
+pub fn attitude_reading_problem(roll_deg: f64, pitch_deg: f64, yaw_deg: f64) -> Option<String> {
+    tilt_reading_problem(roll_deg, pitch_deg).or_else(|| yaw_reading_problem(yaw_deg))
+}
+
 /// Writes `attitude.csv`: the header [`ATTITUDE_HEADER`], then `index,roll,pitch,yaw` per scan
 /// with the angles in degrees, written so that they read back to the same degrees bit-for-bit.
 /// When a reading's standard deviations ([`Attitude::sigma`]) are not the defaults, every row
@@ -104,10 +119,7 @@ pub fn write_attitude_csv(path: &Path, attitudes: &[Attitude]) -> Result<()> {
             "roll_pitch_sigma_deg",
             "yaw_sigma_deg",
         );
-        if let Some(why) = (tilt_reading_problem(roll, pitch))
-            .or_else(|| yaw_reading_problem(yaw))
-            .or(sigma.err())
-        {
+        if let Some(why) = attitude_reading_problem(roll, pitch, yaw).or(sigma.err()) {
             return Err(Error::Invalid(format!(
                 "refusing to write {}: attitude {i}: {why}",
                 path.display()
@@ -243,7 +255,7 @@ pub fn read_attitude_readings(
         let roll = parse_finite(path, line_no, roll, "roll_deg")?;
         let pitch = parse_finite(path, line_no, pitch, "pitch_deg")?;
         let yaw = parse_finite(path, line_no, yaw, "yaw_deg")?;
-        if let Some(why) = tilt_reading_problem(roll, pitch).or_else(|| yaw_reading_problem(yaw)) {
+        if let Some(why) = attitude_reading_problem(roll, pitch, yaw) {
             return Err(Error::parse(path, Some(line_no), why));
         }
         let sigma = match sigma {

@@ -54,7 +54,9 @@
 //! The header exactly as shown, then one row per scan with `index` counting 0, 1, 2, … in order.
 //! Angles in degrees, `R = Rz(yaw) · Ry(pitch) · Rx(roll)`. Blank lines are ignored. A roll or
 //! pitch beyond ±[`MAX_TILT_READING_DEG`] (360°) is not a reading in degrees and is an error;
-//! yaw is not bounded (a gyro heading may be unwrapped).
+//! a yaw may be unwrapped (a gyro heading), up to ±[`MAX_YAW_READING_DEG`] (1e6°, some 2,800
+//! turns). `sdem localize --attitude` holds its reading to the same bounds
+//! ([`attitude_reading_problem`]).
 //!
 //! Each reading may carry its own standard deviations (a compass that is good in the open and
 //! poor near steel), in two more columns, degrees, with the header
@@ -251,8 +253,9 @@ mod voxels;
 
 pub use self::e57::{for_each_e57_scan, read_e57, write_e57, E57Scan, E57ScanOut};
 pub use attitude::{
-    read_attitude_csv, read_attitude_readings, write_attitude_csv, AttitudeReadings,
-    ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG, MAX_YAW_READING_DEG,
+    attitude_reading_problem, read_attitude_csv, read_attitude_readings, write_attitude_csv,
+    AttitudeReadings, ATTITUDE_HEADER, ATTITUDE_HEADER_WITH_SIGMA, MAX_TILT_READING_DEG,
+    MAX_YAW_READING_DEG,
 };
 pub use dataset::{
     clear_dataset, write_dataset, write_dataset_streamed, Dataset, DatasetPlan, SigmaSource,
