@@ -95,6 +95,14 @@ pub(super) const NO_PRIOR_SEARCH_SHARE: f64 = 0.75;
 /// measured.
 pub(super) const RIVAL_COARSE_EXCESS: f64 = 0.12;
 
+/// What a search of the map without a prior found ([`MapSearch::find_in_map_or_weak`]): a
+/// match taken, or else its best weak match.
+#[derive(Default)]
+pub(super) struct PlaceSearch {
+    pub found: Option<Located>,
+    pub weak: Option<Matched>,
+}
+
 /// A place searched over every heading ([`MapSearch::search_every_heading`]): the nodes whose
 /// points are merged (seen from the first one's origin), the window's centre (world) and
 /// half-size, and the share of its cells a match there must at least find on the coarse grid
@@ -422,7 +430,7 @@ impl MapSearch<'_> {
                 };
                 None
             }
-            Err(e) if matches!(e, Error::TooFewPoints { .. }) => {
+            Err(e) if matches!(e, Error::TooFewPoints { .. } | Error::NoUsablePoints { .. }) => {
                 attempt.reason = e.to_string();
                 None
             }
@@ -508,6 +516,23 @@ impl MapSearch<'_> {
         max_candidates: Option<usize>,
         attempts: &mut Vec<Attempt>,
     ) -> Result<Option<Located>> {
+        Ok(self
+            .find_in_map_or_weak(scan, keep, max_candidates, attempts)?
+            .found)
+    }
+
+    /// [`Self::find_in_map`], and when nothing is taken, its best weak match: one with no
+    /// doubt that the search found (it matches the share of cells the coarse search prunes
+    /// at, [`NO_PRIOR_SEARCH_SHARE`] of a loop closure's) but not the share a match without a
+    /// prior needs, unless a match elsewhere compares almost as well. Alone it is not taken;
+    /// two of them that agree can be (`joins`).
+    pub(super) fn find_in_map_or_weak(
+        &self,
+        scan: &ScanInput,
+        keep: impl Fn(usize) -> bool,
+        max_candidates: Option<usize>,
+        attempts: &mut Vec<Attempt>,
+    ) -> Result<PlaceSearch> {
         let recovery = &self.config.recovery;
         let count = max_candidates.unwrap_or(recovery.relocalize_candidates);
         let candidates = self.place_candidates(scan, &keep, count)?;
@@ -548,12 +573,9 @@ impl MapSearch<'_> {
                 }
             }
         }
-        let Some(best) = results.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
-            return Ok(None);
-        };
         let ratio = self.config.localize.ambiguous_cost_ratio;
         let segment_of = |m: &Matched| self.map.nodes[m.references[0].0].segment;
-        let elsewhere = |m: &Matched| {
+        let apart = |m: &Matched, best: &Matched| {
             let apart =
                 m.world_from_sensor.translation.vector - best.world_from_sensor.translation.vector;
             segment_of(m) != segment_of(best)
@@ -563,6 +585,18 @@ impl MapSearch<'_> {
                     .angle_to(&best.world_from_sensor.rotation)
                     > 10f64.to_radians()
         };
+        let Some(best) = results.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
+            // Nothing taken: the best weak match, when no other place rivals it.
+            let weak = (rivals.iter())
+                .filter(|m| m.doubts.is_empty())
+                .min_by(|a, b| a.cost.total_cmp(&b.cost))
+                .filter(|weak| {
+                    !(rivals.iter()).any(|m| apart(m, weak) && m.cost < ratio * weak.cost)
+                })
+                .cloned();
+            return Ok(PlaceSearch { found: None, weak });
+        };
+        let elsewhere = |m: &Matched| apart(m, best);
         let rival = (results.iter().chain(&rivals))
             .filter(|m| elsewhere(m) && m.cost < ratio * best.cost)
             .min_by(|a, b| a.cost.total_cmp(&b.cost));
@@ -578,10 +612,13 @@ impl MapSearch<'_> {
                 );
                 a.accepted = false;
             }
-            return Ok(None);
+            return Ok(PlaceSearch::default());
         }
         let segment = segment_of(best);
-        Ok(Some(found(best.clone(), StepStatus::Relocalized, segment)))
+        Ok(PlaceSearch {
+            found: Some(found(best.clone(), StepStatus::Relocalized, segment)),
+            weak: None,
+        })
     }
 
     /// The share of its cells a place must match on the coarse grid to rival a match of fine

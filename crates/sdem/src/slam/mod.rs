@@ -139,6 +139,12 @@ pub struct Slam {
     /// The nodes a join of their segment with another was tried from (the tries are bounded:
     /// `joins`).
     join_tries: Vec<usize>,
+    /// Weak matches of nodes of segments not yet joined, each waiting for another that agrees
+    /// (`joins`).
+    weak_joins: Vec<joins::WeakJoin>,
+    /// The weak match of the scan being added when the whole map was searched for it, for
+    /// its node if it starts a segment.
+    lost_weak: Option<Matched>,
     /// The run the next scans belong to.
     run: usize,
     /// The robot's last stop, when its place in the map is known to the loop (`None` at the
@@ -170,6 +176,8 @@ impl Slam {
             unplaced_segments: Vec::new(),
             measured_segments: Vec::new(),
             join_tries: Vec::new(),
+            weak_joins: Vec::new(),
+            lost_weak: None,
             run: 0,
             last_node: None,
             last_scan_index: None,
@@ -442,7 +450,9 @@ impl Slam {
             self.upkeep.bring(&mut self.map, &recent)?;
         }
         let mut attempts = Vec::new();
+        self.lost_weak = None;
         let located = self.locate(scan, self.last_node, &mut attempts)?;
+        let lost_weak = self.lost_weak.take();
         let (status, matched, segment, world_from_sensor) = match located {
             Located::Found {
                 matched,
@@ -485,6 +495,10 @@ impl Slam {
             matched.as_ref(),
             &links,
         )?;
+        if let (StepStatus::NewSegment, Some(weak)) = (status, lost_weak) {
+            self.weak_joins
+                .push(joins::WeakJoin::new(&self.map, node_id, weak));
+        }
         let closing_start = Instant::now();
         let mut closing = self.close_loops(node_id)?;
         attempts.append(&mut closing.attempts);

@@ -43,16 +43,18 @@ impl Slam {
         attempts: &mut Vec<Attempt>,
     ) -> Result<Located> {
         let Some(last) = last else {
-            return Ok(
-                match self.search().find_in_map(scan, |_| true, None, attempts)? {
-                    Some(found) => found,
-                    None => Located::Lost {
-                        guess: pose_from_parts(Vec3::zeros(), scan.attitude.unwrap_or_default()),
-                        best: None,
-                        measured: false,
-                    },
+            let search = self
+                .search()
+                .find_in_map_or_weak(scan, |_| true, None, attempts)?;
+            self.lost_weak = search.weak;
+            return Ok(match search.found {
+                Some(found) => found,
+                None => Located::Lost {
+                    guess: pose_from_parts(Vec3::zeros(), scan.attitude.unwrap_or_default()),
+                    best: None,
+                    measured: false,
                 },
-            );
+            });
         };
         let segment = self.map.nodes[last].segment;
         let predictions = self.predictions(scan, last);
@@ -132,7 +134,11 @@ impl Slam {
                 return Ok(found(matched, StepStatus::Recovered, segment));
             }
         }
-        if let Some(found) = self.search().find_in_map(scan, |_| true, None, attempts)? {
+        let search = self
+            .search()
+            .find_in_map_or_weak(scan, |_| true, None, attempts)?;
+        self.lost_weak = search.weak;
+        if let Some(found) = search.found {
             return Ok(found);
         }
         // The new segment's frame shares the world's vertical and, with a compass, its heading:
@@ -232,16 +238,17 @@ impl Slam {
             })
     }
 
-    /// The scan's S-DEM levelled by `attitude`; an error when no point is usable.
+    /// The scan's S-DEM levelled by `attitude`; [`Error::NoUsablePoints`], saying why, when no
+    /// point is usable.
     fn query_sdem(&self, scan: &ScanInput, attitude: &Attitude) -> Result<Sdem> {
-        let query = Sdem::from_points(scan.points_in_sensor, attitude, &self.config.sdem)?;
-        if query.known_cells() == 0 {
-            return Err(Error::Invalid(format!(
-                "scan {} has no usable point (all closer than {} m or not finite)",
-                scan.scan_index, self.config.sdem.min_range_m
-            )));
-        }
-        Ok(query)
+        Sdem::from_usable_points(scan.points_in_sensor, attitude, &self.config.sdem).map_err(|e| {
+            match e {
+                Error::NoUsablePoints { reason } => Error::NoUsablePoints {
+                    reason: format!("{reason} (scan {})", scan.scan_index),
+                },
+                e => e,
+            }
+        })
     }
 
     /// The nodes to match a scan predicted by `prediction` against: the recent nodes of
