@@ -96,11 +96,20 @@ pub(super) const NO_PRIOR_SEARCH_SHARE: f64 = 0.75;
 pub(super) const RIVAL_COARSE_EXCESS: f64 = 0.12;
 
 /// What a search of the map without a prior found ([`MapSearch::find_in_map_or_weak`]): a
-/// match taken, or else its best weak match.
+/// match taken, or else its best weak match; `ambiguous` when a match was not taken because
+/// another place compares almost as well.
 #[derive(Default)]
 pub(super) struct PlaceSearch {
     pub found: Option<Located>,
     pub weak: Option<Matched>,
+    pub ambiguous: bool,
+}
+
+/// A place: a node and up to `nodes` nodes of its segment within `radius_m` of it, merged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PlaceSize {
+    nodes: usize,
+    radius_m: f64,
 }
 
 /// A place searched over every heading ([`MapSearch::search_every_heading`]): the nodes whose
@@ -535,15 +544,44 @@ impl MapSearch<'_> {
     ) -> Result<PlaceSearch> {
         let recovery = &self.config.recovery;
         let count = max_candidates.unwrap_or(recovery.relocalize_candidates);
-        let candidates = self.place_candidates(scan, &keep, count)?;
+        let small = PlaceSize {
+            nodes: recovery.relocalize_place_nodes,
+            radius_m: recovery.relocalize_radius_m,
+        };
+        let first = self.search_places(scan, &keep, count, small, attempts)?;
+        let wide = PlaceSize {
+            nodes: recovery.relocalize_wide_place_nodes,
+            radius_m: recovery.relocalize_wide_radius_m,
+        };
+        if first.found.is_some() || first.ambiguous || wide == small {
+            return Ok(first);
+        }
+        let second = self.search_places(scan, &keep, count, wide, attempts)?;
+        Ok(if second.found.is_some() || second.ambiguous {
+            second
+        } else {
+            PlaceSearch {
+                weak: second.weak.or(first.weak),
+                ..second
+            }
+        })
+    }
+
+    /// [`Self::find_in_map_or_weak`] with places of one size.
+    fn search_places(
+        &self,
+        scan: &ScanInput,
+        keep: &impl Fn(usize) -> bool,
+        count: usize,
+        size: PlaceSize,
+        attempts: &mut Vec<Attempt>,
+    ) -> Result<PlaceSearch> {
+        let recovery = &self.config.recovery;
+        let candidates = self.place_candidates(scan, keep, count, size)?;
         let mut results: Vec<Matched> = Vec::new();
         let mut rivals: Vec<Matched> = Vec::new();
         for (node, distance) in candidates {
-            let nodes = self.map.nearby_in_segment(
-                node,
-                recovery.relocalize_radius_m,
-                recovery.relocalize_place_nodes,
-            );
+            let nodes = self.map.nearby_in_segment(node, size.radius_m, size.nodes);
             // A place searched after a match was taken elsewhere matters only as its rival.
             let taken_best = (results.iter()).min_by(|a, b| a.cost.total_cmp(&b.cost));
             let rival_needs = (taken_best.map(|best| self.rival_inlier_fraction(best.cost)))
@@ -594,7 +632,11 @@ impl MapSearch<'_> {
                     !(rivals.iter()).any(|m| apart(m, weak) && m.cost < ratio * weak.cost)
                 })
                 .cloned();
-            return Ok(PlaceSearch { found: None, weak });
+            return Ok(PlaceSearch {
+                found: None,
+                weak,
+                ambiguous: false,
+            });
         };
         let elsewhere = |m: &Matched| apart(m, best);
         let rival = (results.iter().chain(&rivals))
@@ -612,12 +654,16 @@ impl MapSearch<'_> {
                 );
                 a.accepted = false;
             }
-            return Ok(PlaceSearch::default());
+            return Ok(PlaceSearch {
+                ambiguous: true,
+                ..PlaceSearch::default()
+            });
         }
         let segment = segment_of(best);
         Ok(PlaceSearch {
             found: Some(found(best.clone(), StepStatus::Relocalized, segment)),
             weak: None,
+            ambiguous: false,
         })
     }
 
@@ -647,19 +693,17 @@ impl MapSearch<'_> {
         scan: &ScanInput,
         keep: &impl Fn(usize) -> bool,
         count: usize,
+        size: PlaceSize,
     ) -> Result<Vec<(usize, f64)>> {
-        let recovery = &self.config.recovery;
         let level = scan.attitude.unwrap_or_default();
         let query = Sdem::from_points(scan.points_in_sensor, &level, &self.config.sdem)?;
         let descriptor = Descriptor::from_levelled(query.points());
         let mut scored: Vec<(usize, f64)> = (self.map.nodes.iter())
             .filter(|n| keep(n.node_id))
             .filter_map(|n| {
-                let place = self.map.place_descriptor(
-                    n.node_id,
-                    recovery.relocalize_radius_m,
-                    recovery.relocalize_place_nodes,
-                )?;
+                let place = self
+                    .map
+                    .place_descriptor(n.node_id, size.radius_m, size.nodes)?;
                 Some((n.node_id, descriptor.distance_any_heading(&place)?.0))
             })
             .collect();

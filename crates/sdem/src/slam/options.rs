@@ -128,13 +128,20 @@ pub struct RecoveryOptions {
     /// up to a few metres from them (a second run facing back along the first).
     pub relocalize_window_half_m: [f64; 3],
     /// … and a node's place is the node and up to this many nodes of its segment within
-    /// `relocalize_radius_m`, merged. A scan facing back along a run sees what many of its
-    /// stops saw, each a little: on the route bench's second runs over seeds 1–12, places of
-    /// 3 nodes within 1.5 m joined 4 runs, places of 20 within 4 m 6 (and, with two weak
-    /// matches that agree, `joins`, more).
+    /// `relocalize_radius_m`, merged.
     pub relocalize_place_nodes: usize,
     /// See `relocalize_place_nodes`, metres.
     pub relocalize_radius_m: f64,
+    /// When no place of that size is taken (and none was ambiguous), the places are searched
+    /// again with up to this many nodes within `relocalize_wide_radius_m`. A scan facing back
+    /// along a run sees a little of what many of its stops saw: on the route bench's second
+    /// runs over seeds 1–12 (no odometry), places of 3 nodes within 1.5 m placed 4 runs,
+    /// places of 20 within 4 m 6, and 7 with two weak matches that agree (`joins`). Searched
+    /// first, the small places keep relocalization in the `revisit` map at 0.4 s a scan
+    /// (median) where places of 20 take 1.2 s.
+    pub relocalize_wide_place_nodes: usize,
+    /// See `relocalize_wide_place_nodes`, metres.
+    pub relocalize_wide_radius_m: f64,
     /// The nodes of the segment whose origins lie within this of a prediction are candidates
     /// when the recent ones do not see what the scan sees, metres (the scanner's reach).
     pub other_nodes_radius_m: f64,
@@ -155,8 +162,10 @@ impl Default for RecoveryOptions {
             every_heading_nodes: 3,
             relocalize_candidates: 6,
             relocalize_window_half_m: [2.2, 2.2, 0.3],
-            relocalize_place_nodes: 20,
-            relocalize_radius_m: 4.0,
+            relocalize_place_nodes: 3,
+            relocalize_radius_m: 1.5,
+            relocalize_wide_place_nodes: 20,
+            relocalize_wide_radius_m: 4.0,
             other_nodes_radius_m: 6.0,
             min_shared_inlier_fraction: 0.75,
             min_shared_inliers: 150,
@@ -184,13 +193,19 @@ impl RecoveryOptions {
                 self.max_heading_half_deg
             )));
         }
-        if self.every_heading_nodes == 0 || self.relocalize_place_nodes == 0 {
+        if self.every_heading_nodes == 0
+            || self.relocalize_place_nodes == 0
+            || self.relocalize_wide_place_nodes == 0
+        {
             return Err(Error::Invalid(
-                "recovery.every_heading_nodes and relocalize_place_nodes must be at least 1".into(),
+                "recovery.every_heading_nodes, relocalize_place_nodes and \
+                 relocalize_wide_place_nodes must be at least 1"
+                    .into(),
             ));
         }
         for (name, v) in [
             ("relocalize_radius_m", self.relocalize_radius_m),
+            ("relocalize_wide_radius_m", self.relocalize_wide_radius_m),
             ("other_nodes_radius_m", self.other_nodes_radius_m),
         ] {
             if !(v.is_finite() && v >= 0.0) {
