@@ -122,7 +122,7 @@ pub struct Args {
     step: f64,
     /// Score every candidate of the window (the paper's search; slow): at most 4,000,000
     /// candidates, about a minute on 2 cores (see --max-candidates). Same as `--search
-    /// exhaustive`.
+    /// exhaustive`; another --search with it is refused.
     #[arg(long, conflicts_with = "map")]
     exhaustive: bool,
     /// With the exhaustive search: score up to this many candidates instead of 4,000,000 (the
@@ -135,10 +135,11 @@ pub struct Args {
         value_parser = positive_count
     )]
     max_candidates: Option<usize>,
-    /// Which search: exact branch-and-bound (projective cost), the exhaustive oracle, or the
-    /// coarse-to-fine heuristic.
-    #[arg(long, value_enum, default_value_t = Search::BranchAndBound, conflicts_with = "map")]
-    search: Search,
+    /// Which search: exact branch-and-bound (projective cost), the exhaustive oracle (as
+    /// --exhaustive), or the coarse-to-fine heuristic [default: branch-and-bound, or exhaustive
+    /// with --exhaustive].
+    #[arg(long, value_enum, conflicts_with = "map")]
+    search: Option<Search>,
     /// Which form of the paper's eq. (1): query points looked up in the reference S-DEM
     /// (projective), or the paper's z-buffered virtual S-DEM (virtual; not with branch-and-bound).
     #[arg(long, value_enum, default_value_t = Cost::Projective, conflicts_with = "map")]
@@ -619,9 +620,22 @@ pub fn run(args: Args) -> Result<Outcome> {
 /// together), before anything is read.
 fn search_of(args: &Args) -> Result<(SearchMode, CostModel)> {
     let mode = match (args.exhaustive, args.search) {
-        (true, _) | (_, Search::Exhaustive) => SearchMode::Exhaustive,
-        (_, Search::BranchAndBound) => SearchMode::BranchAndBound,
-        (_, Search::CoarseToFine) => SearchMode::CoarseToFine,
+        (true, Some(other @ (Search::BranchAndBound | Search::CoarseToFine))) => {
+            // The exhaustive search would run and --search go unheeded.
+            let name = clap::ValueEnum::to_possible_value(&other)
+                .map(|v| v.get_name().to_string())
+                .unwrap_or_default();
+            return Err(usage_error(
+                "localize",
+                format!(
+                    "--exhaustive and --search {name} ask for two different searches \
+                     (--exhaustive is --search exhaustive); give one of them"
+                ),
+            ));
+        }
+        (true, _) | (_, Some(Search::Exhaustive)) => SearchMode::Exhaustive,
+        (false, None | Some(Search::BranchAndBound)) => SearchMode::BranchAndBound,
+        (false, Some(Search::CoarseToFine)) => SearchMode::CoarseToFine,
     };
     let model = match args.cost {
         Cost::Projective => CostModel::Projective,

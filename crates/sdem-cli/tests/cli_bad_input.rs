@@ -80,16 +80,21 @@ fn localize_names_a_bad_sensor_toml() {
 #[test]
 fn localize_in_a_map_refuses_the_options_it_would_ignore() {
     let dir = tempfile::tempdir().unwrap();
-    for flag in [
-        ["--step", "0.05"],
-        ["--window", "-1:1,-1:1,-0.1:0.1"],
-        ["--resolution", "0.5"],
-        ["--cost", "virtual"],
-        ["--search", "exhaustive"],
-    ] {
+    let flags: [&[&str]; 9] = [
+        &["--step", "0.05"],
+        &["--window", "-1:1,-1:1,-0.1:0.1"],
+        &["--resolution", "0.5"],
+        &["--cost", "virtual"],
+        &["--search", "exhaustive"],
+        &["--search", "coarse-to-fine"],
+        &["--search", "branch-and-bound"],
+        &["--exhaustive"],
+        &["--max-candidates", "1000"],
+    ];
+    for flag in flags {
         let r = common::run(
             dir.path(),
-            &["localize", "--map", "map", "scan.ply", flag[0], flag[1]],
+            &[&["localize", "--map", "map", "scan.ply"][..], flag].concat(),
         );
         assert_eq!(r.code, Some(2), "{flag:?}: {}", r.stderr);
         assert!(
@@ -458,6 +463,17 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
             ],
         ),
         (
+            [&pair[..], &["--exhaustive", "--search", "coarse-to-fine"]].concat(),
+            &[
+                "--exhaustive and --search coarse-to-fine",
+                "--exhaustive is --search exhaustive",
+            ],
+        ),
+        (
+            [&pair[..], &["--search", "branch-and-bound", "--exhaustive"]].concat(),
+            &["--exhaustive and --search branch-and-bound"],
+        ),
+        (
             [&pair[..], &["--window", "-2000:2000,-2:2,-0.1:0.1"]].concat(),
             &[
                 "--window -2000:2000,-2:2,-0.1:0.1 at --step 0.01 m",
@@ -587,4 +603,17 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
         let written: Vec<_> = std::fs::read_dir(dir.path()).unwrap().collect();
         assert!(written.is_empty(), "{args:?} wrote {written:?}");
     }
+}
+
+/// Beside the refusals above, the flags that do fit stay accepted: `--exhaustive --search
+/// exhaustive` is one search. It gets as far as its files (exit status 1, not 2).
+#[test]
+fn flags_that_fit_together_are_not_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let pair = ["localize", "nowhere", "--reference", "0", "--query", "1"];
+    let line = common::fails(
+        dir.path(),
+        &[&pair[..], &["--exhaustive", "--search", "exhaustive"]].concat(),
+    );
+    assert!(line.contains("nowhere"), "{line}");
 }
