@@ -422,6 +422,28 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
             ],
         ),
         (
+            [
+                &["bench", "--suite", "routes", "--quick"][..],
+                &["--route", "long-steps", "--kitti", "nowhere"],
+            ]
+            .concat(),
+            &[
+                "--kitti cannot be given with --route",
+                "--route runs only the named routes, without the KITTI part",
+            ],
+        ),
+        (
+            [
+                &["bench", "--suite", "routes", "--quick"][..],
+                &["--route", "revisit", "--peers", "nowhere"],
+            ]
+            .concat(),
+            &[
+                "--peers cannot be given with --route",
+                "--route runs only the named routes, without the KITTI part",
+            ],
+        ),
+        (
             vec!["bench", "--suite", "routes", "--peer-pairs", "3"],
             &[
                 "--peer-pairs applies to --suite unlevelled, compass-noise, lidar and \
@@ -606,7 +628,8 @@ fn every_subcommand_refuses_options_that_do_not_fit_as_a_usage_error_before_any_
 }
 
 /// Beside the refusals above, the flags that do fit stay accepted: `--exhaustive --search
-/// exhaustive` is one search. It gets as far as its files (exit status 1, not 2).
+/// exhaustive` is one search, and `--kitti`/`--peers` serve `--suite routes` when no `--route`
+/// leaves its KITTI part out. Each gets as far as its files (exit status 1, not 2).
 #[test]
 fn flags_that_fit_together_are_not_refused() {
     let dir = tempfile::tempdir().unwrap();
@@ -616,4 +639,15 @@ fn flags_that_fit_together_are_not_refused() {
         &[&pair[..], &["--exhaustive", "--search", "exhaustive"]].concat(),
     );
     assert!(line.contains("nowhere"), "{line}");
+    // --peers is looked for first, before any route runs.
+    let line = common::fails(
+        dir.path(),
+        &[
+            "bench", "--suite", "routes", "--quick", "--kitti", "nowhere", "--peers", "nowhere",
+        ],
+    );
+    assert!(
+        line.contains("--peers nowhere: no register_pair.py there"),
+        "{line}"
+    );
 }

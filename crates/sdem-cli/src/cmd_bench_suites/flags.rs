@@ -57,13 +57,15 @@ pub struct SuiteArgs {
     /// in ../shared/data beside the repository].
     #[arg(long = "scan", value_name = "FILE", requires = "suite")]
     pub scans: Vec<PathBuf>,
-    /// With --suite lidar or routes: the KITTI folder (velodyne/, poses.txt, calib.txt) [default:
-    /// ../shared/data/kitti-00-first16 beside the repository, skipped, saying so, when absent].
+    /// With --suite lidar or routes (not with --route, which leaves the KITTI part out): the
+    /// KITTI folder (velodyne/, poses.txt, calib.txt) [default: ../shared/data/kitti-00-first16
+    /// beside the repository, skipped, saying so, when absent].
     #[arg(long, value_name = "DIR", requires = "suite")]
     pub kitti: Option<PathBuf>,
     /// With --suite: the peers' folder, holding register_pair.py [default: ../shared/peers
     /// beside the repository]; their Python is $SDEM_PEERS_PYTHON, else
     /// /tmp/peers-venv/bin/python. Without either the suite runs without the peers, saying so.
+    /// Not with --suite routes --route (the peers there run on the KITTI part only).
     #[arg(long, value_name = "DIR", requires = "suite")]
     pub peers: Option<PathBuf>,
     /// With --suite: give the peers the first N pairs of each part, 0 for none [default: 20
@@ -84,7 +86,8 @@ pub struct SuiteArgs {
     /// With --suite scale or routes: the routes (repeat or separate by commas) [scale's
     /// default: room-laps, floor, wings; room-laps with --quick. routes' default: all six
     /// (long-steps, turn-around, kidnapped, half-blocked, revisit, second-run) and the KITTI
-    /// frames; naming routes leaves the KITTI frames out].
+    /// frames; naming routes leaves the KITTI frames out, so --kitti and --peers are refused
+    /// with it].
     #[arg(
         long = "route",
         value_name = "ROUTE",
@@ -165,6 +168,9 @@ pub(super) fn scale_args(
 /// `step`: whether `--pairs` and `--step` were given.
 pub fn check_flags(args: &SuiteArgs, suite: Suite, pairs: bool, step: bool) -> Result<()> {
     let takes_routes = matches!(suite, Suite::Scale | Suite::Routes);
+    // Named routes leave out the routes suite's KITTI part, the only use there of --kitti and
+    // of the peers (KISS-ICP on the KITTI frames).
+    let only_routes = suite == Suite::Routes && !args.routes.is_empty();
     let refused = [
         (
             !args.sizes.is_empty() && suite != Suite::Scale,
@@ -206,6 +212,18 @@ pub fn check_flags(args: &SuiteArgs, suite: Suite, pairs: bool, step: bool) -> R
             args.peers.is_some() && suite == Suite::Scale,
             "--peers applies to --suite unlevelled, compass-noise, lidar, routes and \
              real-geometry only (scale runs no peer)",
+        ),
+        (
+            args.kitti.is_some() && only_routes,
+            "--kitti cannot be given with --route: --route runs only the named routes, without \
+             the KITTI part; drop --route to run every route and the KITTI frames, or drop \
+             --kitti",
+        ),
+        (
+            args.peers.is_some() && only_routes,
+            "--peers cannot be given with --route: --route runs only the named routes, without \
+             the KITTI part, the only one --suite routes gives the peers (KISS-ICP on the KITTI \
+             frames); drop --route to run every route and the KITTI frames, or drop --peers",
         ),
         (
             args.peer_pairs.is_some() && takes_routes,
