@@ -115,8 +115,14 @@ impl Slam {
         let joined = self.join_segments(edge, &matched.world_from_sensor)?;
         closure.correction_m = Some(joined.moved_m);
         if let Some(earlier) = earlier {
-            // The weak match that this one agrees with is an edge of the joined graph too.
-            let (edge, mut other) = self.join_link(earlier.node, &earlier.matched);
+            // The weak match that this one agrees with is an edge of the joined graph too, as
+            // it placed its node from the node it was matched against.
+            let matched = Matched {
+                world_from_sensor: self.map.nodes[earlier.link].world_from_sensor
+                    * earlier.link_from_node,
+                ..earlier.matched
+            };
+            let (edge, mut other) = self.join_link(earlier.node, &matched);
             self.edges.push(edge);
             other.correction_m = Some(joined.moved_m);
             self.loop_closures.push(other.clone());
