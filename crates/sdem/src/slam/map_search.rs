@@ -625,8 +625,9 @@ impl MapSearch<'_> {
         };
         let Some(best) = results.iter().min_by(|a, b| a.cost.total_cmp(&b.cost)) else {
             // Nothing taken: the best weak match, when no other place rivals it.
+            let floor = self.no_prior_inlier_fraction();
             let weak = (rivals.iter())
-                .filter(|m| m.doubts.is_empty())
+                .filter(|m| m.doubts.is_empty() && m.diagnostics.inlier_fraction >= floor)
                 .min_by(|a, b| a.cost.total_cmp(&b.cost))
                 .filter(|weak| {
                     !(rivals.iter()).any(|m| apart(m, weak) && m.cost < ratio * weak.cost)
