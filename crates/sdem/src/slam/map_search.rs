@@ -534,7 +534,7 @@ impl MapSearch<'_> {
     /// doubt that the search found (it matches the share of cells the coarse search prunes
     /// at, [`NO_PRIOR_SEARCH_SHARE`] of a loop closure's) but not the share a match without a
     /// prior needs, unless a match elsewhere compares almost as well. Alone it is not taken;
-    /// two of them that agree can be (`joins`).
+    /// three of them that agree can be (`joins`).
     pub(super) fn find_in_map_or_weak(
         &self,
         scan: &ScanInput,

@@ -136,7 +136,7 @@ pub struct RecoveryOptions {
     /// again with up to this many nodes within `relocalize_wide_radius_m`. A scan facing back
     /// along a run sees a little of what many of its stops saw: on the route bench's second
     /// runs over seeds 1–12 (no odometry), places of 3 nodes within 1.5 m placed 4 runs,
-    /// places of 20 within 4 m 6, and 7 with two weak matches that agree (`joins`). Searched
+    /// places of 20 within 4 m 6, and 7 with three weak matches that agree (`joins`). Searched
     /// first, the small places keep relocalization in the `revisit` map at 0.4 s a scan
     /// (median) where places of 20 take 1.2 s.
     pub relocalize_wide_place_nodes: usize,
