@@ -60,7 +60,8 @@ impl Node {
     /// lies in front of the surface; see the module's documentation).
     ///
     /// # Errors
-    /// An invalid `sdem` configuration, or a scan with no usable point.
+    /// An invalid `sdem` configuration, or ([`Error::NoUsablePoints`], saying why) a scan with
+    /// no usable point.
     pub fn from_scan(
         node_id: usize,
         scan_index: usize,
@@ -70,13 +71,14 @@ impl Node {
         sdem: &SdemConfig,
     ) -> Result<Self> {
         let rotation = world_from_sensor.rotation.to_rotation_matrix();
-        let levelled = Sdem::from_points(points_in_sensor, &attitude_of(&world_from_sensor), sdem)?;
-        if levelled.known_cells() == 0 {
-            return Err(Error::Invalid(format!(
-                "scan {scan_index} has no point between {} m and the sensor's range",
-                sdem.min_range_m
-            )));
-        }
+        let levelled =
+            Sdem::from_usable_points(points_in_sensor, &attitude_of(&world_from_sensor), sdem)
+                .map_err(|e| match e {
+                    Error::NoUsablePoints { reason } => Error::NoUsablePoints {
+                        reason: format!("{reason} (scan {scan_index})"),
+                    },
+                    e => e,
+                })?;
         let sensor_from_level = rotation.inverse();
         let points_in_sensor = levelled
             .surface_points()

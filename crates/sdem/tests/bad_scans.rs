@@ -79,6 +79,30 @@ fn a_scan_that_fills_no_cell_says_why() {
     }
 }
 
+/// The loop's first scan becomes a node at once, with no search: one that fills no cell is
+/// refused there too, with the same typed error naming the scan, and the map stays empty.
+#[test]
+fn a_first_scan_that_fills_no_cell_is_refused_saying_why() {
+    let at_origin = vec![Vector3::zeros(); 500];
+    let mut slam = sdem::Slam::new(sdem::SlamOptions::default()).unwrap();
+    let scan = sdem::slam::ScanInput {
+        scan_index: 7,
+        points_in_sensor: &at_origin,
+        attitude: None,
+        odometry: None,
+    };
+    match slam.add_scan(&scan) {
+        Err(e @ Error::NoUsablePoints { .. }) => {
+            let message = e.to_string();
+            for w in ["the scan has no usable point", "within 0.05 m", "(scan 7)"] {
+                assert!(message.contains(w), "{message:?} lacks {w:?}");
+            }
+        }
+        other => panic!("expected NoUsablePoints, got {other:?}"),
+    }
+    assert!(slam.map.nodes.is_empty());
+}
+
 #[test]
 fn non_finite_input_is_named_nan_points_are_no_return() {
     let mut points = room();
