@@ -141,6 +141,17 @@ pub enum Error {
 }
 
 impl Error {
+    /// This error, naming scan `scan_index` where it says why a scan has no usable point
+    /// (the loop's scans are told apart by their index); any other error as it is.
+    pub(crate) fn of_scan(self, scan_index: usize) -> Self {
+        match self {
+            Error::NoUsablePoints { reason } => Error::NoUsablePoints {
+                reason: format!("{reason} (scan {scan_index})"),
+            },
+            e => e,
+        }
+    }
+
     /// Whether the scans were usable but did not match: nothing in the window overlaps or
     /// matches, the refinement failed, or no node matched. A caller can widen the search, try
     /// other nodes, or keep the scan out of the map; every other error is bad input or options.

@@ -73,12 +73,7 @@ impl Node {
         let rotation = world_from_sensor.rotation.to_rotation_matrix();
         let levelled =
             Sdem::from_usable_points(points_in_sensor, &attitude_of(&world_from_sensor), sdem)
-                .map_err(|e| match e {
-                    Error::NoUsablePoints { reason } => Error::NoUsablePoints {
-                        reason: format!("{reason} (scan {scan_index})"),
-                    },
-                    e => e,
-                })?;
+                .map_err(|e| e.of_scan(scan_index))?;
         let sensor_from_level = rotation.inverse();
         let points_in_sensor = levelled
             .surface_points()

@@ -87,11 +87,15 @@ impl WeakJoin {
         }
     }
 
+    /// The node's pose in the frame of the link's segment, as this match has it, from where the
+    /// link stands now.
+    fn world_from_node(&self, map: &Map) -> Pose {
+        map.nodes[self.link].world_from_sensor * self.link_from_node
+    }
+
     /// The frame of the link's segment from the frame of the node's, as this match has it.
     fn other_from_segment(&self, map: &Map) -> Pose {
-        map.nodes[self.link].world_from_sensor
-            * self.link_from_node
-            * map.nodes[self.node].world_from_sensor.inverse()
+        self.world_from_node(map) * map.nodes[self.node].world_from_sensor.inverse()
     }
 }
 /// A join is tried again from a node of a segment only this many stops of the segment after
@@ -126,8 +130,7 @@ impl Slam {
             // The weak matches that this one agrees with are edges of the joined graph too, as
             // they placed their nodes from the nodes they were matched against.
             let matched = Matched {
-                world_from_sensor: self.map.nodes[earlier.link].world_from_sensor
-                    * earlier.link_from_node,
+                world_from_sensor: earlier.world_from_node(&self.map),
                 ..earlier.matched
             };
             let (edge, mut other) = self.join_link(earlier.node, &matched);

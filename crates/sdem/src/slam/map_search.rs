@@ -52,11 +52,12 @@ pub(super) enum Located {
         segment: usize,
     },
     /// Found nowhere with confidence: the best guess of its pose (`measured`: the odometry's),
-    /// and the best match tried.
+    /// the best match tried, and the weak match of the whole map's search, if any (`joins`).
     Lost {
         guess: Pose,
         best: Option<Matched>,
         measured: bool,
+        weak: Option<Box<Matched>>,
     },
 }
 

@@ -142,9 +142,6 @@ pub struct Slam {
     /// Weak matches of nodes of segments not yet joined, each waiting for another that agrees
     /// (`joins`).
     weak_joins: Vec<joins::WeakJoin>,
-    /// The weak match of the scan being added when the whole map was searched for it, for
-    /// its node if it starts a segment.
-    lost_weak: Option<Matched>,
     /// The run the next scans belong to.
     run: usize,
     /// The robot's last stop, when its place in the map is known to the loop (`None` at the
@@ -177,7 +174,6 @@ impl Slam {
             measured_segments: Vec::new(),
             join_tries: Vec::new(),
             weak_joins: Vec::new(),
-            lost_weak: None,
             run: 0,
             last_node: None,
             last_scan_index: None,
@@ -450,9 +446,8 @@ impl Slam {
             self.upkeep.bring(&mut self.map, &recent)?;
         }
         let mut attempts = Vec::new();
-        self.lost_weak = None;
         let located = self.locate(scan, self.last_node, &mut attempts)?;
-        let lost_weak = self.lost_weak.take();
+        let mut lost_weak = None;
         let (status, matched, segment, world_from_sensor) = match located {
             Located::Found {
                 matched,
@@ -471,7 +466,9 @@ impl Slam {
                 guess,
                 best,
                 measured,
+                weak,
             } => {
+                lost_weak = weak;
                 if self.last_node.is_none() {
                     self.unplaced_segments.push(node_id);
                 } else if measured {
@@ -495,9 +492,9 @@ impl Slam {
             matched.as_ref(),
             &links,
         )?;
-        if let (StepStatus::NewSegment, Some(weak)) = (status, lost_weak) {
+        if let Some(weak) = lost_weak {
             self.weak_joins
-                .push(joins::WeakJoin::new(&self.map, node_id, weak));
+                .push(joins::WeakJoin::new(&self.map, node_id, *weak));
         }
         let closing_start = Instant::now();
         let mut closing = self.close_loops(node_id)?;

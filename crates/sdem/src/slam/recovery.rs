@@ -17,7 +17,7 @@ use super::predictions::Prediction;
 use super::step::{Attempt, PredictionSource, StepStatus};
 use super::{ms, ScanInput, Slam};
 use crate::doubt::Doubt;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::geometry::{pose_from_parts, Attitude, Vec3};
 use crate::sdem::Sdem;
 use std::time::Instant;
@@ -46,13 +46,13 @@ impl Slam {
             let search = self
                 .search()
                 .find_in_map_or_weak(scan, |_| true, None, attempts)?;
-            self.lost_weak = search.weak;
             return Ok(match search.found {
                 Some(found) => found,
                 None => Located::Lost {
                     guess: pose_from_parts(Vec3::zeros(), scan.attitude.unwrap_or_default()),
                     best: None,
                     measured: false,
+                    weak: search.weak.map(Box::new),
                 },
             });
         };
@@ -137,7 +137,6 @@ impl Slam {
         let search = self
             .search()
             .find_in_map_or_weak(scan, |_| true, None, attempts)?;
-        self.lost_weak = search.weak;
         if let Some(found) = search.found {
             return Ok(found);
         }
@@ -163,6 +162,7 @@ impl Slam {
             guess,
             best: best.map(|b| b.0),
             measured: measured.is_some(),
+            weak: search.weak.map(Box::new),
         })
     }
 
@@ -241,14 +241,8 @@ impl Slam {
     /// The scan's S-DEM levelled by `attitude`; [`Error::NoUsablePoints`], saying why, when no
     /// point is usable.
     fn query_sdem(&self, scan: &ScanInput, attitude: &Attitude) -> Result<Sdem> {
-        Sdem::from_usable_points(scan.points_in_sensor, attitude, &self.config.sdem).map_err(|e| {
-            match e {
-                Error::NoUsablePoints { reason } => Error::NoUsablePoints {
-                    reason: format!("{reason} (scan {})", scan.scan_index),
-                },
-                e => e,
-            }
-        })
+        Sdem::from_usable_points(scan.points_in_sensor, attitude, &self.config.sdem)
+            .map_err(|e| e.of_scan(scan.scan_index))
     }
 
     /// The nodes to match a scan predicted by `prediction` against: the recent nodes of
