@@ -70,6 +70,18 @@ impl Prediction {
         }
     }
 
+    /// Whether `pose` lies where this prediction allows: within two of its motion's σ of its
+    /// position along each axis (at least its window; the window's height does not grow with
+    /// the step, the odometry's vertical error does) and its heading within the heading window.
+    pub fn allows(&self, pose: &Pose) -> bool {
+        let d = pose.translation.vector - self.position;
+        let turn = wrap_pi(attitude_of(pose).yaw - self.attitude.yaw)
+            .abs()
+            .to_degrees();
+        let within = |i: usize| d[i].abs() <= self.window_half[i].max(2.0 * self.motion_sigma_m);
+        (0..3).all(within) && turn <= self.heading_half
+    }
+
     /// Whether `other`'s search lies inside this one's: its position within a quarter of this
     /// window, the same heading, and no wider windows.
     fn covers(&self, other: &Prediction) -> bool {

@@ -113,7 +113,12 @@ impl Slam {
             let query = self.query_sdem(scan, &prediction.attitude)?;
             let recent = self.reference_nodes(&query, prediction, segment, last);
             let others = self.segment_references(&query, prediction, segment, last);
-            if prediction.source == PredictionSource::OtherNodes && same_nodes(&recent, &others) {
+            // Against the same nodes the segment's search repeats the recent nodes' — unless
+            // that one was the odometry's and found nothing: it asked for as many inliers as
+            // tracking needs, and a long step into a new room matches fewer where the odometry
+            // says (the best place to start the new segment from, when it comes to that).
+            let repeats = same_nodes(&recent, &others) && !(base.measured && best.is_none());
+            if prediction.source == PredictionSource::OtherNodes && repeats {
                 continue;
             }
             match self.try_prediction(
@@ -140,24 +145,36 @@ impl Slam {
         if let Some(found) = search.found {
             return Ok(found);
         }
-        // The new segment's frame shares the world's vertical and, with a compass, its heading:
-        // only the position is a guess — the odometry's when there is odometry (a measurement),
-        // else the best match's.
+        // Where the new segment's first node stands is a guess. With odometry (a
+        // measurement), the best match when it lies where the odometry allows (the
+        // scans place a stop to millimetres in the right basin, the odometry to a few per cent
+        // of the step: on the route bench's long steps every such match was within about 1 cm
+        // and 0.3° of the truth, the odometry 5–27 cm), with the odometry's position along a
+        // direction the scans leave free; else the odometry's pose, heading
+        // included (a step's odometry turns by a fraction of a degree off, a compass near steel
+        // by degrees). Without odometry: the best match's position, the compass's heading.
         let measured = predictions.iter().find(|p| p.measured);
-        let mut guess = match (measured, &best) {
+        let guess = match (measured, &best) {
+            (Some(p), Some((m, _))) if p.allows(&m.world_from_sensor) => measured_along_free(m, p),
             (Some(p), _) => p.pose(),
-            (None, Some((m, _))) => m.world_from_sensor,
-            (None, None) => predictions[0].pose(),
+            (None, best) => {
+                let guess = best
+                    .as_ref()
+                    .map_or_else(|| predictions[0].pose(), |(m, _)| m.world_from_sensor);
+                match scan.attitude {
+                    Some(a) => {
+                        let yaw = self
+                            .compass(scan)
+                            .map_or(crate::geometry::attitude_of(&guess).yaw, |c| c.0);
+                        pose_from_parts(
+                            guess.translation.vector,
+                            Attitude::new(a.roll, a.pitch, yaw),
+                        )
+                    }
+                    None => guess,
+                }
+            }
         };
-        if let Some(a) = scan.attitude {
-            let yaw = self
-                .compass(scan)
-                .map_or(crate::geometry::attitude_of(&guess).yaw, |c| c.0);
-            guess = pose_from_parts(
-                guess.translation.vector,
-                Attitude::new(a.roll, a.pitch, yaw),
-            );
-        }
         Ok(Located::Lost {
             guess,
             best: best.map(|b| b.0),
@@ -426,4 +443,23 @@ impl Attempt {
         self.accepted = reason.is_none();
         self.reason = reason.unwrap_or_default();
     }
+}
+
+/// The pose of the match `matched`, moved along the direction its scans leave free (the cost's
+/// flat direction, else the refinement's weakest when too little faces along it) to the
+/// measured `prediction`'s place there: along a ditch the scans' position is their sampling's,
+/// the odometry's a measurement (a turned-round stop's match, 22 % of its cells, lay 4.7 cm
+/// along the ditch from the truth, the odometry of its 19 cm step 0.9 cm).
+fn measured_along_free(matched: &Matched, prediction: &Prediction) -> crate::geometry::Pose {
+    let mut pose = matched.world_from_sensor;
+    let unconstrained = (matched.doubts.iter()).find_map(|d| match d {
+        Doubt::Unconstrained { direction, .. } => Some(*direction),
+        _ => None,
+    });
+    if let Some(free) = matched.diagnostics.flat_direction.or(unconstrained) {
+        let v = Vec3::from(free);
+        let t = pose.translation.vector;
+        pose.translation.vector = t + v * v.dot(&(prediction.position - t));
+    }
+    pose
 }
