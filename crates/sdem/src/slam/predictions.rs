@@ -271,3 +271,53 @@ pub(super) fn take_prediction_along(
         shift_m: along,
     });
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An odometry prediction after a 1.5 m step: ±15 cm horizontally (its window), σ 22.5 cm.
+    fn after_long_step() -> Prediction {
+        Prediction {
+            source: PredictionSource::Odometry,
+            position: Vec3::new(1.5, 0.0, 0.0),
+            attitude: Attitude::new(0.0, 0.0, 0.2),
+            heading_prior: HeadingPrior::Odometry,
+            heading_half: 3.0,
+            window_half: [0.15, 0.15, 0.08],
+            prior_sigma_m: 0.05,
+            motion_sigma_m: 0.225,
+            measured: true,
+        }
+    }
+
+    fn at(x: f64, y: f64, z: f64, yaw_deg: f64) -> Pose {
+        pose_from_parts(
+            Vec3::new(x, y, z),
+            Attitude::new(0.0, 0.0, yaw_deg.to_radians()),
+        )
+    }
+
+    /// A pose is allowed within two of the motion's σ on every axis, the window's height
+    /// included (the window does not grow upwards with the step, the odometry's error does),
+    /// and within the heading window.
+    #[test]
+    fn a_measured_prediction_allows_two_sigma_on_every_axis_and_its_heading_window() {
+        let p = after_long_step();
+        let yaw = 0.2f64.to_degrees();
+        assert!(p.allows(&at(1.5, 0.0, 0.0, yaw)));
+        assert!(p.allows(&at(1.9, -0.4, 0.12, yaw + 2.9)));
+        assert!(!p.allows(&at(1.96, 0.0, 0.0, yaw)), "beyond 2σ along x");
+        assert!(!p.allows(&at(1.5, 0.0, -0.46, yaw)), "beyond 2σ in height");
+        assert!(
+            !p.allows(&at(1.5, 0.0, 0.0, yaw - 3.1)),
+            "outside the heading window"
+        );
+        // Across the half turn the heading wraps.
+        let turned = Prediction {
+            attitude: Attitude::new(0.0, 0.0, 179f64.to_radians()),
+            ..after_long_step()
+        };
+        assert!(turned.allows(&at(1.5, 0.0, 0.0, -179.0)));
+    }
+}

@@ -152,7 +152,8 @@ impl Slam {
         // and 0.3° of the truth, the odometry 5–27 cm), with the odometry's position along a
         // direction the scans leave free; else the odometry's pose, heading
         // included (a step's odometry turns by a fraction of a degree off, a compass near steel
-        // by degrees). Without odometry: the best match's position, the compass's heading.
+        // by degrees). Without odometry: the best match's position, and its heading where the
+        // compass allows it (a compass is off by degrees, a match's heading by tenths).
         let measured = predictions.iter().find(|p| p.measured);
         let guess = match (measured, &best) {
             (Some(p), Some((m, _))) if p.allows(&m.world_from_sensor) => measured_along_free(m, p),
@@ -161,11 +162,21 @@ impl Slam {
                 let guess = best
                     .as_ref()
                     .map_or_else(|| predictions[0].pose(), |(m, _)| m.world_from_sensor);
+                let matched_yaw = crate::geometry::attitude_of(&guess).yaw;
                 match scan.attitude {
                     Some(a) => {
-                        let yaw = self
-                            .compass(scan)
-                            .map_or(crate::geometry::attitude_of(&guess).yaw, |c| c.0);
+                        let yaw = match self.compass(scan) {
+                            Some((compass, half))
+                                if best.is_none()
+                                    || crate::geometry::wrap_pi(matched_yaw - compass)
+                                        .abs()
+                                        .to_degrees()
+                                        > half =>
+                            {
+                                compass
+                            }
+                            _ => matched_yaw,
+                        };
                         pose_from_parts(
                             guess.translation.vector,
                             Attitude::new(a.roll, a.pitch, yaw),
