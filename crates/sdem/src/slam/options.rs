@@ -25,8 +25,9 @@ pub struct SlamOptions {
     /// [`crate::cost::OffsetPrior`] (it decides only what the scans leave open, such as the
     /// position along a featureless ditch).
     pub prior_sigma_m: f64,
-    /// The odometry's error grows with the distance it measured: its window's horizontal
-    /// half-size is at least twice this share of the distance driven since the last stop,
+    /// The odometry's error grows with the distance it measured: its window's half-sizes
+    /// (the height's too: a step over rubble climbs more or less than the odometry says) are at
+    /// least twice this share of the distance driven since the last stop,
     /// and the variance its position carries along a direction the scans leave free at least
     /// this share squared (a crawler's tracks slip by 10–15 % on rubble, and a step of 1.5 m
     /// is 20 cm off then). The cost's prior keeps `prior_sigma_m`.

@@ -71,8 +71,8 @@ impl Prediction {
     }
 
     /// Whether `pose` lies where this prediction allows: within two of its motion's σ of its
-    /// position along each axis (at least its window; the window's height does not grow with
-    /// the step, the odometry's vertical error does) and its heading within the heading window.
+    /// position along each axis (at least its window, which the widest recovery window caps)
+    /// and its heading within the heading window.
     pub fn allows(&self, pose: &Pose) -> bool {
         let d = pose.translation.vector - self.position;
         let turn = wrap_pi(attitude_of(pose).yaw - self.attitude.yaw)
@@ -141,7 +141,8 @@ impl Slam {
         if let Some(odometry) = &scan.odometry {
             let motion = odometry.previous_sensor_from_sensor();
             let pose = last_pose * motion;
-            // The odometry's error grows with the distance it measured.
+            // The odometry's error grows with the distance it measured, on every axis (a 1.5 m
+            // step on the route bench climbed 12 cm more than the odometry said).
             let sigma = config
                 .prior_sigma_m
                 .max(config.odometry_error_per_m * motion.translation.vector.norm());
@@ -151,7 +152,7 @@ impl Slam {
             // prediction simply finds nothing there, and the other hypotheses and the recovery
             // take over, as after a step the window does not hold.
             let mut window_half = config.window_half_m;
-            for (h, widest) in window_half[..2]
+            for (h, widest) in window_half
                 .iter_mut()
                 .zip(config.recovery.max_window_half_m)
             {
@@ -298,9 +299,8 @@ mod tests {
         )
     }
 
-    /// A pose is allowed within two of the motion's σ on every axis, the window's height
-    /// included (the window does not grow upwards with the step, the odometry's error does),
-    /// and within the heading window.
+    /// A pose is allowed within two of the motion's σ on every axis, beyond a window that does
+    /// not reach that far, and within the heading window.
     #[test]
     fn a_measured_prediction_allows_two_sigma_on_every_axis_and_its_heading_window() {
         let p = after_long_step();
