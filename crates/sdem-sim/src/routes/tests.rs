@@ -8,6 +8,30 @@ fn coarse() -> RouteConfig {
     config
 }
 
+/// Asserts that each of `stops` lies within `bound_m` of the truth (its run's frame).
+fn assert_stops_within<'a>(stops: impl IntoIterator<Item = &'a RouteStopOutcome>, bound_m: f64) {
+    for stop in stops {
+        assert!(
+            stop.error_m < bound_m,
+            "run {}, stop {}: {} m off",
+            stop.run,
+            stop.index,
+            stop.error_m
+        );
+    }
+}
+
+/// Asserts that a route's ATE and the error of every stop in the map's frame are below
+/// `bound_m`.
+fn assert_mapped_within(outcome: &RouteOutcome, bound_m: f64) {
+    assert!(
+        outcome.ate_rmse_m < bound_m && outcome.max_error_m < bound_m,
+        "ATE {:.2} cm, max {:.2} cm: {outcome:?}",
+        outcome.ate_rmse_m * 100.0,
+        outcome.max_error_m * 100.0
+    );
+}
+
 fn steps(run: &RouteRun) -> Vec<f64> {
     (run.waypoints.windows(2))
         .map(|w| (w[1].along_m - w[0].along_m).abs())
@@ -140,14 +164,7 @@ fn a_second_run_facing_back_is_never_placed_wrong_in_the_first_runs_frame() {
         !placed.is_empty(),
         "no stop of the second run was placed: {outcome:?}"
     );
-    for stop in placed {
-        assert!(
-            stop.error_m < 0.05,
-            "second run's stop {}: {} m off",
-            stop.index,
-            stop.error_m
-        );
-    }
+    assert_stops_within(placed, 0.05);
 }
 
 /// Seed 8's second run starts facing back along the first and sees, from each stop, a little of
@@ -164,14 +181,7 @@ fn a_second_run_facing_back_is_joined_by_three_weak_matches_that_agree() {
         .filter(|s| s.run == 1)
         .collect();
     assert!(second.iter().all(|s| s.segment == world), "{outcome:?}");
-    for stop in second {
-        assert!(
-            stop.error_m < 0.02,
-            "second run's stop {}: {} m off",
-            stop.index,
-            stop.error_m
-        );
-    }
+    assert_stops_within(second, 0.02);
 }
 
 /// Seed 3's fourth stop is 1.79 m beyond the third, in a room the third saw little of: it
@@ -184,12 +194,7 @@ fn a_segment_after_a_long_step_starts_where_the_scans_and_the_odometry_agree() {
     let r = route(RouteKind::LongSteps, 3, &RouteConfig::default()).unwrap();
     let (outcome, _) = run_route(&r, true, &sdem::slam::SlamOptions::default()).unwrap();
     assert!(outcome.segments > 1, "no segment was started: {outcome:?}");
-    assert!(
-        outcome.ate_rmse_m < 0.02 && outcome.max_error_m < 0.02,
-        "ATE {:.2} cm, max {:.2} cm: {outcome:?}",
-        outcome.ate_rmse_m * 100.0,
-        outcome.max_error_m * 100.0
-    );
+    assert_mapped_within(&outcome, 0.02);
 }
 
 /// Seed 5's third stop, 1.73 m beyond the second and turned 25°, matches 12 % of its points
@@ -202,12 +207,7 @@ fn a_segment_after_a_long_step_starts_where_the_scans_and_the_odometry_agree() {
 fn a_long_steps_segment_starts_at_a_match_the_odometrys_window_finds() {
     let r = route(RouteKind::LongSteps, 5, &RouteConfig::default()).unwrap();
     let (outcome, _) = run_route(&r, true, &sdem::slam::SlamOptions::default()).unwrap();
-    assert!(
-        outcome.ate_rmse_m < 0.02 && outcome.max_error_m < 0.02,
-        "ATE {:.2} cm, max {:.2} cm: {outcome:?}",
-        outcome.ate_rmse_m * 100.0,
-        outcome.max_error_m * 100.0
-    );
+    assert_mapped_within(&outcome, 0.02);
 }
 
 /// A map is scored in its own frame: a map whose world frame the first stop's compass turned

@@ -9,6 +9,7 @@
 //! Where a match leaves a direction free, the prediction sets the position along it
 //! ([`take_prediction_along`]).
 
+use super::map_search::Matched;
 use super::step::{HeadingPrior, PredictionSource};
 use super::{ScanInput, Slam};
 use crate::doubt::Doubt;
@@ -257,9 +258,7 @@ pub(super) fn take_prediction_along(
         return;
     };
     let v = Vec3::from(flat);
-    let t = pose.translation.vector;
-    let along = v.dot(&(predicted - t));
-    pose.translation.vector = t + v * along;
+    let along = move_along(pose, &v, predicted);
     if let Some(c) = diagnostics.covariance.as_mut() {
         for i in 0..3 {
             for j in 0..3 {
@@ -271,6 +270,33 @@ pub(super) fn take_prediction_along(
         direction: flat,
         shift_m: along,
     });
+}
+
+/// Moves `pose` along the unit direction `v` to `predicted`'s place along it; returns the
+/// shift, metres.
+fn move_along(pose: &mut Pose, v: &Vec3, predicted: &Vec3) -> f64 {
+    let t = pose.translation.vector;
+    let along = v.dot(&(predicted - t));
+    pose.translation.vector = t + v * along;
+    along
+}
+
+/// The pose of the match `matched`, moved along the direction its scans leave free (the cost's
+/// flat direction, else the refinement's weakest when too little faces along it) to the
+/// measured `prediction`'s place there: along a ditch the scans' position is their sampling's,
+/// the odometry's a measurement (a turned-round stop's match, 22 % of its cells, lay 4.7 cm
+/// along the ditch from the truth, the odometry of its 19 cm step 0.9 cm). Only a guess: the
+/// covariance and doubts stay as they are ([`take_prediction_along`] is for an edge).
+pub(super) fn measured_along_free(matched: &Matched, prediction: &Prediction) -> Pose {
+    let mut pose = matched.world_from_sensor;
+    let unconstrained = (matched.doubts.iter()).find_map(|d| match d {
+        Doubt::Unconstrained { direction, .. } => Some(*direction),
+        _ => None,
+    });
+    if let Some(free) = matched.diagnostics.flat_direction.or(unconstrained) {
+        move_along(&mut pose, &Vec3::from(free), &prediction.position);
+    }
+    pose
 }
 
 #[cfg(test)]

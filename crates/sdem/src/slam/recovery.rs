@@ -13,7 +13,7 @@ use super::map_search::{
     found, keep_best, nearest, same_nodes, EveryHeading, Located, MapSearch, Matched,
     DISTURBED_COMPASS_DEG, WIDE_MIN_INLIERS,
 };
-use super::predictions::Prediction;
+use super::predictions::{measured_along_free, Prediction};
 use super::step::{Attempt, PredictionSource, StepStatus};
 use super::{ms, ScanInput, Slam};
 use crate::doubt::Doubt;
@@ -110,15 +110,20 @@ impl Slam {
             base.grown(&recovery.max_window_half_m, widest_heading),
         ];
         for prediction in &again {
-            let query = self.query_sdem(scan, &prediction.attitude)?;
-            let recent = self.reference_nodes(&query, prediction, segment, last);
-            let others = self.segment_references(&query, prediction, segment, last);
             // Against the same nodes the segment's search repeats the recent nodes' — unless
             // that one was the odometry's and found nothing: it asked for as many inliers as
             // tracking needs, and a long step into a new room matches fewer where the odometry
             // says (the best place to start the new segment from, when it comes to that).
-            let repeats = same_nodes(&recent, &others) && !(base.measured && best.is_none());
-            if prediction.source == PredictionSource::OtherNodes && repeats {
+            let repeats = prediction.source == PredictionSource::OtherNodes
+                && !(base.measured && best.is_none())
+                && {
+                    let query = self.query_sdem(scan, &prediction.attitude)?;
+                    same_nodes(
+                        &self.reference_nodes(&query, prediction, segment, last),
+                        &self.segment_references(&query, prediction, segment, last),
+                    )
+                };
+            if repeats {
                 continue;
             }
             match self.try_prediction(
@@ -162,19 +167,15 @@ impl Slam {
                 let guess = best
                     .as_ref()
                     .map_or_else(|| predictions[0].pose(), |(m, _)| m.world_from_sensor);
-                let matched_yaw = crate::geometry::attitude_of(&guess).yaw;
                 match scan.attitude {
                     Some(a) => {
+                        let matched_yaw = crate::geometry::attitude_of(&guess).yaw;
+                        let allowed = |compass: f64, half: f64| {
+                            let turn = crate::geometry::wrap_pi(matched_yaw - compass);
+                            best.is_some() && turn.abs().to_degrees() <= half
+                        };
                         let yaw = match self.compass(scan) {
-                            Some((compass, half))
-                                if best.is_none()
-                                    || crate::geometry::wrap_pi(matched_yaw - compass)
-                                        .abs()
-                                        .to_degrees()
-                                        > half =>
-                            {
-                                compass
-                            }
+                            Some((compass, half)) if !allowed(compass, half) => compass,
                             _ => matched_yaw,
                         };
                         pose_from_parts(
@@ -454,23 +455,4 @@ impl Attempt {
         self.accepted = reason.is_none();
         self.reason = reason.unwrap_or_default();
     }
-}
-
-/// The pose of the match `matched`, moved along the direction its scans leave free (the cost's
-/// flat direction, else the refinement's weakest when too little faces along it) to the
-/// measured `prediction`'s place there: along a ditch the scans' position is their sampling's,
-/// the odometry's a measurement (a turned-round stop's match, 22 % of its cells, lay 4.7 cm
-/// along the ditch from the truth, the odometry of its 19 cm step 0.9 cm).
-fn measured_along_free(matched: &Matched, prediction: &Prediction) -> crate::geometry::Pose {
-    let mut pose = matched.world_from_sensor;
-    let unconstrained = (matched.doubts.iter()).find_map(|d| match d {
-        Doubt::Unconstrained { direction, .. } => Some(*direction),
-        _ => None,
-    });
-    if let Some(free) = matched.diagnostics.flat_direction.or(unconstrained) {
-        let v = Vec3::from(free);
-        let t = pose.translation.vector;
-        pose.translation.vector = t + v * v.dot(&(prediction.position - t));
-    }
-    pose
 }
