@@ -232,9 +232,10 @@ impl MapSearch<'_> {
 
     /// The fine search around a coarse match: the configured step within ±[`FINE_HALF_M`] and
     /// ±[`FINE_HEADING_DEG`] of it, against the same nodes. A runner-up of the coarse search
-    /// is searched the same way around it, and is a doubt only when it still compares almost
-    /// as well (on a coarse grid the costs lie well above the basins' bottoms, by how far each
-    /// basin's bottom is from the nearest grid point). `search_yaw`: the heading the coarse
+    /// is searched the same way around it. On a coarse grid the costs lie above the basins'
+    /// bottoms, each by how far its bottom is from the nearest grid point, so the coarse order
+    /// of two basins says little: the one whose fine search comes out lower is the match, and
+    /// the other a doubt when it compares almost as well. `search_yaw`: the heading the coarse
     /// search levelled the scan with, which the runner-up's heading is relative to (`None`:
     /// the coarse doubt is kept as it is). A doubt about another rotation carries over.
     fn fine(
@@ -266,16 +267,21 @@ impl MapSearch<'_> {
                 let ratio = self.config.localize.ambiguous_cost_ratio;
                 let peak = self.config.localize.peak_radius_m;
                 match self.fine_at(scan, prediction, &coarse, &at) {
-                    Ok(r) => {
+                    Ok(mut r) => {
                         let apart = (r.world_from_sensor.translation.vector
                             - matched.world_from_sensor.translation.vector)
                             .norm();
-                        if apart > peak && r.cost < ratio * matched.cost {
-                            matched.doubts.push(Doubt::RunnerUp {
-                                distance_m: apart,
-                                cost: r.cost,
-                                best_cost: matched.cost,
-                            });
+                        if apart > peak {
+                            if r.cost < matched.cost {
+                                std::mem::swap(&mut matched, &mut r);
+                            }
+                            if r.cost < ratio * matched.cost {
+                                matched.doubts.push(Doubt::RunnerUp {
+                                    distance_m: apart,
+                                    cost: r.cost,
+                                    best_cost: matched.cost,
+                                });
+                            }
                         }
                     }
                     Err(e) if e.is_no_match() => {}
