@@ -113,8 +113,9 @@ pub struct RecoveryOptions {
     /// When no prediction leads to a trusted match, the best one is searched again in a window
     /// this large, metres (a robot that drove 2 m between stops, or 30 cm up or down)…
     pub max_window_half_m: [f64; 3],
-    /// … and this many degrees of heading either way; without a compass, every heading is
-    /// searched next.
+    /// … and this many degrees of heading either way without a compass, every heading being
+    /// searched next. Around a compass the window is searched at the compass's own heading
+    /// window first, then at what a compass near steel may be off by (±25°, at most this).
     pub max_heading_half_deg: f64,
     /// The search over every heading (and over tilt when the scan has no attitude reading)
     /// merges up to this many nodes of the current segment, nearest the last one, and searches
