@@ -32,6 +32,15 @@ fn assert_mapped_within(outcome: &RouteOutcome, bound_m: f64) {
     );
 }
 
+/// The route `kind` drawn with `seed` and the default settings, mapped with the default options,
+/// with or without its odometry.
+fn mapped(kind: RouteKind, seed: u64, odometry: bool) -> RouteOutcome {
+    let r = route(kind, seed, &RouteConfig::default()).unwrap();
+    run_route(&r, odometry, &sdem::slam::SlamOptions::default())
+        .unwrap()
+        .0
+}
+
 fn steps(run: &RouteRun) -> Vec<f64> {
     (run.waypoints.windows(2))
         .map(|w| (w[1].along_m - w[0].along_m).abs())
@@ -154,8 +163,7 @@ fn a_second_run_starts_inside_the_first_runs_map() {
 /// truth does, in the first run's frame (its stops alone align it to the truth).
 #[test]
 fn a_second_run_facing_back_is_never_placed_wrong_in_the_first_runs_frame() {
-    let r = route(RouteKind::SecondRun, 6, &RouteConfig::default()).unwrap();
-    let (outcome, _) = run_route(&r, false, &sdem::slam::SlamOptions::default()).unwrap();
+    let outcome = mapped(RouteKind::SecondRun, 6, false);
     let world = outcome.stops_detail[0].segment;
     let placed: Vec<&RouteStopOutcome> = (outcome.stops_detail.iter())
         .filter(|s| s.run == 1 && s.segment == world)
@@ -174,8 +182,7 @@ fn a_second_run_facing_back_is_never_placed_wrong_in_the_first_runs_frame() {
 /// then lie within 2 cm of the truth.
 #[test]
 fn a_second_run_facing_back_is_joined_by_three_weak_matches_that_agree() {
-    let r = route(RouteKind::SecondRun, 8, &RouteConfig::default()).unwrap();
-    let (outcome, _) = run_route(&r, false, &sdem::slam::SlamOptions::default()).unwrap();
+    let outcome = mapped(RouteKind::SecondRun, 8, false);
     let world = outcome.stops_detail[0].segment;
     let second: Vec<&RouteStopOutcome> = (outcome.stops_detail.iter())
         .filter(|s| s.run == 1)
@@ -191,8 +198,7 @@ fn a_second_run_facing_back_is_joined_by_three_weak_matches_that_agree() {
 /// the map stays within 2 cm of the truth though it is never joined.
 #[test]
 fn a_segment_after_a_long_step_starts_where_the_scans_and_the_odometry_agree() {
-    let r = route(RouteKind::LongSteps, 3, &RouteConfig::default()).unwrap();
-    let (outcome, _) = run_route(&r, true, &sdem::slam::SlamOptions::default()).unwrap();
+    let outcome = mapped(RouteKind::LongSteps, 3, true);
     assert!(outcome.segments > 1, "no segment was started: {outcome:?}");
     assert_mapped_within(&outcome, 0.02);
 }
@@ -205,8 +211,7 @@ fn a_segment_after_a_long_step_starts_where_the_scans_and_the_odometry_agree() {
 /// (6.18 cm ATE); with the height grown with the step, as across, it is found.
 #[test]
 fn a_long_steps_segment_starts_at_a_match_the_odometrys_window_finds() {
-    let r = route(RouteKind::LongSteps, 5, &RouteConfig::default()).unwrap();
-    let (outcome, _) = run_route(&r, true, &sdem::slam::SlamOptions::default()).unwrap();
+    let outcome = mapped(RouteKind::LongSteps, 5, true);
     assert_mapped_within(&outcome, 0.02);
 }
 
@@ -217,21 +222,23 @@ fn a_long_steps_segment_starts_at_a_match_the_odometrys_window_finds() {
 /// it stands, and the map is one segment within 2 cm of the truth.
 #[test]
 fn a_lost_stop_is_searched_in_the_compasss_own_heading_window_first() {
-    let r = route(RouteKind::LongSteps, 7, &RouteConfig::default()).unwrap();
-    let (outcome, _) = run_route(&r, false, &sdem::slam::SlamOptions::default()).unwrap();
+    let outcome = mapped(RouteKind::LongSteps, 7, false);
     assert_eq!(outcome.segments, 1, "{outcome:?}");
     assert_mapped_within(&outcome, 0.02);
 }
 
-/// Without odometry seed 3's first step is 1.46 m, beyond the tracking windows. In the widest
-/// window at the compass's heading the coarse grid's optimum lies 1.1 m short and turned 10°;
-/// its runner-up, searched finely, costs less (1.47e-3 against 1.65e-3 m²) and is the truth.
-/// The finer of the two is the match: the first two long steps are recovered in the world
-/// segment instead of opening a segment 1.1 m off.
+/// Without odometry seed 3 loses two of its long steps. The first, 1.46 m: in the widest window
+/// at the compass's heading the coarse grid's optimum lies 1.1 m short and turned 10°; its
+/// runner-up, searched finely, costs less (1.47e-3 against 1.65e-3 m²) and is the truth. The
+/// finer of the two is the match: the first two long steps are recovered in the world segment
+/// instead of opening a segment 1.1 m off. The fourth stop, 1.79 m beyond the third, matches
+/// 13 % of its cells at its true pose: fewer than the wide search keeps, so nothing matched,
+/// and its segment started at the constant-velocity prediction, 60 cm short (22.69 cm ATE).
+/// Searched again with the configured floor, the compass's window holds that match with no
+/// rival, and the segment starts there: never joined, the map is still within 2 cm of the truth.
 #[test]
-fn a_coarse_runner_up_that_costs_less_when_searched_finely_is_the_match() {
-    let r = route(RouteKind::LongSteps, 3, &RouteConfig::default()).unwrap();
-    let (outcome, _) = run_route(&r, false, &sdem::slam::SlamOptions::default()).unwrap();
+fn a_finer_basin_is_the_match_and_a_segment_nothing_matched_starts_at_one_with_no_rival() {
+    let outcome = mapped(RouteKind::LongSteps, 3, false);
     let world = outcome.stops_detail[0].segment;
     for stop in &outcome.stops_detail[1..3] {
         assert_eq!(
@@ -241,17 +248,6 @@ fn a_coarse_runner_up_that_costs_less_when_searched_finely_is_the_match() {
         );
         assert_eq!(stop.segment, world, "{outcome:?}");
     }
-}
-
-/// Without odometry seed 3's fourth stop, 1.79 m beyond the third, matches 13 % of its cells at
-/// its true pose: fewer than the wide search keeps, so nothing matched, and its segment started
-/// at the constant-velocity prediction, 60 cm short (22.69 cm ATE). Searched again with the
-/// configured floor, the compass's window holds that match with no rival, and the segment
-/// starts there: never joined, the map is still within 2 cm of the truth.
-#[test]
-fn a_segment_that_nothing_matched_starts_at_a_match_with_no_rival() {
-    let r = route(RouteKind::LongSteps, 3, &RouteConfig::default()).unwrap();
-    let (outcome, _) = run_route(&r, false, &sdem::slam::SlamOptions::default()).unwrap();
     assert!(outcome.segments > 1, "no segment was started: {outcome:?}");
     assert_mapped_within(&outcome, 0.02);
 }

@@ -260,24 +260,16 @@ impl Slam {
             (true, PredictionSource::WiderWindow) => WIDE_MIN_INLIERS,
             (true, _) => 0.0,
         };
-        let mut attempt = Attempt::new(prediction, &references);
         let search = self.search();
-        let outcome =
-            match search.match_prediction(scan, &query, prediction, references, checked, gate) {
-                Ok(mut matched) => {
-                    let reason = search.verdict(&mut matched, prediction.measured, partial, false);
-                    attempt.record(&matched, reason);
-                    Some((matched, attempt.accepted))
-                }
-                Err(e) if e.is_no_match() => {
-                    attempt.reason = e.to_string();
-                    None
-                }
-                Err(e) => return Err(e),
-            };
-        attempt.time_ms = ms(start);
-        attempts.push(attempt);
-        Ok(outcome)
+        let found = self.search_recorded(
+            scan,
+            prediction,
+            (query, references),
+            (checked, gate),
+            (attempts, start),
+            |matched| search.verdict(matched, prediction.measured, partial, false),
+        )?;
+        Ok(found.map(|(matched, reason)| (matched, reason.is_none())))
     }
 
     /// A place for a lost stop's segment to start from, never a match: `prediction`'s window
@@ -294,22 +286,45 @@ impl Slam {
         let start = Instant::now();
         let query = self.query_sdem(scan, &prediction.attitude)?;
         let references = self.segment_references(&query, prediction, segment, last);
+        let unique = |m: &Matched| (m.doubts.iter()).all(|d| matches!(d, Doubt::FewInliers { .. }));
+        let found = self.search_recorded(
+            scan,
+            prediction,
+            (query, references),
+            (true, 0.0),
+            (attempts, start),
+            |matched| {
+                Some(if unique(matched) {
+                    "the new segment's place only: too few inliers to trust".to_string()
+                } else {
+                    "not even the new segment's place: doubts beyond too few inliers".to_string()
+                })
+            },
+        )?;
+        Ok(found.map(|(matched, _)| matched).filter(|m| unique(m)))
+    }
+
+    /// One search of `prediction`'s window (`query` against `references`; `(checked, gate)`
+    /// as [`MapSearch::match_prediction`] takes them), recorded in `attempts` with `verdict`'s
+    /// reason (`None`: taken) and the time since `start` (the query and references built).
+    /// `None` when nothing in the window matches.
+    fn search_recorded(
+        &self,
+        scan: &ScanInput,
+        prediction: &Prediction,
+        (query, references): (Sdem, Vec<(usize, usize)>),
+        (checked, gate): (bool, f64),
+        (attempts, start): (&mut Vec<Attempt>, Instant),
+        verdict: impl FnOnce(&mut Matched) -> Option<String>,
+    ) -> Result<Option<(Matched, Option<String>)>> {
         let mut attempt = Attempt::new(prediction, &references);
         let outcome = match (self.search())
-            .match_prediction(scan, &query, prediction, references, true, 0.0)
+            .match_prediction(scan, &query, prediction, references, checked, gate)
         {
-            Ok(matched) => {
-                let unique = (matched.doubts.iter()).all(|d| matches!(d, Doubt::FewInliers { .. }));
-                attempt.record(
-                    &matched,
-                    Some(if unique {
-                        "the new segment's place only: too few inliers to trust".to_string()
-                    } else {
-                        "not even the new segment's place: doubts beyond too few inliers"
-                            .to_string()
-                    }),
-                );
-                unique.then_some(matched)
+            Ok(mut matched) => {
+                let reason = verdict(&mut matched);
+                attempt.record(&matched, reason.clone());
+                Some((matched, reason))
             }
             Err(e) if e.is_no_match() => {
                 attempt.reason = e.to_string();
