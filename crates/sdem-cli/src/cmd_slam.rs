@@ -283,6 +283,9 @@ pub fn run(args: Args) -> Result<Outcome> {
         }
         None => None,
     };
+    if let Some(existing) = &args.map {
+        check_extended_map(existing, &args.out)?;
+    }
     prepare_out(&args, &map_dir)?;
     let mut run = match (&args.map, args.resume) {
         (Some(existing), _) => extend(existing, &map_dir)?,
@@ -369,24 +372,8 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
 /// `--map EXISTING`: the saved map, with its configuration, ready for a new run; OUT/map must
 /// be another folder.
 fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
-    let folder = if existing.join(sdem_io::MAP_MANIFEST).exists() {
-        existing.to_path_buf()
-    } else {
-        existing.join(MAP_DIR)
-    };
+    let folder = saved_map_folder(existing);
     let saved = load_map(&folder).with_context(|| format!("--map {}", existing.display()))?;
-    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
-    if same(&folder, map_dir) {
-        bail!(
-            "--map {}: the extended map is written to {}, the map it extends; choose another \
-             --out (the saved map is left as it was)",
-            existing.display(),
-            map_dir.display()
-        );
-    }
     let nodes = saved.map.nodes.len();
     let earlier_datasets = saved.datasets_by_run();
     let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
@@ -401,6 +388,36 @@ fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
         folder: store,
         earlier_datasets,
     })
+}
+
+/// The map folder `--map existing` names: the folder itself when it holds a map, else its
+/// `map` folder (a `sdem slam` output folder).
+fn saved_map_folder(existing: &Path) -> PathBuf {
+    if existing.join(sdem_io::MAP_MANIFEST).exists() {
+        existing.to_path_buf()
+    } else {
+        existing.join(MAP_DIR)
+    }
+}
+
+/// Refuses, before anything in `--out` is touched, a `--map existing` that is the map the run
+/// writes in `out`: it would write over the map it extends (with `--force`, remove it first).
+fn check_extended_map(existing: &Path, out: &Path) -> Result<()> {
+    let (Ok(folder), Ok(out_folder)) = (
+        saved_map_folder(existing).canonicalize(),
+        out.canonicalize(),
+    ) else {
+        return Ok(());
+    };
+    if folder == out_folder || folder.starts_with(out_folder.join(MAP_DIR)) {
+        bail!(
+            "--map {}: that is the map this run writes in --out {}; choose another --out \
+             (the saved map is left as it was)",
+            existing.display(),
+            out.display()
+        );
+    }
+    Ok(())
 }
 
 /// The nodes of the loop's current run.

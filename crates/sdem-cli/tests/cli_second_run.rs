@@ -126,6 +126,44 @@ fn localize_without_a_prior_finds_a_scan_in_a_saved_map_or_says_it_is_not_there(
     );
     assert!(why.contains("is not found in the map"), "{why}");
     assert!(why.contains("tried node"), "{why}");
+    // A second run told to write over the map it extends is refused before anything in the
+    // folder is touched, even with --force.
+    let listing = |dir: &Path| {
+        let mut names: Vec<_> = walk(dir);
+        names.sort();
+        names
+    };
+    let kept = listing(&dir.path().join("first"));
+    for map in ["first", "first/map"] {
+        let why = fails(
+            dir.path(),
+            &[
+                "slam",
+                "elsewhere",
+                "--map",
+                map,
+                "--out",
+                "first",
+                "--force",
+            ],
+        );
+        assert!(why.contains("that is the map this run writes"), "{why}");
+        assert_eq!(listing(&dir.path().join("first")), kept);
+    }
+}
+
+/// Every file below `dir`, with its size.
+fn walk(dir: &Path) -> Vec<(std::path::PathBuf, u64)> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            out.extend(walk(&path));
+        } else {
+            out.push((path.clone(), path.metadata().unwrap().len()));
+        }
+    }
+    out
 }
 
 #[test]
