@@ -508,6 +508,11 @@ pub const DATASET_ENTRIES: &[&str] = &[
 /// that a new dataset can be written there without mixing with the old one. Entries that do not
 /// exist are skipped; a missing `root` is fine.
 ///
+/// # Errors
+/// [`Error::Invalid`], before anything is removed, when `scans/` or `sweeps/` holds a file sdem
+/// does not write there (one not numbered like `000012.ply`): it is the user's, and would go
+/// with the folder.
+///
 /// # Example
 /// ```
 /// # let dir = std::env::temp_dir().join(format!("sdem-doc-clear-{}", std::process::id()));
@@ -520,6 +525,35 @@ pub const DATASET_ENTRIES: &[&str] = &[
 /// # std::fs::remove_dir_all(&dir).unwrap();
 /// ```
 pub fn clear_dataset(root: &Path) -> Result<()> {
+    for folder in [SCANS_DIR, SWEEPS_DIR] {
+        let Ok(entries) = std::fs::read_dir(root.join(folder)) else {
+            continue;
+        };
+        let mut foreign: Vec<String> = (entries.flatten())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|name| !written_by_sdem(name))
+            .collect();
+        if !foreign.is_empty() {
+            foreign.sort();
+            let shown: Vec<String> = (foreign.iter().take(3))
+                .map(|n| format!("{folder}/{n}"))
+                .collect();
+            return Err(Error::Invalid(format!(
+                "{} holds {} that sdem did not write ({}{}); replacing the dataset would remove \
+                 {}: move {} out of {folder}/ first, or choose another folder",
+                root.display(),
+                if foreign.len() == 1 {
+                    "a file"
+                } else {
+                    "files"
+                },
+                shown.join(", "),
+                if foreign.len() > 3 { ", …" } else { "" },
+                if foreign.len() == 1 { "it" } else { "them" },
+                if foreign.len() == 1 { "it" } else { "them" },
+            )));
+        }
+    }
     for name in DATASET_ENTRIES {
         let path = root.join(name);
         let Ok(meta) = std::fs::symlink_metadata(&path) else {
@@ -533,6 +567,19 @@ pub fn clear_dataset(root: &Path) -> Result<()> {
         removed.map_err(|e| Error::io(&path, e))?;
     }
     Ok(())
+}
+
+/// Whether `name`, in `scans/` or `sweeps/`, is one sdem writes there: six digits and an
+/// extension (`000012.ply`), or such a file's temporary twin left by a crash
+/// (`.000012.ply.tmp-PID-N`).
+fn written_by_sdem(name: &str) -> bool {
+    let name = name
+        .strip_prefix('.')
+        .and_then(|n| n.rsplit_once(crate::TEMPORARY_MARK))
+        .map_or(name, |(file, _)| file);
+    name.split_once('.').is_some_and(|(stem, ext)| {
+        stem.len() == 6 && stem.bytes().all(|b| b.is_ascii_digit()) && !ext.is_empty()
+    })
 }
 
 #[cfg(test)]
@@ -641,8 +688,18 @@ mod tests {
             .to_string();
         assert!(err.contains("poses_truth.txt"), "{err}");
 
-        // clear_dataset removes every dataset entry and nothing else.
+        // clear_dataset removes every dataset entry and nothing else; a file of the user's in
+        // scans/ makes it refuse, naming it, before anything is removed.
         std::fs::write(root.join("notes.md"), "mine").unwrap();
+        std::fs::write(root.join("scans/mine.txt"), "mine").unwrap();
+        std::fs::write(root.join("scans/.000001.ply.tmp-1-0"), "crashed").unwrap();
+        let err = clear_dataset(&root).unwrap_err().to_string();
+        assert!(
+            err.contains("scans/mine.txt") && err.contains("move it out"),
+            "{err}"
+        );
+        assert!(root.join("scans/000002.ply").is_file() && root.join(ATTITUDE_FILE).is_file());
+        std::fs::remove_file(root.join("scans/mine.txt")).unwrap();
         clear_dataset(&root).unwrap();
         let left: Vec<_> = std::fs::read_dir(&root)
             .unwrap()
