@@ -77,9 +77,13 @@ struct SliceArgs {
 struct MapArgs {
     /// The output folder of `sdem slam` (holding map/ and map.ply).
     slam_out: PathBuf,
-    /// Where the pictures go [default: SLAM_OUT].
+    /// Where the pictures go [default: SLAM_OUT, whose pictures are redrawn]. Elsewhere, a
+    /// file of a picture's name is refused unless --force.
     #[arg(long)]
     out_dir: Option<PathBuf>,
+    /// Write over pictures of the same names in --out-dir.
+    #[arg(long)]
+    force: bool,
 }
 
 #[derive(clap::Args)]
@@ -159,7 +163,15 @@ pub fn run(args: Args) -> Result<()> {
             check_cost_sampling(cost)?;
             check_output_file(&cost.out, "--out", cost.force)?;
         }
-        What::Map(_) => {}
+        What::Map(map) => {
+            if let Some(dir) = map
+                .out_dir
+                .as_deref()
+                .filter(|d| !same_folder(d, &map.slam_out))
+            {
+                crate::output::check_output_folder(dir, "--out-dir", MAP_PICTURE_FILES, map.force)?;
+            }
+        }
     }
     let written = match args.what {
         What::Panorama(scan) => {
@@ -184,6 +196,14 @@ pub fn run(args: Args) -> Result<()> {
             println!("wrote {}", path.display());
         }
         Ok(())
+    }
+}
+
+/// Whether `a` and `b` name one folder (as given, when either does not exist).
+fn same_folder(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => a == b,
     }
 }
 

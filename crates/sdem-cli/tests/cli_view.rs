@@ -69,6 +69,17 @@ fn view_map_writes_every_picture_and_the_page() {
     let page = std::fs::read_to_string(dir.join("pictures/viewer.html")).unwrap();
     assert!(!page.contains("http://") && !page.contains("https://"));
     assert!(page.contains("\"shownCount\":") && page.contains("<canvas"));
+    // Pictures already in another folder are the user's: written over only with --force.
+    let plan = dir.join("pictures/plan.png");
+    std::fs::write(&plan, "mine").unwrap();
+    let why = fails(dir, &["view", "map", "out", "--out-dir", "pictures"]);
+    assert!(why.contains("plan.png") && why.contains("--force"), "{why}");
+    assert_eq!(std::fs::read(&plan).unwrap(), b"mine");
+    run_ok(
+        dir,
+        &["view", "map", "out", "--out-dir", "pictures", "--force"],
+    );
+    check_png(&plan, 12);
 }
 
 #[test]
