@@ -627,9 +627,11 @@ fn recovery_words(how: PredictionSource) -> &'static str {
     }
 }
 
-/// Saves the map, then the step log: a kill between the two loses one step's log line, never
-/// the map.
+/// Saves the step log, then the map: a kill between the two leaves the log one step ahead of
+/// the map, and `--resume` drops that step and maps its scan again, so no step's log is lost.
 fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
+    let steps_text = serde_json::to_vec(&run.steps).context("cannot encode the step log")?;
+    write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;
     let slam = &run.slam;
     debug_assert_eq!(run.folder.path(), map_dir);
     // The dataset's whole path: `sdem export` and `--resume` find it from any folder.
@@ -643,8 +645,6 @@ fn save_progress(args: &Args, map_dir: &Path, run: &mut Run) -> Result<()> {
         &slam.loop_closures,
         &datasets,
     )?;
-    let steps_text = serde_json::to_vec(&run.steps).context("cannot encode the step log")?;
-    write_atomic(&args.out.join(STEPS_FILE), |w| w.write_all(&steps_text))?;
     Ok(())
 }
 
@@ -839,6 +839,12 @@ fn print_text(args: &Args, report: &Report) {
         report.loop_closures_accepted,
         report.loop_closures_rejected
     );
+    if let Some(n) = report.resumed_at {
+        println!(
+            "resumed at scan {n}: scans 0 to {} were in the saved map",
+            n.max(1) - 1
+        );
+    }
     if let Some(e) = &report.extends {
         println!(
             "run {} into the map {} ({} nodes before it); the map in {} holds both",
@@ -972,15 +978,20 @@ fn summary(report: &Report) -> serde_json::Value {
     value
 }
 
-/// Reads the step log of a resumed run; it may be one step behind the map (a kill between the
-/// two writes), never ahead.
+/// Reads the step log of a resumed run, whose map has `nodes` nodes in this run. A log one
+/// step ahead (a kill between the two writes of [`save_progress`]) loses that step, whose scan
+/// is mapped again; one further ahead is another run's. (A map saved before its log, as
+/// earlier versions did, may be a step ahead of the log: that step's line is missing.)
 fn read_steps(path: &Path, nodes: usize) -> Result<Vec<Value>> {
     if !path.exists() {
         return Ok(Vec::new());
     }
     let text = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let values: Vec<Value> = serde_json::from_slice(&text)
+    let mut values: Vec<Value> = serde_json::from_slice(&text)
         .with_context(|| format!("{}: not a step log", path.display()))?;
+    if values.len() == nodes + 1 {
+        values.pop();
+    }
     if values.len() > nodes {
         bail!(
             "{} logs {} steps but the map has {nodes} nodes; the folder mixes two runs",

@@ -336,6 +336,46 @@ fn a_killed_run_resumes_from_its_saved_map() {
     ))
     .unwrap();
     assert_eq!(again["nodes"], 6);
+    let logged = |out: &str| -> Vec<u64> {
+        let text = std::fs::read_to_string(dir.path().join(out).join("report.json")).unwrap();
+        let report: Value = serde_json::from_str(&text).unwrap();
+        (report["steps"].as_array().unwrap().iter())
+            .map(|s| s["scan_index"].as_u64().unwrap())
+            .collect()
+    };
+    assert_eq!(logged("out"), (0..6).collect::<Vec<_>>());
+
+    // Killed after a step's log line was written and before the map was saved: the log is a
+    // step ahead. Resuming drops that line and maps the scan again, so every scan keeps its
+    // one step in the report.
+    run_ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "cut",
+            "--max-scans",
+            "3",
+            "--no-pictures",
+        ],
+    );
+    let steps_path = dir.path().join("cut/steps.json");
+    let mut steps: Vec<Value> =
+        serde_json::from_str(&std::fs::read_to_string(&steps_path).unwrap()).unwrap();
+    let mut ahead = steps[2].clone();
+    ahead["scan_index"] = 3.into();
+    ahead["status"] = "written_before_the_kill".into();
+    steps.push(ahead);
+    std::fs::write(&steps_path, serde_json::to_vec(&steps).unwrap()).unwrap();
+    let text = run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "cut", "--resume", "--no-pictures"],
+    );
+    assert!(text.contains("resumed at scan 3"), "{text}");
+    assert_eq!(logged("cut"), (0..6).collect::<Vec<_>>());
+    let report = std::fs::read_to_string(dir.path().join("cut/report.json")).unwrap();
+    assert!(!report.contains("written_before_the_kill"));
 }
 
 /// Odometry that errs by 60 % of each step puts the search's window (±15 cm around the
