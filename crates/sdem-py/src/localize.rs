@@ -374,7 +374,7 @@ impl Localization {
     }
 
     /// The figures behind ``trusted``, as ``sdem localize --json`` reports them:
-    /// ``overlap_fraction``, ``inlier_fraction``, ``runner_up_cost``,
+    /// ``overlap_fraction``, ``inlier_fraction``, ``refined_inlier_fraction``, ``runner_up_cost``,
     /// ``runner_up_cost_at_least``, ``covariance`` (on the levelled reference's axes),
     /// ``weakest_direction``, ``weakest_sigma_m``, ``strongest_sigma_m``, ``flat_direction``,
     /// ``ambiguous``, and the search's ``cost``, ``rms_m``, ``overlap``, ``runner_up``,

@@ -296,6 +296,11 @@ pub struct Diagnostics {
     pub overlap_fraction: f64,
     /// Cells within the truncation at the best candidate over the query points compared.
     pub inlier_fraction: f64,
+    /// The same at the refined pose (its rotation, tilt included), when there is one. On a
+    /// grid as coarse as a LiDAR's (15–25 cm) the best candidate lies up to half a step from
+    /// the pose, where fewer cells fall within the truncation: a KITTI frame matched against
+    /// itself in a map, 49 % at the grid's best candidate, 86 % at the refined pose.
+    pub refined_inlier_fraction: Option<f64>,
     /// The smallest cost outside the peak's neighbourhood, when it lies below
     /// [`LocalizeOptions::ambiguous_cost_ratio`] × the best (the runner-up search looks no
     /// higher); `None` otherwise.
@@ -526,6 +531,10 @@ pub(crate) fn localize_below(
     // well as its heading; at the reading's tilt the cost has its minimum elsewhere when the
     // refinement corrected it, and under `sdem bench --faults`' gyro drift half the right poses
     // came out flat there).
+    let refined_inliers = (refined.refinement.is_some())
+        .then(|| correlator.evaluate_turned(&offset, &rotation))
+        .flatten()
+        .map(|c| c.inliers);
     let mut cost_at = |offset: Vec3, refined: bool| {
         let scored = if refined {
             correlator.evaluate_turned(&offset, &rotation)
@@ -534,7 +543,7 @@ pub(crate) fn localize_below(
         };
         scored.map_or(f64::INFINITY, |c| c.cost)
     };
-    let (diagnostics, mut doubts) = diagnose(
+    let (mut diagnostics, mut doubts) = diagnose(
         config,
         best.compared,
         &best.at_best,
@@ -544,6 +553,8 @@ pub(crate) fn localize_below(
         refined.error.as_deref(),
         &mut cost_at,
     );
+    diagnostics.refined_inlier_fraction =
+        refined_inliers.map(|n| n as f64 / best.compared.max(1) as f64);
     if let Some(doubt) = attitude_corrected(&refined.rotation, reference_attitude, query_attitude) {
         doubts.push(doubt);
     }

@@ -123,6 +123,7 @@ pub(super) fn diagnose(
     let diagnostics = Diagnostics {
         overlap_fraction: best.overlap as f64 / known,
         inlier_fraction,
+        refined_inlier_fraction: None,
         runner_up_cost: runner_up.map(|r| r.0),
         runner_up_cost_at_least: config
             .runner_up

@@ -374,11 +374,16 @@ impl MapSearch<'_> {
                     tracking * 100.0
                 ));
             }
+            // Counted at the refined pose too: on a LiDAR's coarse grid the best candidate
+            // lies up to half a step from the pose (see `Diagnostics::refined_inlier_fraction`).
             let needed = self.config.loop_closure.min_inlier_fraction;
-            (no_prior && d.inlier_fraction < needed).then(|| {
+            let matching = d
+                .inlier_fraction
+                .max(d.refined_inlier_fraction.unwrap_or(0.0));
+            (no_prior && matching < needed).then(|| {
                 format!(
                     "only {:.0} % of the cells match (a match without a prior needs {:.0} %)",
-                    d.inlier_fraction * 100.0,
+                    matching * 100.0,
                     needed * 100.0,
                 )
             })
@@ -471,8 +476,16 @@ impl MapSearch<'_> {
             .flat_map(|&n| self.map.nodes[n].points_in_world())
             .map(|p| Point3::from(p - origin))
             .collect();
-        let level = Attitude::default().with_sigma_deg(0.05, 0.05);
-        let reference = crate::scan::Scan::with_grid(&points, Some(level), grid)?;
+        // The world's axes are level where gyro readings levelled the nodes, and the scan is
+        // levelled by its own reading. A scan without one levels itself by its surfaces, and
+        // then so does the place, so that the two levellings share their bias: the world's
+        // axes are the readings' level, or without readings the first scan's axes, and either
+        // may lean against the surfaces' (on the KITTI frames by 1–1.5°; taken as level, no
+        // frame of the map could be relocalized in it, nor a 3DTK scan in its map).
+        let levelled = scan.attitude.is_some()
+            && (place.nodes.iter()).all(|&n| self.map.nodes[n].attitude_reading.is_some());
+        let level = levelled.then(|| Attitude::default().with_sigma_deg(0.05, 0.05));
+        let reference = crate::scan::Scan::with_grid(&points, level, grid)?;
         let query_points: Vec<Point3<f64>> = scan
             .points_in_sensor
             .iter()
