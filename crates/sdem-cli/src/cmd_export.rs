@@ -38,7 +38,10 @@ pub struct Args {
 /// Runs `sdem export`.
 pub fn run(args: Args) -> Result<()> {
     if args.mcap.is_none() && args.e57.is_none() {
-        bail!("say what to write: --mcap OUT.mcap, --e57 OUT.e57, or both");
+        return Err(crate::parse::usage_error(
+            "export",
+            "say what to write: --mcap OUT.mcap, --e57 OUT.e57, or both",
+        ));
     }
     // Both targets checked before either is written.
     if let Some(mcap) = &args.mcap {

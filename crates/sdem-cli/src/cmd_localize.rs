@@ -59,8 +59,10 @@ pub struct Args {
     scan: Option<PathBuf>,
     /// With --map: the gyro/compass reading of the scan, roll,pitch,yaw in degrees, held to
     /// attitude.csv's bounds (roll and pitch within ±360°, yaw within ±1e6°) [default: none:
-    /// the tilt and the heading are searched]. Without --near or --prior every heading is
-    /// searched (the surfaces' heading hypotheses) whatever the reading says.
+    /// with --near or --prior the scan is taken as level and the heading searched within the
+    /// map's heading_half_no_prior_deg (15°); without them the tilt and the heading are
+    /// searched]. Without --near or --prior every heading is searched (the surfaces' heading
+    /// hypotheses) whatever the reading says.
     #[arg(
         long,
         requires = "map",
@@ -478,9 +480,12 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     } else {
         map.join("map")
     };
-    let scan = (args.scan.as_ref())
-        .or(args.dataset.as_ref())
-        .context("--map needs the scan to relocalize: --map DIR SCAN (or --scan SCAN)")?;
+    let Some(scan) = args.scan.as_ref().or(args.dataset.as_ref()) else {
+        return Err(usage_error(
+            "localize",
+            "--map needs the scan to relocalize: --map DIR SCAN (or --scan SCAN)",
+        ));
+    };
     let saved = sdem_io::load_map(&folder)?;
     let points = sdem_io::read_points(scan)?;
     // The map's own search settings (its config.toml), not this command's --step.
@@ -553,6 +558,23 @@ fn print_accepted(trusted: bool, accept_doubtful: bool) {
 pub fn run(args: Args) -> Result<Outcome> {
     if let Some(map) = args.map.clone() {
         return run_map(&args, &map);
+    }
+    // clap's `requires = "map"` is not enforced beside the positional DATASET: checked here.
+    for (given, flag) in [
+        (args.near.is_some(), "--near"),
+        (args.attitude.is_some(), "--attitude"),
+        (args.scan.is_some(), "--scan"),
+    ] {
+        if given {
+            return Err(usage_error(
+                "localize",
+                format!(
+                    "{flag} is for relocalizing a scan in a saved map (--map DIR SCAN); a pair \
+                     of a dataset's scans takes its readings from attitude.csv and its window \
+                     from --window or --prior"
+                ),
+            ));
+        }
     }
     let (Some(dataset_path), Some(reference_index), Some(query_index)) =
         (args.dataset.clone(), args.reference, args.query)

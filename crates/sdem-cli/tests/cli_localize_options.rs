@@ -50,6 +50,26 @@ fn localize_numbers_out_of_range_are_usage_errors_naming_flag_and_range() {
     }
 }
 
+/// Flags of one mode given in the other are usage errors (exit status 2) before anything is
+/// read: --near, --attitude and --scan are for --map, and --map needs its scan; `sdem export`
+/// needs a format to write.
+#[test]
+fn flags_of_the_other_mode_are_usage_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let pair = ["localize", "nowhere", "--reference", "0", "--query", "1"];
+    for (flag, value) in [("--near", "1,2,3"), ("--attitude", "1,2,3")] {
+        let args = [&pair[..], &[flag, value]].concat();
+        let e = usage_error(dir.path(), &args, &[flag, "--map DIR SCAN"]);
+        assert!(!e.contains("nowhere"), "{args:?}: {e}");
+    }
+    usage_error(
+        dir.path(),
+        &["localize", "--map", "nomap"],
+        &["--map needs the scan"],
+    );
+    usage_error(dir.path(), &["export", "nomap"], &["--mcap", "--e57"]);
+}
+
 #[test]
 fn localize_refuses_a_step_larger_than_the_window_naming_both() {
     let dir = tempfile::tempdir().unwrap();
