@@ -535,15 +535,25 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     Ok(outcome)
 }
 
-/// The candidates a relocalization tried, in words: `node N (why); …`.
+/// The candidates a relocalization tried, in words: `node N (why); …`, each node once (its
+/// first search; a place is searched again wider, or over a full turn), with the count of
+/// searches when there were more.
 fn tried_words(tried: &[(usize, String)]) -> String {
     if tried.is_empty() {
         return "no node (none shares enough of the scan's place)".to_string();
     }
-    (tried.iter())
+    let mut seen = std::collections::HashSet::new();
+    let mut words: Vec<String> = (tried.iter())
+        .filter(|(node, _)| seen.insert(*node))
         .map(|(node, why)| format!("node {node} ({why})"))
-        .collect::<Vec<_>>()
-        .join("; ")
+        .collect();
+    if tried.len() > words.len() {
+        words.push(format!(
+            "{} searches in all, some nodes' places again wider",
+            tried.len()
+        ));
+    }
+    words.join("; ")
 }
 
 /// Says that a doubtful result was taken as the best guess, when `--accept-doubtful` asked.

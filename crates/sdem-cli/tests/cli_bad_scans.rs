@@ -403,6 +403,22 @@ fn a_scan_at_the_origin_is_refused_in_a_map_before_the_search() {
             assert!(!m.contains("not found"), "{m}");
         }
     }
+    // Three points: too few cells to compare, said as pair mode says it, not "tried no node".
+    let scan = dir.path().join("three.ply");
+    let three = [
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+        Vec3::new(1.0, 1.0, 0.5),
+    ];
+    sdem_io::write_points_ply(&scan, &three).unwrap();
+    for extra in [&[][..], &["--near", "0,0,0"]] {
+        let args = [&["localize", "--map", s(&out), s(&scan)][..], extra].concat();
+        let m = run_err(dir.path(), &args);
+        assert!(
+            m.contains("fills 3 cells") && m.contains("fewer than the 100"),
+            "{m}"
+        );
+    }
 }
 
 /// `sdem view panorama` of a scan with every point at the sensor's origin: refused (status 1)

@@ -71,7 +71,8 @@ pub struct Near {
 ///   searched again over a full turn of heading, exactly, before it is said not to be found.
 ///
 /// # Errors
-/// An empty map, a scan of which no point is usable ([`Error::NoUsablePoints`], saying why), a
+/// An empty map, a scan of which no point is usable ([`Error::NoUsablePoints`], saying why) or
+/// that fills too few cells to compare ([`Error::TooFewPoints`]), a
 /// `near` that is not finite or whose σ is not a positive length, or ([`Error::NotFound`]) no
 /// node that matches with confidence, each tried node with its reason.
 pub fn relocalize(
@@ -95,6 +96,13 @@ pub fn relocalize(
         &attitude.unwrap_or_default(),
         &config.sdem,
     )?;
+    // Too few cells to compare anywhere: said so, not "tried no node".
+    if query.known_cells() < crate::scan::MIN_KNOWN_CELLS {
+        return Err(Error::TooFewPoints {
+            usable: query.known_cells(),
+            needed: crate::scan::MIN_KNOWN_CELLS,
+        });
+    }
     match near {
         Some(near) => relocalize_near(map, config, &query, attitude, near, max_nodes),
         None => relocalize_anywhere(map, config, points_in_sensor, attitude, max_nodes),
