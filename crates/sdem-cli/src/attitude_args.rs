@@ -216,6 +216,11 @@ pub fn attitude_assumption(attitudes: &Attitudes) -> AttitudeAssumption {
             let words = if half >= 180.0 {
                 "heading searched over a full turn (3σ of the readings' difference reaches 180°)"
                     .to_string()
+            } else if attitudes.kind == AttitudeKind::AssumedLevel {
+                format!(
+                    "heading searched ±{}° (3σ of the difference of the two headings assumed)",
+                    degrees(half)
+                )
             } else {
                 format!(
                     "heading searched ±{}° (3σ of the two readings' difference)",

@@ -882,13 +882,17 @@ fn print_estimate(report: &Report, found: &Localization, truth: Option<&Pose>) {
         ),
         _ => format!("{:?}", found.refined),
     };
-    if report.attitude.source == AttitudeKind::Unknown {
-        println!("  refined: {refined}");
-    } else {
-        println!(
-            "  heading correction {:+.2}° to the compass; refined: {refined}",
+    let to = match report.attitude.source {
+        AttitudeKind::Unknown => None,
+        AttitudeKind::AssumedLevel => Some("the headings assumed (--assume-level)"),
+        AttitudeKind::Readings => Some("the compass"),
+    };
+    match to {
+        None => println!("  refined: {refined}"),
+        Some(to) => println!(
+            "  heading correction {:+.2}° to {to}; refined: {refined}",
             report.heading_correction_deg
-        );
+        ),
     }
 }
 
