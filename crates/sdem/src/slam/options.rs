@@ -373,6 +373,16 @@ impl SlamOptions {
                 )));
             }
         }
+        // A grid step wider than the tracking window leaves it one candidate a side: every stop
+        // would be searched again wider, or open a segment.
+        let widest = 2.0 * self.window_half_m[0].max(self.window_half_m[1]);
+        if self.localize.step_m > widest {
+            return Err(Error::Invalid(format!(
+                "the search's step {} m is wider than the tracking window ({} m across, \
+                 window_half_m); give a step of at most {} m",
+                self.localize.step_m, widest, widest
+            )));
+        }
         if !(self.reference_radius_m.is_finite() && self.reference_radius_m > 0.0) {
             return Err(Error::Invalid(format!(
                 "reference_radius_m = {} must be a positive distance",
@@ -400,5 +410,23 @@ impl SlamOptions {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A search step wider than the tracking window is refused, naming the widest it may be;
+    /// the defaults, and a spinning LiDAR's derived options, pass.
+    #[test]
+    fn a_step_wider_than_the_tracking_window_is_refused() {
+        let mut options = SlamOptions::default();
+        options.validate().unwrap();
+        options.localize.step_m = 5.0;
+        let e = options.validate().unwrap_err().to_string();
+        assert!(e.contains("5 m") && e.contains("at most 0.3 m"), "{e}");
+        options.localize.step_m = 0.3;
+        options.validate().unwrap();
     }
 }
