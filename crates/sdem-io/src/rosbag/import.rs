@@ -356,7 +356,8 @@ fn plan_clouds(
             format!(
                 "{} is in frame {sensor_frame}, in which /tf moves {moved}: its points are in a \
                  world frame (an aligned map's), not in their sensor's; sdem imports scans as \
-                 the sensor took them (a map sdem exported is opened with sdem view map)",
+                 the sensor took them (for a map sdem exported, draw its slam output folder \
+                 with sdem view map, or open the MCAP itself in Foxglove)",
                 scan.topic
             ),
         ));
