@@ -165,14 +165,14 @@ fn check_source(source: &Path) -> Result<()> {
         Ok(())
     } else if source.exists() {
         Err(Error::Invalid(format!(
-            "{} is not a folder; import reads a 3DTK folder, a KITTI sequence folder or an \
-             .e57 file",
+            "{} is not a folder; import reads a 3DTK folder, a KITTI sequence folder, an .e57 \
+             file or a ROS 2 bag (a rosbag2 folder, or an .mcap or .db3 file)",
             source.display()
         )))
     } else {
         Err(Error::Invalid(format!(
-            "{} does not exist; import reads a 3DTK folder, a KITTI sequence folder or an .e57 \
-             file",
+            "{} does not exist; import reads a 3DTK folder, a KITTI sequence folder, an .e57 \
+             file or a ROS 2 bag (a rosbag2 folder, or an .mcap or .db3 file)",
             source.display()
         )))
     }
