@@ -896,7 +896,7 @@ fn print_text(args: &Args, report: &Report) {
         );
     }
     println!(
-        "wrote {}: poses.txt, poses.tum, report.json, map.ply ({} points), map.sdemvox ({} occupied voxels), config.toml, map/{}",
+        "wrote {}: poses.txt, poses.tum, report.json, steps.json (the step log --resume reads), map.ply ({} points), map.sdemvox ({} occupied voxels), config.toml, map/{}",
         args.out.display(),
         report.map_points,
         report.occupied_voxels,
