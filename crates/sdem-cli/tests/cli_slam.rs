@@ -254,6 +254,28 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
     // A map is never overwritten by accident.
     let err = fails(dir.path(), &["slam", "data", "--out", "out"]);
     assert!(err.contains("--resume") && err.contains("--force"), "{err}");
+    // Nor, with --force, a file of the user's kept in the map folder: refused, naming it,
+    // before anything is removed.
+    std::fs::write(out.join("map/notes.txt"), "mine").unwrap();
+    let poses = std::fs::read(out.join("poses.txt")).unwrap();
+    let args = [
+        "slam",
+        "data",
+        "--out",
+        "out",
+        "--force",
+        "--max-scans",
+        "2",
+    ];
+    let err = fails(dir.path(), &args);
+    assert!(
+        err.contains("notes.txt") && err.contains("did not write"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(out.join("poses.txt")).unwrap(), poses);
+    assert!(out.join("map/map.json").is_file());
+    std::fs::remove_file(out.join("map/notes.txt")).unwrap();
+    run_ok(dir.path(), &args);
 }
 
 #[test]
