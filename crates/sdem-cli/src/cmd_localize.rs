@@ -514,8 +514,12 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     let pose = sdem::geometry::Pose::from(&found.world_from_sensor);
     println!("{} in the map {}:", scan.display(), folder.display());
     println!("  {}  {}", estimate_label(found.trusted), pose_line(&pose));
+    let refined = (found.diagnostics.refined_inlier_fraction).map_or(String::new(), |f| {
+        format!(", {:.0} % at the refined pose", f * 100.0)
+    });
     println!(
-        "  matched node {} (cost {:.3e} m², {:.0} % of the cells within the truncation) in {:.0} ms",
+        "  matched node {} (cost {:.3e} m², {:.0} % of the cells within the truncation{refined}) \
+         in {:.0} ms",
         found.node_id,
         found.cost,
         found.diagnostics.inlier_fraction * 100.0,

@@ -346,6 +346,14 @@ pub struct Diagnostics {
 }
 
 impl Diagnostics {
+    /// The share of the compared cells within the truncation, the larger of the grid's best
+    /// candidate's ([`Self::inlier_fraction`]) and the refined pose's
+    /// ([`Self::refined_inlier_fraction`]): how much of the scan the match explains.
+    pub fn matching_fraction(&self) -> f64 {
+        self.inlier_fraction
+            .max(self.refined_inlier_fraction.unwrap_or(0.0))
+    }
+
     /// The share of the compared cells within the truncation (inliers over overlap): how well
     /// the scans agree where they both see; 0 when no cell was compared.
     pub fn shared_inlier_fraction(&self) -> f64 {

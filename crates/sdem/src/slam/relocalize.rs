@@ -197,8 +197,11 @@ fn relocalize_near(
         let centre = near.position - origin;
         let localize_config = search_options(config, centre, Some(near), heading);
         match localize(&reference, query, &localize_config) {
+            // Counted at the refined pose too (a LiDAR's coarse grid, see
+            // `Diagnostics::refined_inlier_fraction`).
             Ok(found)
-                if found.diagnostics.inlier_fraction >= config.loop_closure.min_inlier_fraction =>
+                if found.diagnostics.matching_fraction()
+                    >= config.loop_closure.min_inlier_fraction =>
             {
                 // The nearest node that matches well is the answer; the others are tried only
                 // when it does not.
@@ -208,8 +211,10 @@ fn relocalize_near(
             Ok(found) => tried.push((
                 node_id,
                 format!(
-                    "only {:.0} % of the cells match",
-                    found.diagnostics.inlier_fraction * 100.0
+                    "only {:.0} % of the cells match (a match near a position needs {:.0} %: \
+                     the map's loop_closure.min_inlier_fraction)",
+                    found.diagnostics.matching_fraction() * 100.0,
+                    config.loop_closure.min_inlier_fraction * 100.0
                 ),
             )),
             Err(e) if e.is_no_match() => tried.push((node_id, e.to_string())),
