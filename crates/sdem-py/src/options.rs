@@ -29,13 +29,79 @@ pub fn with_overrides<T: Serialize + DeserializeOwned>(
     serde_json::from_value(value).map_err(|e| invalid(format!("{what}: {e}")))
 }
 
-/// The keywords as JSON.
+/// The keywords as JSON. numpy scalars and arrays count as the numbers and lists they hold
+/// (robotics code builds windows and offsets with numpy); a number that is not finite, or a
+/// value of another type, is an error naming the option.
 pub fn dict_json(dict: &Bound<'_, PyDict>, what: &str) -> PyResult<Value> {
-    pythonize::depythonize::<Value>(dict.as_any()).map_err(|e| {
+    let plain = plain(dict.as_any(), what, "")?;
+    pythonize::depythonize::<Value>(&plain).map_err(|e| {
         invalid(format!(
             "{what}: a value is not a number, string, bool, list or dict: {e}"
         ))
     })
+}
+
+/// `value` (the option at `path`) with numpy's scalars and arrays turned into Python numbers
+/// and lists, checked to be finite where it is a number.
+fn plain<'py>(value: &Bound<'py, PyAny>, what: &str, path: &str) -> PyResult<Bound<'py, PyAny>> {
+    use pyo3::types::{PyBool, PyFloat, PyInt, PyList, PyString, PyTuple};
+    let py = value.py();
+    let at = |key: &str| {
+        if path.is_empty() {
+            key.to_string()
+        } else {
+            format!("{path}.{key}")
+        }
+    };
+    if value.is_none() || value.is_instance_of::<PyBool>() || value.is_instance_of::<PyString>() {
+        return Ok(value.clone());
+    }
+    if value.is_instance_of::<PyInt>() {
+        return Ok(value.clone());
+    }
+    if let Ok(f) = value.cast::<PyFloat>() {
+        let v = f.value();
+        if !v.is_finite() {
+            return Err(invalid(format!(
+                "{what}: {} is {v}; it must be a finite number",
+                if path.is_empty() { "a value" } else { path }
+            )));
+        }
+        return Ok(value.clone());
+    }
+    if let Ok(dict) = value.cast::<PyDict>() {
+        let out = PyDict::new(py);
+        for (k, v) in dict.iter() {
+            let key = k.str().map(|s| s.to_string()).unwrap_or_default();
+            out.set_item(&k, plain(&v, what, &at(&key))?)?;
+        }
+        return Ok(out.into_any());
+    }
+    if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
+        let items: Vec<Bound<'py, PyAny>> = (value.try_iter()?)
+            .enumerate()
+            .map(|(i, item)| {
+                plain(
+                    &item?,
+                    what,
+                    &format!("{}[{i}]", at("").trim_end_matches('.')),
+                )
+            })
+            .collect::<PyResult<_>>()?;
+        return Ok(PyList::new(py, items)?.into_any());
+    }
+    // numpy: an array's or a scalar's own Python form.
+    if value.hasattr("tolist")? {
+        let listed = value.call_method0("tolist")?;
+        if !listed.is(value) {
+            return plain(&listed, what, path);
+        }
+    }
+    Err(invalid(format!(
+        "{what}: {} is a {}; give a number, string, bool, list or dict",
+        if path.is_empty() { "a value" } else { path },
+        value.get_type().name()?
+    )))
 }
 
 /// `base` read back from its own serialization (so that fields serde skips take their

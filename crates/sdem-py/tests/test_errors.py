@@ -148,6 +148,23 @@ def test_options_that_do_not_exist_are_refused():
         sdem.Slam(max_reference_nodes=0)
 
 
+def test_numpy_values_serve_as_options_and_a_number_that_is_not_finite_is_named(pairs):
+    pair = pairs[0]
+    ref = sdem.Scan(pair["reference_points"], attitude_deg=pair["reference_attitude_deg"])
+    qry = sdem.Scan(pair["query_points"], attitude_deg=pair["query_attitude_deg"])
+    window = {"min": np.array(pair["window"]["min"]), "max": np.array(pair["window"]["max"])}
+    by_numpy = sdem.localize(ref, qry, window=window, step_m=np.float32(0.02))
+    plain = sdem.localize(ref, qry, window=pair["window"], step_m=0.02)
+    assert np.allclose(by_numpy.reference_from_query, plain.reference_from_query)
+    with pytest.raises(sdem.InvalidError, match="step_m is nan; it must be a finite number"):
+        sdem.localize(ref, qry, step_m=float("nan"))
+    bad = {"min": [-0.5, float("inf"), -0.1], "max": [0.5, 0.5, 0.1]}
+    with pytest.raises(sdem.InvalidError, match=r"window.min\[1\] is inf"):
+        sdem.localize(ref, qry, window=bad)
+    with pytest.raises(sdem.InvalidError, match="step_m is a set"):
+        sdem.localize(ref, qry, step_m={0.02})
+
+
 def test_file_errors_are_os_errors_and_parse_errors_name_the_line(tmp_path):
     missing = tmp_path / "missing.ply"
     with pytest.raises(sdem.FileError) as info:

@@ -31,8 +31,9 @@ pub enum Error {
     },
     /// A scan fills too few S-DEM cells to be localized or to localize against.
     #[error(
-        "the scan fills {usable} cells of its S-DEM, fewer than the {needed} a localization \
-         compares; check that the points are metres in the sensor frame and within range"
+        "the scan fills {usable} {} of its S-DEM, fewer than the {needed} a localization \
+         compares; check that the points are metres in the sensor frame and within range",
+        if *.usable == 1 { "cell" } else { "cells" }
     )]
     TooFewPoints {
         /// Cells that hold a return.

@@ -102,8 +102,16 @@ impl RefineConfig {
     /// Checks the settings.
     ///
     /// # Errors
-    /// [`Error::Invalid`] naming the field that is not a positive number.
+    /// [`Error::Invalid`] naming the field that is not a positive number (`max_iterations`: at
+    /// least 1).
     pub fn validate(&self) -> Result<()> {
+        if self.max_iterations == 0 {
+            return Err(Error::Invalid(
+                "refinement.max_iterations = 0: give at least 1 (or refine = false to skip the \
+                 refinement)"
+                    .into(),
+            ));
+        }
         let positive = [
             ("kernel_scale_m", self.kernel_scale_m),
             ("max_correspondence_m", self.max_correspondence_m),
@@ -904,6 +912,12 @@ mod tests {
                 assert!(e.contains(name), "{e}");
             }
         }
+        let none = RefineConfig {
+            max_iterations: 0,
+            ..Default::default()
+        };
+        let e = none.validate().unwrap_err().to_string();
+        assert!(e.contains("max_iterations = 0"), "{e}");
         RefineConfig::default().validate().unwrap();
     }
 }
