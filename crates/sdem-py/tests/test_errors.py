@@ -156,7 +156,7 @@ def test_numpy_values_serve_as_options_and_a_number_that_is_not_finite_is_named(
     by_numpy = sdem.localize(ref, qry, window=window, step_m=np.float32(0.02))
     plain = sdem.localize(ref, qry, window=pair["window"], step_m=0.02)
     assert np.allclose(by_numpy.reference_from_query, plain.reference_from_query)
-    with pytest.raises(sdem.InvalidError, match="step_m is nan; it must be a finite number"):
+    with pytest.raises(sdem.InvalidError, match="step_m is NaN; it must be a finite number"):
         sdem.localize(ref, qry, step_m=float("nan"))
     bad = {"min": [-0.5, float("inf"), -0.1], "max": [0.5, 0.5, 0.1]}
     with pytest.raises(sdem.InvalidError, match=r"window.min\[1\] is inf"):

@@ -299,7 +299,8 @@ pub struct Diagnostics {
     /// The same at the refined pose (its rotation, tilt included), when there is one. On a
     /// grid as coarse as a LiDAR's (15–25 cm) the best candidate lies up to half a step from
     /// the pose, where fewer cells fall within the truncation: a KITTI frame matched against
-    /// itself in a map, 49 % at the grid's best candidate, 86 % at the refined pose.
+    /// its own node's place in a map, 49 % at the grid's best candidate, 69 % at the refined
+    /// pose.
     pub refined_inlier_fraction: Option<f64>,
     /// The smallest cost outside the peak's neighbourhood, when it lies below
     /// [`LocalizeOptions::ambiguous_cost_ratio`] × the best (the runner-up search looks no

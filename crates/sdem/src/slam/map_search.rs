@@ -377,9 +377,7 @@ impl MapSearch<'_> {
             // Counted at the refined pose too: on a LiDAR's coarse grid the best candidate
             // lies up to half a step from the pose (see `Diagnostics::refined_inlier_fraction`).
             let needed = self.config.loop_closure.min_inlier_fraction;
-            let matching = d
-                .inlier_fraction
-                .max(d.refined_inlier_fraction.unwrap_or(0.0));
+            let matching = d.matching_fraction();
             (no_prior && matching < needed).then(|| {
                 format!(
                     "only {:.0} % of the cells match (a match without a prior needs {:.0} %)",
