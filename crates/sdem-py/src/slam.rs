@@ -54,11 +54,28 @@ pub struct Slam {
     saved: Option<(PathBuf, NodeFiles)>,
 }
 
+/// Refuses a `progress` that cannot be called, before any scan is added (called only after
+/// `add` has added its scan, it would fail with the map already changed).
+fn check_progress(py: Python<'_>, progress: Option<&Py<PyAny>>) -> PyResult<()> {
+    match progress {
+        Some(p) if !p.bind(py).is_callable() => Err(crate::errors::invalid(format!(
+            "progress must be a callable taking each sdem.Step (a function), not a {}",
+            p.bind(py).get_type().name()?
+        ))),
+        _ => Ok(()),
+    }
+}
+
 #[pymethods]
 impl Slam {
     #[new]
     #[pyo3(signature = (*, progress=None, **options))]
-    fn new(progress: Option<Py<PyAny>>, options: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        progress: Option<Py<PyAny>>,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        check_progress(py, progress.as_ref())?;
         let options = with_overrides(&SlamOptions::default(), options, "slam options")?;
         Ok(Self {
             inner: sdem::Slam::new(options).map_err(sdem_error)?,
@@ -78,6 +95,7 @@ impl Slam {
     #[staticmethod]
     #[pyo3(signature = (path, *, progress=None))]
     fn load(py: Python<'_>, path: PathBuf, progress: Option<Py<PyAny>>) -> PyResult<Self> {
+        check_progress(py, progress.as_ref())?;
         let folder = map_folder(&path);
         let saved = py.detach(|| sdem_io::load_map(&folder)).map_err(io_error)?;
         let node_files = saved.node_files.clone();

@@ -165,6 +165,11 @@ def test_numpy_values_serve_as_options_and_a_number_that_is_not_finite_is_named(
         sdem.localize(ref, qry, step_m={0.02})
 
 
+def test_a_progress_that_cannot_be_called_is_refused_before_any_scan():
+    with pytest.raises(sdem.InvalidError, match="progress must be a callable.*not a int"):
+        sdem.Slam(progress=5)
+
+
 def test_file_errors_are_os_errors_and_parse_errors_name_the_line(tmp_path):
     missing = tmp_path / "missing.ply"
     with pytest.raises(sdem.FileError) as info:
