@@ -63,6 +63,7 @@ fn _sdem(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(localize::localize_options_for_scan, m)?)?;
     m.add_function(wrap_pyfunction!(localize::grid_for_scan, m)?)?;
     m.add_function(wrap_pyfunction!(slam::slam_options, m)?)?;
+    m.add_function(wrap_pyfunction!(slam::slam_options_for_scan, m)?)?;
     m.add_function(wrap_pyfunction!(read_points, m)?)?;
     m.add("DEFAULT_ATTITUDE_SIGMA_DEG", default_attitude_sigma_deg())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -629,3 +629,31 @@ pub fn slam_options<'py>(
         &with_overrides(&SlamOptions::default(), overrides, "slam options")?,
     )
 }
+
+/// The loop's options matched to a scan (``SlamOptions::for_scan``), with ``overrides`` laid
+/// over them, as a dict for ``sdem.Slam(**options)``. For a spinning multi-beam LiDAR (every
+/// azimuth within a band of elevation): the S-DEM grid at the scan's own angular step, the
+/// search's step, truncation and refinement from its ranges, loop closure and the fused map
+/// on that step (rays up to 20 m), as ``sdem slam`` chooses them for a dataset without
+/// ``sensor.toml``; for any other scanner, ``sdem.slam_options()``'s defaults (the tilting
+/// laser's).
+///
+/// Args:
+///     points: the first scan, ``(N, 3)`` float32 or float64, sensor frame, metres.
+///
+/// Raises:
+///     sdem.InvalidInputError: points not ``(N, 3)``; sdem.InvalidError: an unknown name or a
+///     value of the wrong type.
+#[pyfunction]
+#[pyo3(signature = (points, **overrides))]
+pub fn slam_options_for_scan<'py>(
+    py: Python<'py>,
+    points: &Bound<'py, PyAny>,
+    overrides: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let points: Vec<Vec3> = (points_from(points, "points")?.into_iter())
+        .map(|p| p.coords)
+        .collect();
+    let base = py.detach(|| SlamOptions::for_scan(&points));
+    to_python(py, &with_overrides(&base, overrides, "slam options")?)
+}

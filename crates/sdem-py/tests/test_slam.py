@@ -69,6 +69,43 @@ def test_the_merged_cloud_and_options_are_there(mapped):
     assert isinstance(slam.loop_closures, list)
 
 
+def lidar_scan(offset=(0.0, 0.0)):
+    """A 20 m square room (walls, floor, ceiling) seen by 32 lasers 1° apart over every azimuth
+    (0.2° steps), from `offset` (metres) at its middle's height."""
+    el = np.radians(np.arange(32) - 20.0)[:, None]
+    az = np.radians(np.arange(1800) * 0.2)[None, :]
+    d = np.stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el) * np.ones_like(az)], -1)
+    d = d.reshape(-1, 3)
+    # Distance along each ray to the square's walls |x|, |y| = 10 m around `offset`.
+    o = np.array([offset[0], offset[1], 0.0])
+    with np.errstate(divide="ignore"):
+        tx = np.where(d[:, 0] > 0, 10 - o[0], -10 - o[0]) / d[:, 0]
+        ty = np.where(d[:, 1] > 0, 10 - o[1], -10 - o[1]) / d[:, 1]
+    t = np.minimum(np.abs(tx), np.abs(ty))
+    # A floor 1.7 m below the sensor, a ceiling 2 m above it.
+    with np.errstate(divide="ignore"):
+        tz = np.where(d[:, 2] < 0, -1.7 / d[:, 2], np.where(d[:, 2] > 0, 2.0 / d[:, 2], np.inf))
+    t = np.minimum(t, tz)
+    keep = np.isfinite(t)
+    return d[keep] * t[keep, None]
+
+
+def test_options_for_a_spinning_lidar_come_from_its_first_scan(run):
+    lidar = sdem.slam_options_for_scan(lidar_scan())
+    # The grid's band of elevations is the lasers' (−20°..+11°, with a margin), the search's
+    # step and the fused map's rays follow the ranges (20 m walls: a 25 cm step, 20 m rays).
+    assert (lidar["sdem"]["elevation_min_deg"], lidar["sdem"]["elevation_max_deg"]) == (-25.0, 16.0)
+    assert lidar["localize"]["step_m"] == 0.25 and lidar["voxel"]["max_range_m"] == 20.0
+    # A tilting laser's scan keeps the defaults; overrides are laid over either.
+    assert sdem.slam_options_for_scan(run["points"][0]) == sdem.slam_options()
+    assert sdem.slam_options_for_scan(lidar_scan(), max_reference_nodes=2)["max_reference_nodes"] == 2
+    slam = sdem.Slam(**lidar)
+    slam.add(lidar_scan())
+    slam.add(lidar_scan((0.3, 0.1)))
+    assert slam.last_step.status in ("tracked", "recovered")
+    assert np.linalg.norm(slam.poses()[1][:2, 3] - [0.3, 0.1]) < 0.05
+
+
 def test_a_saved_map_reloaded_relocalizes_new_scans_near_the_truth(run, mapped, tmp_path):
     slam, _ = mapped
     slam.save(tmp_path / "map")

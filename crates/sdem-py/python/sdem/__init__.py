@@ -65,6 +65,7 @@ from ._sdem import (
     localize_options_for_scan,
     read_points,
     slam_options,
+    slam_options_for_scan,
 )
 
 __all__ = [
@@ -100,4 +101,5 @@ __all__ = [
     "read_points",
     "sim",
     "slam_options",
+    "slam_options_for_scan",
 ]

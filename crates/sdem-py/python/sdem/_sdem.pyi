@@ -130,6 +130,9 @@ def grid_for_scan(points: Points) -> dict[str, Any]:
 def slam_options(**overrides: Any) -> dict[str, Any]:
     """Every ``SlamOptions`` field with its default, ``overrides`` laid over them."""
 
+def slam_options_for_scan(points: Points, **overrides: Any) -> dict[str, Any]:
+    """``SlamOptions::for_scan``: the loop's options matched to a (spinning LiDAR's) first scan."""
+
 def read_points(path: PathLike) -> npt.NDArray[np.float64]:
     """Reads ``.ply``, ``.pcd``, ``.las``/``.laz``, ``.xyz``/``.txt``, KITTI ``.bin``, 3DTK
     ``.3d`` or ``.sweep`` as ``(N, 3)`` float64; raises ``FileError`` or ``ParseError``."""
@@ -256,6 +259,7 @@ __all__ = [
     "localize_options_for_scan",
     "grid_for_scan",
     "slam_options",
+    "slam_options_for_scan",
     "read_points",
     "DEFAULT_ATTITUDE_SIGMA_DEG",
     "__version__",
