@@ -227,3 +227,11 @@ where
         .expect("three coordinates a point")
         .into_pyarray(py)
 }
+
+/// A count or seed given as a Python int: refused, naming `what`, when negative (pyo3's own
+/// conversion raises a bare `OverflowError` that names nothing).
+pub fn non_negative(value: i64, what: &str) -> PyResult<u64> {
+    u64::try_from(value).map_err(|_| {
+        crate::errors::invalid_input(what, format!("{value} is negative; give 0 or more"))
+    })
+}

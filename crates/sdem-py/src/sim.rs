@@ -42,13 +42,15 @@ use sdem_sim::sim;
 )]
 fn pairs<'py>(
     py: Python<'py>,
-    seed: u64,
-    count: usize,
+    seed: i64,
+    count: i64,
     displacement_half_m: (f64, f64, f64),
     yaw_spread_deg: f64,
     tilt_max_deg: f64,
     compass_error_max_deg: f64,
 ) -> PyResult<Bound<'py, PyList>> {
+    let seed = crate::arrays::non_negative(seed, "seed")?;
+    let count = crate::arrays::non_negative(count, "count")? as usize;
     let (x, y, z) = displacement_half_m;
     let config = PairConfig {
         displacement_half_m: [x, y, z],
@@ -114,7 +116,9 @@ fn degrees(attitude: &Attitude) -> (f64, f64, f64) {
 /// Raises:
 ///     sdem.InvalidError: a number of stops the route cannot hold.
 #[pyfunction]
-fn run<'py>(py: Python<'py>, seed: u64, stops: usize) -> PyResult<Bound<'py, PyDict>> {
+fn run<'py>(py: Python<'py>, seed: i64, stops: i64) -> PyResult<Bound<'py, PyDict>> {
+    let seed = crate::arrays::non_negative(seed, "seed")?;
+    let stops = crate::arrays::non_negative(stops, "stops")? as usize;
     let sensor = SensorConfig::default();
     let simulated = py
         .detach(|| -> sdem::Result<_> {

@@ -433,10 +433,13 @@ impl Map {
         attitude_deg: Option<&Bound<'_, PyAny>>,
         near: Option<&Bound<'_, PyAny>>,
         near_sigma_m: Option<f64>,
-        max_nodes: Option<usize>,
+        max_nodes: Option<i64>,
         roll_pitch_sigma_deg: Option<f64>,
         yaw_sigma_deg: Option<f64>,
     ) -> PyResult<Relocalization> {
+        let max_nodes = (max_nodes.map(|n| crate::arrays::non_negative(n, "max_nodes")))
+            .transpose()?
+            .map(|n| n as usize);
         let points = points_from(points, "points")?;
         let attitude = attitude_from(attitude_deg, roll_pitch_sigma_deg, yaw_sigma_deg)?;
         let near = near_from(near, near_sigma_m)?;

@@ -165,6 +165,13 @@ def test_numpy_values_serve_as_options_and_a_number_that_is_not_finite_is_named(
         sdem.localize(ref, qry, step_m={0.02})
 
 
+def test_a_negative_count_is_refused_by_name():
+    with pytest.raises(sdem.InvalidInputError, match="seed: -1 is negative"):
+        sdem.sim.run(-1, 2)
+    with pytest.raises(sdem.InvalidInputError, match="count: -1 is negative"):
+        sdem.sim.pairs(1, -1)
+
+
 def test_a_progress_that_cannot_be_called_is_refused_before_any_scan():
     with pytest.raises(sdem.InvalidError, match="progress must be a callable.*not a int"):
         sdem.Slam(progress=5)
