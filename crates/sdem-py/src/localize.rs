@@ -135,6 +135,17 @@ pub fn attitude_from(
         return Ok(None);
     };
     let [r, p, y] = numbers::<3>(attitude_deg, "attitude_deg")?;
+    for (name, sigma) in [
+        ("roll_pitch_sigma_deg", roll_pitch_sigma_deg),
+        ("yaw_sigma_deg", yaw_sigma_deg),
+    ] {
+        if let Some(s) = sigma.filter(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(invalid_input(
+                name,
+                format!("{s}° must be positive: the reading's standard deviation, in degrees"),
+            ));
+        }
+    }
     let default = AttitudeSigma::default();
     Ok(Some(Attitude::from_degrees(r, p, y).with_sigma_deg(
         roll_pitch_sigma_deg.unwrap_or(default.roll_pitch.to_degrees()),
@@ -229,6 +240,9 @@ pub fn localize_options_over(
     if prior.is_some() {
         merged.cost.prior = prior;
     }
+    // Checked here, not only where a search uses them: `localize_options(step_m=-1)` returned
+    // the value, and a heading window is not read when the rotation is searched.
+    merged.validate().map_err(sdem_error)?;
     Ok(merged)
 }
 

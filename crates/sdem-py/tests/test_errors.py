@@ -97,7 +97,7 @@ def test_a_bad_attitude_is_invalid_input(points):
         sdem.Scan(points, attitude_deg=(0.0, float("nan"), 0.0))
     with pytest.raises(sdem.InvalidInputError, match="give attitude_deg"):
         sdem.Scan(points, yaw_sigma_deg=20.0)
-    with pytest.raises(sdem.InvalidInputError, match="standard deviations"):
+    with pytest.raises(sdem.InvalidInputError, match="roll_pitch_sigma_deg: -1° must be positive"):
         sdem.Scan(points, attitude_deg=(0, 0, 0), roll_pitch_sigma_deg=-1.0)
     # An ndarray and a list both serve as an attitude.
     assert sdem.Scan(points, attitude_deg=np.array([0.5, 0.0, 10.0])).attitude_deg == \
@@ -163,6 +163,15 @@ def test_numpy_values_serve_as_options_and_a_number_that_is_not_finite_is_named(
         sdem.localize(ref, qry, window=bad)
     with pytest.raises(sdem.InvalidError, match="step_m is a set"):
         sdem.localize(ref, qry, step_m={0.02})
+
+
+def test_options_and_readings_are_checked_where_they_are_given(points):
+    with pytest.raises(sdem.InvalidError, match="step"):
+        sdem.localize_options(step_m=-1)
+    with pytest.raises(sdem.InvalidError, match="heading window"):
+        sdem.localize_options(heading={"half_range_deg": -5})
+    with pytest.raises(sdem.InvalidInputError, match="yaw_sigma_deg: 0° must be positive"):
+        sdem.Scan(points, attitude_deg=(0, 0, 0), yaw_sigma_deg=0)
 
 
 def test_a_negative_count_is_refused_by_name():
