@@ -679,6 +679,48 @@ fn validate(config: &LocalizeOptions) -> Result<()> {
             config.step_m
         )));
     }
+    // The doubts' thresholds: a NaN or a ratio out of range would silence a doubt (a NaN
+    // ambiguity ratio left a KITTI pair's runner-up unflagged, the pose trusted).
+    let in_range = |name: &str, value: f64, lo: f64, hi: f64| {
+        if (lo..=hi).contains(&value) {
+            Ok(())
+        } else {
+            Err(Error::Invalid(format!(
+                "{name} = {value} must lie in {lo}..={hi}"
+            )))
+        }
+    };
+    in_range(
+        "ambiguous_cost_ratio",
+        config.ambiguous_cost_ratio,
+        1.0,
+        f64::MAX,
+    )?;
+    in_range(
+        "ambiguous_sigma_ratio",
+        config.ambiguous_sigma_ratio,
+        1.0,
+        f64::MAX,
+    )?;
+    in_range(
+        "ambiguous_rise_ratio",
+        config.ambiguous_rise_ratio,
+        0.0,
+        1.0,
+    )?;
+    in_range(
+        "min_trusted_inlier_fraction",
+        config.min_trusted_inlier_fraction,
+        0.0,
+        1.0,
+    )?;
+    in_range("min_trusted_support", config.min_trusted_support, 0.0, 1.0)?;
+    in_range("peak_radius_m", config.peak_radius_m, 0.0, f64::MAX)?;
+    if config.mode == SearchMode::CoarseToFine && config.keep == 0 {
+        return Err(Error::Invalid(
+            "keep = 0: the coarse-to-fine search keeps at least 1 candidate a level".into(),
+        ));
+    }
     if let Some(prior) = &config.cost.prior {
         // Every candidate lies many σ from the prediction: the two contradict each other, and
         // the search would only return the window's edge nearest the prediction.

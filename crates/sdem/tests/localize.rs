@@ -712,3 +712,33 @@ proptest! {
         prop_assert!(fast.candidates_evaluated < oracle.candidates_evaluated);
     }
 }
+
+/// A doubt's threshold that is not a number, or out of its range, is refused by name: a NaN
+/// ambiguity ratio silenced the runner-up doubt.
+#[test]
+fn thresholds_of_the_doubts_are_checked() {
+    use sdem::localize::{LocalizeOptions, SearchMode};
+    let bad: [(&str, fn(&mut LocalizeOptions)); 6] = [
+        ("ambiguous_cost_ratio", |o| {
+            o.ambiguous_cost_ratio = f64::NAN
+        }),
+        ("ambiguous_sigma_ratio", |o| o.ambiguous_sigma_ratio = 0.5),
+        ("ambiguous_rise_ratio", |o| o.ambiguous_rise_ratio = -0.1),
+        ("min_trusted_inlier_fraction", |o| {
+            o.min_trusted_inlier_fraction = 2.0
+        }),
+        ("min_trusted_support", |o| o.min_trusted_support = f64::NAN),
+        ("keep", |o| {
+            o.mode = SearchMode::CoarseToFine;
+            o.cost.model = sdem::cost::CostModel::VirtualSdem;
+            o.keep = 0;
+        }),
+    ];
+    for (name, spoil) in bad {
+        let mut options = LocalizeOptions::default();
+        spoil(&mut options);
+        let e = options.validate().unwrap_err().to_string();
+        assert!(e.contains(name), "{name}: {e}");
+    }
+    LocalizeOptions::default().validate().unwrap();
+}
