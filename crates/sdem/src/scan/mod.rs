@@ -60,6 +60,9 @@ use crate::sdem::Sdem;
 /// # Ok::<(), sdem::Error>(())
 /// ```
 pub fn localize(reference: &Scan, query: &Scan, options: &LocalizeOptions) -> Result<Localization> {
+    // Checked as given, though the heading's range is replaced below: a bad option is refused
+    // whichever search reads it.
+    options.validate()?;
     if reference.sdem.config() != query.sdem.config() {
         return Err(Error::Invalid(
             "the reference and the query are on different S-DEM grids; build both scans with \
