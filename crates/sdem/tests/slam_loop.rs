@@ -507,6 +507,8 @@ fn a_relocalization_with_a_prediction_takes_it_along_a_corridor() {
         );
         assert!(bad.is_err(), "σ {sigma_m} accepted");
     }
+    let none = relocalize(&map, &config, &points, level, None, 0).unwrap_err();
+    assert!(none.to_string().contains("max_nodes = 0"), "{none}");
 }
 
 /// The doubt a step carries when the prediction, not the scans, set its position along a free

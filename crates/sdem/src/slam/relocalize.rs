@@ -71,7 +71,7 @@ pub struct Near {
 ///   searched again over a full turn of heading, exactly, before it is said not to be found.
 ///
 /// # Errors
-/// An empty map, a scan of which no point is usable ([`Error::NoUsablePoints`], saying why) or
+/// An empty map or `max_nodes` 0, a scan of which no point is usable ([`Error::NoUsablePoints`], saying why) or
 /// that fills too few cells to compare ([`Error::TooFewPoints`]), a
 /// `near` that is not finite or whose σ is not a positive length, or ([`Error::NotFound`]) no
 /// node that matches with confidence, each tried node with its reason.
@@ -84,6 +84,11 @@ pub fn relocalize(
     max_nodes: usize,
 ) -> Result<Relocalization> {
     let start = Instant::now();
+    if max_nodes == 0 {
+        return Err(Error::Invalid(
+            "max_nodes = 0: at least one node must be tried".into(),
+        ));
+    }
     if map.nodes.is_empty() {
         return Err(Error::Invalid(
             "the map has no node to relocalize in".into(),
