@@ -718,7 +718,8 @@ proptest! {
 #[test]
 fn thresholds_of_the_doubts_are_checked() {
     use sdem::localize::{LocalizeOptions, SearchMode};
-    let bad: [(&str, fn(&mut LocalizeOptions)); 6] = [
+    type Spoil = fn(&mut LocalizeOptions);
+    let bad: [(&str, Spoil); 6] = [
         ("ambiguous_cost_ratio", |o| {
             o.ambiguous_cost_ratio = f64::NAN
         }),
