@@ -339,7 +339,7 @@ fn check_resume_flags(args: &Args) -> Result<()> {
 
 /// `--resume`: the saved map and step log, with the saved configuration.
 fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
-    let saved = load_map(map_dir)?;
+    let mut saved = load_map(map_dir)?;
     if let Some(made_from) = &saved.dataset {
         if !same_dataset(made_from, &args.dataset) {
             bail!(
@@ -355,9 +355,10 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
     let next = saved.map.nodes.len();
     let mut earlier_datasets = saved.datasets_by_run();
     earlier_datasets.pop();
-    let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+    let node_files = std::mem::take(&mut saved.node_files);
+    let mut slam = saved.into_slam()?;
     let steps = read_steps(&args.out.join(STEPS_FILE), run_nodes(&slam))?;
-    let folder = Arc::new(MapFolder::open(map_dir, saved.node_files)?);
+    let folder = Arc::new(MapFolder::open(map_dir, node_files)?);
     slam.set_node_store(folder.clone());
     Ok(Run {
         slam,
@@ -376,7 +377,7 @@ fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
     let saved = load_map(&folder).with_context(|| format!("--map {}", existing.display()))?;
     let nodes = saved.map.nodes.len();
     let earlier_datasets = saved.datasets_by_run();
-    let mut slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)?;
+    let mut slam = saved.into_slam()?;
     slam.begin_run();
     let store = Arc::new(MapFolder::create(map_dir)?);
     slam.set_node_store(store.clone());

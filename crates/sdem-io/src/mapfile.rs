@@ -109,6 +109,43 @@ impl SavedMap {
         datasets.push(self.dataset.clone());
         datasets
     }
+
+    /// The loop restored to go on with this map ([`sdem::Slam::restore`]: its configuration,
+    /// nodes, edges and loop closures), as `sdem slam --resume` does; call
+    /// [`sdem::Slam::begin_run`] first for a second run into it (`sdem slam --map`).
+    ///
+    /// # Errors
+    /// As [`sdem::Slam::restore`]: a configuration or graph that does not hold together.
+    pub fn into_slam(self) -> sdem::Result<sdem::Slam> {
+        sdem::Slam::restore(self.config, self.map, self.edges, self.loop_closures)
+    }
+
+    /// Relocalizes a scan in this map with the map's own settings, as `sdem localize --map`
+    /// does ([`sdem::slam::relocalize`]): near a position, its 3 nearest nodes; without one,
+    /// the map's `recovery.relocalize_candidates` nodes whose places look most like the scan.
+    ///
+    /// # Errors
+    /// As [`sdem::slam::relocalize`]; [`sdem::Error::NotFound`], with the nodes tried, when no
+    /// place matches with confidence.
+    pub fn relocalize(
+        &self,
+        points_in_sensor: &[sdem::geometry::Vec3],
+        attitude: Option<Attitude>,
+        near: Option<sdem::slam::Near>,
+    ) -> sdem::Result<sdem::slam::Relocalization> {
+        let nodes = match near {
+            Some(_) => 3,
+            None => self.config.recovery.relocalize_candidates,
+        };
+        sdem::slam::relocalize(
+            &self.map,
+            &self.config,
+            points_in_sensor,
+            attitude,
+            near,
+            nodes,
+        )
+    }
 }
 
 #[derive(Serialize, Deserialize)]
