@@ -245,7 +245,28 @@ impl Dataset {
 
     /// Reads scan `index` (0-based): its points in the sensor frame, metres.
     pub fn load_scan(&self, index: usize) -> Result<Vec<Vec3>> {
-        read_points(self.check_index(index)?)
+        let path = self.check_index(index)?;
+        let points = read_points(path)?;
+        // With a sensor model, a scan whose median range is many times the sensor's reach is
+        // in another unit: a millimetre scan taken within a metre passes the readers' own 1 km
+        // check, not this one.
+        if let Some(sensor) = &self.sensor {
+            let (median, _) = crate::points::median_range(&points);
+            if median > UNIT_CHECK_REACHES * sensor.max_range_m {
+                return Err(Error::parse(
+                    path,
+                    None,
+                    format!(
+                        "half of the points lie farther than {median:.1} m from the sensor, \
+                         {:.0} times the {} m the sensor reaches (sensor.toml's max_range_m): \
+                         is the file in millimetres?",
+                        median / sensor.max_range_m,
+                        sensor.max_range_m
+                    ),
+                ));
+            }
+        }
+        Ok(points)
     }
 
     /// The raw sweep of scan `index` from `sweeps/STEM.sweep`, where `STEM` is the scan file's
@@ -489,6 +510,11 @@ pub fn write_dataset_streamed<'s>(
     write_sensor_toml(&root.join(SENSOR_FILE), sensor)
 }
 
+/// A dataset's scan is refused when its median range exceeds this many times the sensor's
+/// maximum range ([`Dataset::load_scan`]): no scanner sees most of its returns beyond its reach,
+/// and a scan in millimetres lies a thousand times farther.
+const UNIT_CHECK_REACHES: f64 = 10.0;
+
 /// The files and folders of a dataset folder that sdem writes (`scans/`, `sweeps/`,
 /// `attitude.csv`, the pose files with their `.tum` twins, `sensor.toml`).
 pub const DATASET_ENTRIES: &[&str] = &[
@@ -613,6 +639,32 @@ mod tests {
                 ranges: vec![1.0, f32::NAN, 2.0],
             }],
         }
+    }
+
+    /// A scan whose median range is many times the sensor's reach (sensor.toml) is refused as
+    /// another unit, naming the file, though it passes the readers' 1 km check (these points,
+    /// scaled by 100, lie 270 m away); without a sensor model it is read.
+    #[test]
+    fn a_scan_far_beyond_the_sensors_reach_is_refused_as_millimetres() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().join("run");
+        let in_mm: Vec<(Vec<Vec3>, Attitude)> = scans(2)
+            .into_iter()
+            .map(|(points, a)| (points.iter().map(|p| p * 100.0).collect(), a))
+            .collect();
+        let sensor = SensorConfig::default();
+        write_dataset(&root, &sensor, &in_mm, None, None, None).unwrap();
+        let e = Dataset::open(&root)
+            .unwrap()
+            .load_scan(1)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("000001.ply") && e.contains("millimetres"), "{e}");
+        std::fs::remove_file(root.join(SENSOR_FILE)).unwrap();
+        assert_eq!(
+            Dataset::open(&root).unwrap().load_scan(1).unwrap().len(),
+            10
+        );
     }
 
     #[test]

@@ -134,10 +134,7 @@ pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
             ),
         ));
     }
-    let mut ranges: Vec<(f64, usize)> = points.iter().map(|p| p.norm()).zip(0..).collect();
-    let middle = ranges.len() / 2;
-    let (_, &mut (median, i), _) =
-        ranges.select_nth_unstable_by(middle, |a, b| a.0.total_cmp(&b.0));
+    let (median, i) = median_range(points);
     if median > MAX_MEDIAN_RANGE_M {
         let p = points.get(i).copied().unwrap_or_default();
         return Err(Error::parse(
@@ -153,6 +150,18 @@ pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+/// The median distance of `points` from the sensor, with the index of a point at it (0 for
+/// no points).
+pub(crate) fn median_range(points: &[Vec3]) -> (f64, usize) {
+    let mut ranges: Vec<(f64, usize)> = points.iter().map(|p| p.norm()).zip(0..).collect();
+    if ranges.is_empty() {
+        return (0.0, 0);
+    }
+    let middle = ranges.len() / 2;
+    let (_, &mut at, _) = ranges.select_nth_unstable_by(middle, |a, b| a.0.total_cmp(&b.0));
+    at
 }
 
 /// Splits a data line into fields: on commas when it has any (each field trimmed, empty fields
