@@ -39,6 +39,16 @@ fn level() -> Option<Attitude> {
     Some(Attitude::default())
 }
 
+/// Degrees given where radians are meant (`Attitude::new(30.0, …)`, roll beyond a full turn)
+/// are refused, naming the two constructors; a full turn itself passes.
+#[test]
+fn an_attitude_in_degrees_given_as_radians_is_refused() {
+    let room = room();
+    let e = Scan::from_points(&room, Some(Attitude::new(30.0, 0.0, 0.0))).unwrap_err();
+    assert!(e.to_string().contains("Attitude::from_degrees"), "{e}");
+    Scan::from_points(&room, Some(Attitude::from_degrees(0.0, 360.0, 0.0))).unwrap();
+}
+
 #[test]
 fn too_few_points_is_an_error_saying_how_many() {
     let few: Vec<Point3<f64>> = room().into_iter().step_by(2000).collect();

@@ -119,6 +119,18 @@ pub(crate) fn checked_input(
             problem: format!("{:?} is not finite", a.to_degrees()),
         });
     }
+    // Roll and pitch beyond a full turn are degrees given where radians are meant
+    // (`Attitude::new(30.0, …)`); attitude.csv holds them to ±360° too.
+    if let Some(a) = attitude.filter(|a| a.roll.abs().max(a.pitch.abs()) > std::f64::consts::TAU) {
+        return Err(Error::InvalidInput {
+            what: "attitude".into(),
+            problem: format!(
+                "roll {} rad and pitch {} rad: beyond a full turn; `Attitude::new` takes \
+                 radians, `Attitude::from_degrees` degrees",
+                a.roll, a.pitch
+            ),
+        });
+    }
     if let Some(a) = attitude.filter(|a| !a.sigma_is_valid()) {
         return Err(Error::InvalidInput {
             what: "attitude's standard deviations".into(),
