@@ -540,10 +540,11 @@ pub(crate) fn localize_below(
     // well as its heading; at the reading's tilt the cost has its minimum elsewhere when the
     // refinement corrected it, and under `sdem bench --faults`' gyro drift half the right poses
     // came out flat there).
-    let refined_inliers = (refined.refinement.is_some())
+    // Eq. (1) at the refined pose, once: the cost's shape is probed about it, and its inliers
+    // are `Diagnostics::refined_inlier_fraction`.
+    let refined_at = (refined.refinement.is_some())
         .then(|| correlator.evaluate_turned(&offset, &rotation))
-        .flatten()
-        .map(|c| c.inliers);
+        .flatten();
     let mut cost_at = |offset: Vec3, refined: bool| {
         let scored = if refined {
             correlator.evaluate_turned(&offset, &rotation)
@@ -552,18 +553,16 @@ pub(crate) fn localize_below(
         };
         scored.map_or(f64::INFINITY, |c| c.cost)
     };
-    let (mut diagnostics, mut doubts) = diagnose(
+    let (diagnostics, mut doubts) = diagnose(
         config,
         best.compared,
         &best.at_best,
         grid_offset,
         runner_up,
-        refined.refinement.as_ref(),
+        (refined.refinement.as_ref(), refined_at.as_ref()),
         refined.error.as_deref(),
         &mut cost_at,
     );
-    diagnostics.refined_inlier_fraction =
-        refined_inliers.map(|n| n as f64 / best.compared.max(1) as f64);
     if let Some(doubt) = attitude_corrected(&refined.rotation, reference_attitude, query_attitude) {
         doubts.push(doubt);
     }

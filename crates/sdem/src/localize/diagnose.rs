@@ -12,8 +12,9 @@ use crate::sdem::Sdem;
 use nalgebra::{Matrix6, SymmetricEigen, UnitQuaternion, Vector3, U3};
 
 /// The diagnostics of a match (overlap, runner-up, covariance) and its doubts. `refinement` is
-/// the 6-DoF refinement's result when it converged; `refine_error` says why it failed, when it
-/// was asked for and did. `cost_at(offset, refined)` is eq. (1) at `offset` with the query turned
+/// the 6-DoF refinement's result when it converged, `refined_at` eq. (1) at its pose (`None`
+/// where the scans share too few cells there); `refine_error` says why it failed, when it was
+/// asked for and did. `cost_at(offset, refined)` is eq. (1) at `offset` with the query turned
 /// by the refined rotation (`true`) or by the grid optimum's heading (`false`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn diagnose(
@@ -22,12 +23,16 @@ pub(super) fn diagnose(
     best: &crate::cost::Correlation,
     best_offset: Vec3,
     runner_up: Option<(f64, Vec3, f64)>,
-    refinement: Option<&Refinement>,
+    (refinement, refined_at): (Option<&Refinement>, Option<&crate::cost::Correlation>),
     refine_error: Option<&str>,
     cost_at: &mut dyn FnMut(Vec3, bool) -> f64,
 ) -> (Diagnostics, Vec<Doubt>) {
     let known = query_known.max(1) as f64;
     let inlier_fraction = best.inliers as f64 / known;
+    let refined_inlier_fraction = refinement
+        .is_some()
+        .then(|| refined_at.map(|c| c.inliers as f64 / known))
+        .flatten();
     let mut doubts = Vec::new();
     if let Some((c, at, _)) = runner_up {
         if c < config.ambiguous_cost_ratio * best.cost {
@@ -74,7 +79,7 @@ pub(super) fn diagnose(
     let before = doubts.len();
     if let Some(r) = refinement {
         let centre = r.reference_level_from_query_level.translation.vector;
-        let centre_cost = cost_at(centre, true);
+        let centre_cost = refined_at.map_or(f64::INFINITY, |c| c.cost);
         let mut about_refined = |o: Vec3| cost_at(o, true);
         cost_shape(
             config,
@@ -123,7 +128,7 @@ pub(super) fn diagnose(
     let diagnostics = Diagnostics {
         overlap_fraction: best.overlap as f64 / known,
         inlier_fraction,
-        refined_inlier_fraction: None,
+        refined_inlier_fraction,
         runner_up_cost: runner_up.map(|r| r.0),
         runner_up_cost_at_least: config
             .runner_up
