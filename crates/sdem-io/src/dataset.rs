@@ -3,9 +3,8 @@
 //! `sensor.toml`.
 
 use super::{
-    read_attitude_readings, read_kitti_poses, read_points, read_sensor_file, read_sweep,
-    write_attitude_csv, write_points_ply, write_poses, write_sensor_toml, write_sweep,
-    POINT_EXTENSIONS,
+    read_attitude_readings, read_kitti_poses, read_sensor_file, read_sweep, write_attitude_csv,
+    write_points_ply, write_poses, write_sensor_toml, write_sweep, POINT_EXTENSIONS,
 };
 use crate::error::{Error, Result};
 use sdem::geometry::{Attitude, AttitudeSigma, Pose, Vec3};
@@ -245,28 +244,9 @@ impl Dataset {
 
     /// Reads scan `index` (0-based): its points in the sensor frame, metres.
     pub fn load_scan(&self, index: usize) -> Result<Vec<Vec3>> {
-        let path = self.check_index(index)?;
-        let points = read_points(path)?;
-        // With a sensor model, a scan whose median range is many times the sensor's reach is
-        // in another unit: a millimetre scan taken within a metre passes the readers' own 1 km
-        // check, not this one.
-        if let Some(sensor) = &self.sensor {
-            let (median, _) = crate::points::median_range(&points);
-            if median > UNIT_CHECK_REACHES * sensor.max_range_m {
-                return Err(Error::parse(
-                    path,
-                    None,
-                    format!(
-                        "half of the points lie farther than {median:.1} m from the sensor, \
-                         {:.0} times the {} m the sensor reaches (sensor.toml's max_range_m): \
-                         is the file in millimetres?",
-                        median / sensor.max_range_m,
-                        sensor.max_range_m
-                    ),
-                ));
-            }
-        }
-        Ok(points)
+        // With a sensor model, a scan far beyond the sensor's reach is in another unit.
+        let reach = self.sensor.as_ref().map(|s| s.max_range_m);
+        crate::points::read_points_within(self.check_index(index)?, reach)
     }
 
     /// The raw sweep of scan `index` from `sweeps/STEM.sweep`, where `STEM` is the scan file's
@@ -509,11 +489,6 @@ pub fn write_dataset_streamed<'s>(
     }
     write_sensor_toml(&root.join(SENSOR_FILE), sensor)
 }
-
-/// A dataset's scan is refused when its median range exceeds this many times the sensor's
-/// maximum range ([`Dataset::load_scan`]): no scanner sees most of its returns beyond its reach,
-/// and a scan in millimetres lies a thousand times farther.
-const UNIT_CHECK_REACHES: f64 = 10.0;
 
 /// The files and folders of a dataset folder that sdem writes (`scans/`, `sweeps/`,
 /// `attitude.csv`, the pose files with their `.tum` twins, `sensor.toml`).

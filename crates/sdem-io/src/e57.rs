@@ -117,10 +117,12 @@ pub fn for_each_e57_scan(
             .map_err(|message| err(format!("scan {index}{name}: {message}")))?;
         if !scan.points_in_sensor.is_empty() {
             // As every scan: metres in the sensor frame (see `read_points`).
-            crate::points::check_magnitudes(path, &scan.points_in_sensor).map_err(|e| match e {
-                Error::Parse { message, .. } => err(format!("scan {index}{name}: {message}")),
-                other => other,
-            })?;
+            crate::points::check_magnitudes(path, &scan.points_in_sensor, None).map_err(
+                |e| match e {
+                    Error::Parse { message, .. } => err(format!("scan {index}{name}: {message}")),
+                    other => other,
+                },
+            )?;
         }
         visit(index, scan)?;
     }

@@ -75,6 +75,12 @@ impl PointFormat {
 /// # std::fs::remove_dir_all(&dir).unwrap();
 /// ```
 pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
+    read_points_within(path, None)
+}
+
+/// [`read_points`], and with `sensor_reach` (a dataset's `sensor.toml` `max_range_m`) a scan
+/// whose median range is more than [`UNIT_CHECK_REACHES`] times it is refused as another unit.
+pub(crate) fn read_points_within(path: &Path, sensor_reach: Option<f64>) -> Result<Vec<Vec3>> {
     let format = PointFormat::from_path(path).ok_or_else(|| {
         let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase());
         let message = match ext.as_deref() {
@@ -105,7 +111,7 @@ pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
             "the file holds no points (or only points with NaN coordinates); a scan needs points",
         ));
     }
-    check_magnitudes(path, &points)?;
+    check_magnitudes(path, &points, sensor_reach)?;
     Ok(points)
 }
 
@@ -115,9 +121,19 @@ pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
 /// (Centimetres, or millimetres of a scan taken within a metre, cannot be told from metres.)
 pub const MAX_MEDIAN_RANGE_M: f64 = 1000.0;
 
+/// A dataset's scan is refused when its median range exceeds this many times the sensor's
+/// maximum range ([`crate::Dataset::load_scan`]): no scanner sees most of its returns beyond
+/// its reach, and a scan in millimetres lies a thousand times farther.
+const UNIT_CHECK_REACHES: f64 = 10.0;
+
 /// Checks what every format shares: each coordinate fits in `f32` (sdem keeps points as `f32`),
-/// and the median distance from the sensor is at most [`MAX_MEDIAN_RANGE_M`].
-pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
+/// and the median distance from the sensor is at most [`MAX_MEDIAN_RANGE_M`] (and, given the
+/// sensor's reach, at most [`UNIT_CHECK_REACHES`] times it).
+pub(crate) fn check_magnitudes(
+    path: &Path,
+    points: &[Vec3],
+    sensor_reach: Option<f64>,
+) -> Result<()> {
     let limit = f64::from(f32::MAX);
     if let Some((i, p)) = points
         .iter()
@@ -146,6 +162,19 @@ pub(crate) fn check_magnitudes(path: &Path, points: &[Vec3]) -> Result<()> {
                  world coordinates?",
                 fmt_msg(median.round()),
                 fmt_point([p.x, p.y, p.z])
+            ),
+        ));
+    }
+    // A millimetre scan taken within a metre passes the kilometre, not the sensor's reach.
+    if let Some(reach) = sensor_reach.filter(|&r| median > UNIT_CHECK_REACHES * r) {
+        return Err(Error::parse(
+            path,
+            None,
+            format!(
+                "half of the points lie farther than {median:.1} m from the sensor, {:.0} times \
+                 the {reach} m the sensor reaches (sensor.toml's max_range_m): is the file in \
+                 millimetres?",
+                median / reach
             ),
         ));
     }
