@@ -475,11 +475,7 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         }),
         (None, None) => None,
     };
-    let folder = if map.join(sdem_io::MAP_MANIFEST).exists() {
-        map.to_path_buf()
-    } else {
-        map.join("map")
-    };
+    let folder = sdem_io::saved_map_folder(map);
     let Some(scan) = args.scan.as_ref().or(args.dataset.as_ref()) else {
         return Err(usage_error(
             "localize",

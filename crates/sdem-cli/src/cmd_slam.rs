@@ -373,7 +373,7 @@ fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
 /// `--map EXISTING`: the saved map, with its configuration, ready for a new run; OUT/map must
 /// be another folder.
 fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
-    let folder = saved_map_folder(existing);
+    let folder = sdem_io::saved_map_folder(existing);
     let saved = load_map(&folder).with_context(|| format!("--map {}", existing.display()))?;
     let nodes = saved.map.nodes.len();
     let earlier_datasets = saved.datasets_by_run();
@@ -391,21 +391,11 @@ fn extend(existing: &Path, map_dir: &Path) -> Result<Run> {
     })
 }
 
-/// The map folder `--map existing` names: the folder itself when it holds a map, else its
-/// `map` folder (a `sdem slam` output folder).
-fn saved_map_folder(existing: &Path) -> PathBuf {
-    if existing.join(sdem_io::MAP_MANIFEST).exists() {
-        existing.to_path_buf()
-    } else {
-        existing.join(MAP_DIR)
-    }
-}
-
 /// Refuses, before anything in `--out` is touched, a `--map existing` that is the map the run
 /// writes in `out`: it would write over the map it extends (with `--force`, remove it first).
 fn check_extended_map(existing: &Path, out: &Path) -> Result<()> {
     let (Ok(folder), Ok(out_folder)) = (
-        saved_map_folder(existing).canonicalize(),
+        sdem_io::saved_map_folder(existing).canonicalize(),
         out.canonicalize(),
     ) else {
         return Ok(());

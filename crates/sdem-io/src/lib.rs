@@ -269,7 +269,10 @@ pub use import::{
     ImportSummary, UOS_MAX_RANGE_M, UOS_MIN_RANGE_M,
 };
 pub use map_store::MapFolder;
-pub use mapfile::{load_map, save_map, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST, MAP_VERSION};
+pub use mapfile::{
+    load_map, save_map, saved_map_folder, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST,
+    MAP_VERSION,
+};
 pub use mcap_out::{
     point_cloud2_message, write_map_mcap, MapScene, McapSummary, MAP_FRAME, ROBOT_FRAME,
 };

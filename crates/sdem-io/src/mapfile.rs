@@ -96,6 +96,17 @@ pub struct SavedMap {
     pub node_files: NodeFiles,
 }
 
+/// The saved map folder `path` names: `path` itself when it holds the manifest, its `map`
+/// folder when that does (the output folder of `sdem slam`), else `path` (whose loading then
+/// says it is not a saved map).
+pub fn saved_map_folder(path: &Path) -> PathBuf {
+    if path.join(MAP_MANIFEST).exists() || !path.join("map").join(MAP_MANIFEST).exists() {
+        path.to_path_buf()
+    } else {
+        path.join("map")
+    }
+}
+
 impl SavedMap {
     /// The dataset of each run of the map's nodes, by run (index = [`sdem::map::Node::run`]),
     /// `None` where the map does not say: what [`save_map`] takes to save the map again.

@@ -13,7 +13,7 @@ use sdem::slam::{relocalize, Near};
 use sdem::{Doubt as RustDoubt, Pose, SlamOptions};
 use sdem_io::{NodeFiles, SavedMap, MAP_MANIFEST};
 use serde_json::Value;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The incremental stop-and-go loop (Nagatani et al. 2003, Sec. III, with loop closure): add
 /// one stop's scan at a time; each is localized against the map, becomes a node, closes loops
@@ -96,7 +96,7 @@ impl Slam {
     #[pyo3(signature = (path, *, progress=None))]
     fn load(py: Python<'_>, path: PathBuf, progress: Option<Py<PyAny>>) -> PyResult<Self> {
         check_progress(py, progress.as_ref())?;
-        let folder = map_folder(&path);
+        let folder = sdem_io::saved_map_folder(&path);
         let saved = py.detach(|| sdem_io::load_map(&folder)).map_err(io_error)?;
         let node_files = saved.node_files.clone();
         let inner = py
@@ -367,15 +367,6 @@ impl Step {
     }
 }
 
-/// The folder holding `map.json`: `path` itself, or `path/map` as `sdem slam` writes it.
-fn map_folder(path: &Path) -> PathBuf {
-    if path.join(MAP_MANIFEST).exists() || !path.join("map").join(MAP_MANIFEST).exists() {
-        path.to_path_buf()
-    } else {
-        path.join("map")
-    }
-}
-
 /// A saved map (``Slam.save`` or ``sdem slam`` wrote it), loaded to relocalize scans in, as
 /// ``sdem localize --map`` does. Load it with ``sdem.Map.load(path)``.
 #[pyclass(module = "sdem", frozen)]
@@ -394,7 +385,7 @@ impl Map {
     ///         naming the file.
     #[staticmethod]
     fn load(py: Python<'_>, path: PathBuf) -> PyResult<Self> {
-        let folder = map_folder(&path);
+        let folder = sdem_io::saved_map_folder(&path);
         let saved = py.detach(|| sdem_io::load_map(&folder)).map_err(io_error)?;
         Ok(Self { saved, folder })
     }
