@@ -532,7 +532,7 @@ pub fn clear_dataset(root: &Path) -> Result<()> {
         };
         let mut foreign: Vec<String> = (entries.flatten())
             .map(|e| e.file_name().to_string_lossy().into_owned())
-            .filter(|name| !written_by_sdem(name))
+            .filter(|name| !crate::numbered_file(name, None))
             .collect();
         if !foreign.is_empty() {
             foreign.sort();
@@ -568,19 +568,6 @@ pub fn clear_dataset(root: &Path) -> Result<()> {
         removed.map_err(|e| Error::io(&path, e))?;
     }
     Ok(())
-}
-
-/// Whether `name`, in `scans/` or `sweeps/`, is one sdem writes there: six digits and an
-/// extension (`000012.ply`), or such a file's temporary twin left by a crash
-/// (`.000012.ply.tmp-PID-N`).
-fn written_by_sdem(name: &str) -> bool {
-    let name = name
-        .strip_prefix('.')
-        .and_then(|n| n.rsplit_once(crate::TEMPORARY_MARK))
-        .map_or(name, |(file, _)| file);
-    name.split_once('.').is_some_and(|(stem, ext)| {
-        stem.len() == 6 && stem.bytes().all(|b| b.is_ascii_digit()) && !ext.is_empty()
-    })
 }
 
 #[cfg(test)]

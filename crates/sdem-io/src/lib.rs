@@ -270,8 +270,8 @@ pub use import::{
 };
 pub use map_store::MapFolder;
 pub use mapfile::{
-    load_map, save_map, saved_map_folder, NodeFiles, SavedMap, MAP_FORMAT, MAP_MANIFEST,
-    MAP_VERSION,
+    foreign_in_map, load_map, save_map, saved_map_folder, NodeFiles, SavedMap, MAP_FORMAT,
+    MAP_MANIFEST, MAP_VERSION,
 };
 pub use mcap_out::{
     point_cloud2_message, write_map_mcap, MapScene, McapSummary, MAP_FRAME, ROBOT_FRAME,
@@ -291,6 +291,26 @@ pub use voxels::{read_voxel_map, write_voxel_map, VOXEL_EXTENSION, VOXEL_MAGIC, 
 
 /// What [`write_atomic`]'s temporary files carry between the target's name and the process id.
 const TEMPORARY_MARK: &str = ".tmp-";
+
+/// The name of the file `name` stands for: itself, or the target of a temporary file
+/// [`write_atomic`] left (`.NAME.tmp-PID-N`, a crash mid-save).
+pub(crate) fn unwrapped_temporary(name: &str) -> &str {
+    name.strip_prefix('.')
+        .and_then(|n| n.rsplit_once(TEMPORARY_MARK))
+        .map_or(name, |(file, _)| file)
+}
+
+/// Whether `name` (or the file a temporary one stands for) is numbered as sdem numbers the
+/// files it writes by scan or node: six digits, then `.ext` (any extension when `None`).
+pub(crate) fn numbered_file(name: &str, ext: Option<&str>) -> bool {
+    unwrapped_temporary(name)
+        .split_once('.')
+        .is_some_and(|(stem, e)| {
+            stem.len() == 6
+                && stem.bytes().all(|b| b.is_ascii_digit())
+                && ext.map_or(!e.is_empty(), |ext| e == ext)
+        })
+}
 
 /// Writes a file atomically: `write` fills a temporary file in the same folder (named
 /// `.NAME.tmp-PID-N`), which is flushed, synced to disk and then renamed over `path`. A crash or

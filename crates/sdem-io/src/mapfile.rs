@@ -34,6 +34,8 @@ use std::path::{Path, PathBuf};
 
 /// The manifest's file name.
 pub const MAP_MANIFEST: &str = "map.json";
+/// The folder of a saved map's node files (`NNNNNN.pts`), beside the manifest.
+const NODES_DIR: &str = "nodes";
 /// The manifest's `format` value.
 pub const MAP_FORMAT: &str = "sdem-map";
 /// The newest map version this build reads and the one it writes.
@@ -94,6 +96,38 @@ pub struct SavedMap {
     pub earlier_datasets: Vec<Option<PathBuf>>,
     /// The node files checked on loading; pass them to [`save_map`] to go on with this map.
     pub node_files: NodeFiles,
+}
+
+/// The entries of the saved map folder `folder` that sdem does not write there (anything but
+/// the manifest, `nodes/NNNNNN.pts` and the temporaries a crash left), as paths relative
+/// to it, sorted: what removing the folder would take of a user's.
+pub fn foreign_in_map(folder: &Path) -> Vec<String> {
+    let mut foreign = Vec::new();
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return foreign;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let temporary = crate::unwrapped_temporary(&name) != name;
+        if name == MAP_MANIFEST || temporary {
+            continue;
+        }
+        if name == NODES_DIR && entry.path().is_dir() {
+            let Ok(nodes) = std::fs::read_dir(entry.path()) else {
+                continue;
+            };
+            for node in nodes.flatten() {
+                let file = node.file_name().to_string_lossy().into_owned();
+                if !crate::numbered_file(&file, Some("pts")) {
+                    foreign.push(format!("{NODES_DIR}/{file}"));
+                }
+            }
+            continue;
+        }
+        foreign.push(name);
+    }
+    foreign.sort();
+    foreign
 }
 
 /// The saved map folder `path` names: `path` itself when it holds the manifest, its `map`
@@ -256,7 +290,7 @@ fn pose_from_row_major(v: &[f64; 12]) -> Option<Pose> {
 }
 
 fn points_file_name(node_id: usize) -> String {
-    format!("nodes/{node_id:06}.pts")
+    format!("{NODES_DIR}/{node_id:06}.pts")
 }
 
 fn encode_points(points: &[[f32; 3]]) -> Vec<u8> {
@@ -402,7 +436,7 @@ pub fn save_map(
     loop_closures: &[LoopClosure],
     datasets: &[Option<PathBuf>],
 ) -> Result<()> {
-    let nodes_dir = folder.join("nodes");
+    let nodes_dir = folder.join(NODES_DIR);
     std::fs::create_dir_all(&nodes_dir).map_err(|e| Error::io(&nodes_dir, e))?;
     remove_stale_temporaries(folder);
     remove_stale_temporaries(&nodes_dir);

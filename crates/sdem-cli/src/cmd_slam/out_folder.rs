@@ -81,7 +81,7 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
     }
     if args.force && !args.resume {
         if has_map {
-            let foreign = foreign_in_map(map_dir);
+            let foreign = sdem_io::foreign_in_map(map_dir);
             if !foreign.is_empty() {
                 bail!(
                     "--force would remove {}, with {} that sdem did not write ({}); move {} out \
@@ -116,39 +116,4 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
         }
     }
     create_folder(out)
-}
-
-/// The entries of the saved map folder `map_dir` that sdem does not write there (anything but
-/// `map.json`, `nodes/NNNNNN.pts` and their crash-left temporaries `.NAME.tmp-PID-N`), as
-/// paths relative to it.
-fn foreign_in_map(map_dir: &Path) -> Vec<String> {
-    let temporary = |name: &str| name.starts_with('.') && name.contains(".tmp-");
-    let mut foreign = Vec::new();
-    let Ok(entries) = std::fs::read_dir(map_dir) else {
-        return foreign;
-    };
-    for entry in entries.flatten() {
-        let name = entry.file_name().to_string_lossy().into_owned();
-        if name == sdem_io::MAP_MANIFEST || temporary(&name) {
-            continue;
-        }
-        if name == "nodes" && entry.path().is_dir() {
-            let Ok(nodes) = std::fs::read_dir(entry.path()) else {
-                continue;
-            };
-            for node in nodes.flatten() {
-                let file = node.file_name().to_string_lossy().into_owned();
-                let numbered = file.strip_suffix(".pts").is_some_and(|stem| {
-                    stem.len() == 6 && stem.bytes().all(|b| b.is_ascii_digit())
-                });
-                if !(numbered || temporary(&file)) {
-                    foreign.push(format!("nodes/{file}"));
-                }
-            }
-            continue;
-        }
-        foreign.push(name);
-    }
-    foreign.sort();
-    foreign
 }
