@@ -485,7 +485,7 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
     let saved = sdem_io::load_map(&folder)?;
     let points = sdem_io::read_points(scan)?;
     // The map's own search settings (its config.toml), not this command's --step.
-    let found = saved.relocalize(&points, attitude, near);
+    let found = saved.relocalize(&points, attitude, near, None);
     let found = match found {
         Err(sdem::Error::NotFound { tried }) => bail!(
             "{} is not found in the map {}: no place matches it with confidence; tried {}",

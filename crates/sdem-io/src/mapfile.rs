@@ -166,8 +166,9 @@ impl SavedMap {
     }
 
     /// Relocalizes a scan in this map with the map's own settings, as `sdem localize --map`
-    /// does ([`sdem::slam::relocalize`]): near a position, its 3 nearest nodes; without one,
-    /// the map's `recovery.relocalize_candidates` nodes whose places look most like the scan.
+    /// does ([`sdem::slam::relocalize`]), trying `max_nodes` nodes, by default: near a
+    /// position, its 3 nearest; without one, the map's `recovery.relocalize_candidates` whose
+    /// places look most like the scan.
     ///
     /// # Errors
     /// As [`sdem::slam::relocalize`]; [`sdem::Error::NotFound`], with the nodes tried, when no
@@ -177,11 +178,12 @@ impl SavedMap {
         points_in_sensor: &[sdem::geometry::Vec3],
         attitude: Option<Attitude>,
         near: Option<sdem::slam::Near>,
+        max_nodes: Option<usize>,
     ) -> sdem::Result<sdem::slam::Relocalization> {
-        let nodes = match near {
+        let nodes = max_nodes.unwrap_or(match near {
             Some(_) => 3,
             None => self.config.recovery.relocalize_candidates,
-        };
+        });
         sdem::slam::relocalize(
             &self.map,
             &self.config,

@@ -80,13 +80,7 @@ fn plain<'py>(value: &Bound<'py, PyAny>, what: &str, path: &str) -> PyResult<Bou
     if value.is_instance_of::<PyList>() || value.is_instance_of::<PyTuple>() {
         let items: Vec<Bound<'py, PyAny>> = (value.try_iter()?)
             .enumerate()
-            .map(|(i, item)| {
-                plain(
-                    &item?,
-                    what,
-                    &format!("{}[{i}]", at("").trim_end_matches('.')),
-                )
-            })
+            .map(|(i, item)| plain(&item?, what, &format!("{path}[{i}]")))
             .collect::<PyResult<_>>()?;
         return Ok(PyList::new(py, items)?.into_any());
     }

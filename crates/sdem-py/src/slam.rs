@@ -9,7 +9,7 @@ use numpy::PyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use sdem::geometry::Vec3;
-use sdem::slam::{relocalize, Near};
+use sdem::slam::Near;
 use sdem::{Doubt as RustDoubt, Pose, SlamOptions};
 use sdem_io::{NodeFiles, SavedMap, MAP_MANIFEST};
 use serde_json::Value;
@@ -434,11 +434,7 @@ impl Map {
         let points = points_from(points, "points")?;
         let attitude = attitude_from(attitude_deg, roll_pitch_sigma_deg, yaw_sigma_deg)?;
         let near = near_from(near, near_sigma_m)?;
-        let max_nodes = max_nodes.unwrap_or(match near {
-            Some(_) => 3,
-            None => self.saved.config.recovery.relocalize_candidates,
-        });
-        if max_nodes == 0 {
+        if max_nodes == Some(0) {
             return Err(invalid_input(
                 "max_nodes",
                 "at least one node must be tried",
@@ -448,14 +444,7 @@ impl Map {
         let found = py.detach(|| {
             // The checks of a scan (finite, enough cells on the map's grid), then its points.
             let scan = sdem::Scan::with_grid(&points, attitude, &saved.config.sdem)?;
-            relocalize(
-                &saved.map,
-                &saved.config,
-                scan.points_in_sensor(),
-                attitude,
-                near,
-                max_nodes,
-            )
+            saved.relocalize(scan.points_in_sensor(), attitude, near, max_nodes)
         });
         Relocalization::new(&found.map_err(sdem_error)?)
     }

@@ -128,7 +128,7 @@ fn relocalize_anywhere(
 ) -> Result<Relocalization> {
     let config = SlamOptions {
         recovery: super::RecoveryOptions {
-            relocalize_candidates: max_nodes.max(1),
+            relocalize_candidates: max_nodes,
             ..config.recovery.clone()
         },
         ..config.clone()
