@@ -97,7 +97,7 @@ fn settings(
     let (grid, mut options) = if args.default {
         (SdemConfig::default(), LocalizeOptions::default())
     } else {
-        let grid = SdemConfig::for_points(points);
+        let grid = SdemConfig::for_scan(points);
         let typical = Sdem::from_points(points, &Attitude::default(), &grid)?;
         let options = LocalizeOptions::for_scan(&typical);
         (grid, options)

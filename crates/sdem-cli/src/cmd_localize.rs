@@ -503,7 +503,7 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         print_json(&with_doubt_messages(value, &found.doubts))?;
         return Ok(outcome);
     }
-    let pose = sdem::geometry::Pose::from(&found.world_from_sensor);
+    let pose = found.world_from_sensor;
     println!("{} in the map {}:", scan.display(), folder.display());
     println!("  {}  {}", estimate_label(found.trusted), pose_line(&pose));
     let refined = (found.diagnostics.refined_inlier_fraction).map_or(String::new(), |f| {
@@ -515,7 +515,7 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
         found.node_id,
         found.cost,
         found.diagnostics.inlier_fraction * 100.0,
-        found.time_ms
+        found.time.as_secs_f64() * 1e3
     );
     if found.segment != 0 {
         println!(
@@ -608,7 +608,7 @@ pub fn run(args: Args) -> Result<Outcome> {
         let attitude = dataset
             .attitude_or_level(reference_index)
             .unwrap_or_default();
-        let grid = SdemConfig::for_points(&points);
+        let grid = SdemConfig::for_scan(&points);
         let matched = LocalizeOptions::for_scan(&Sdem::from_points(&points, &attitude, &grid)?);
         let step = matched.step_m;
         (grid, localize_config(&args, search, matched, step))

@@ -12,7 +12,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 /// A map folder that saves the map and keeps the points of parked nodes: attach it to the loop
-/// with `sdem::Slam::set_node_store`, save with [`MapFolder::save`].
+/// with `sdem::Slam::set_node_store`, save with [`MapFolder::save_slam`] (as often as wanted:
+/// each save writes only the nodes it has not written yet, then the manifest).
 ///
 /// # Example
 /// ```
@@ -23,8 +24,11 @@ use std::sync::Mutex;
 /// let mut slam = sdem::Slam::new(sdem::SlamOptions::default())?;
 /// slam.set_node_store(folder.clone());
 /// // … slam.add(…) at every stop, then:
-/// folder.save(slam.config(), &slam.map, &slam.edges, &slam.loop_closures, &[])?;
+/// folder.save_slam(&slam)?;
 /// assert!(dir.path().join("map/map.json").exists());
+/// // `sdem localize --map`, `sdem view map` and `sdem_io::load_map` read it.
+/// let saved = sdem_io::load_map(&dir.path().join("map"))?;
+/// assert_eq!(saved.map.nodes.len(), slam.map.nodes.len());
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug)]
@@ -84,6 +88,21 @@ impl MapFolder {
             edges,
             loop_closures,
             datasets,
+        )
+    }
+
+    /// Saves the loop's map as it stands: its options, nodes, pose-graph edges and loop
+    /// closures ([`Self::save`] with the loop's own parts and no dataset named).
+    ///
+    /// # Errors
+    /// The file system's errors, naming the file; a node parked in another store.
+    pub fn save_slam(&self, slam: &sdem::Slam) -> Result<()> {
+        self.save(
+            slam.config(),
+            &slam.map,
+            &slam.edges,
+            &slam.loop_closures,
+            &[],
         )
     }
 

@@ -173,9 +173,9 @@ impl SavedMap {
     /// # Errors
     /// As [`sdem::slam::relocalize`]; [`sdem::Error::NotFound`], with the nodes tried, when no
     /// place matches with confidence.
-    pub fn relocalize(
+    pub fn relocalize<P: sdem::geometry::AsPoint>(
         &self,
-        points_in_sensor: &[sdem::geometry::Vec3],
+        points_in_sensor: &[P],
         attitude: Option<Attitude>,
         near: Option<sdem::slam::Near>,
         max_nodes: Option<usize>,

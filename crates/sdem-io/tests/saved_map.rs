@@ -50,7 +50,7 @@ fn a_saved_map_relocalizes_its_scans_and_goes_on_as_a_slam() {
         }),
     ] {
         let found = saved.relocalize(&scans[3], attitude, near, None).unwrap();
-        let pose = sdem::geometry::Pose::from(&found.world_from_sensor);
+        let pose = found.world_from_sensor;
         assert!(found.trusted, "{near:?}: {:?}", found.doubts);
         assert!((pose.translation.vector - node).norm() < 0.05, "{near:?}");
     }

@@ -518,14 +518,14 @@ pub struct Relocalization {
 impl Relocalization {
     fn new(found: &sdem::slam::Relocalization) -> PyResult<Self> {
         Ok(Self {
-            world_from_sensor: Pose::from(&found.world_from_sensor),
+            world_from_sensor: found.world_from_sensor,
             node_id: found.node_id,
             tried: found.tried.clone(),
             cost: found.cost,
             diagnostics: to_json(&found.diagnostics, "diagnostics")?,
             doubts: found.doubts.clone(),
             trusted: found.trusted,
-            time_ms: found.time_ms,
+            time_ms: found.time.as_secs_f64() * 1e3,
         })
     }
 }

@@ -5,14 +5,76 @@
 //! `point_in_a = a_from_b * point_in_b`. Attitude is roll, pitch, yaw with
 //! `R = Rz(yaw) · Ry(pitch) · Rx(roll)`.
 
-use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
+use std::borrow::Cow;
 
 /// A 3D vector in metres, in whatever frame its name says.
 pub type Vec3 = Vector3<f64>;
 
 /// A rigid transform `a_from_b`.
 pub type Pose = Isometry3<f64>;
+
+/// A point in metres as a caller holds one: every function of the library that takes a scan's
+/// returns takes them as any of these, so points read from a file (`sdem_io::read_points`
+/// gives [`Vec3`]), built with nalgebra's `Point3`, or held as arrays (`[f32; 3]`, as a
+/// LiDAR driver gives them) need no conversion first.
+///
+/// ```
+/// use nalgebra::Point3;
+/// use sdem::geometry::{AsPoint, Vec3};
+/// assert_eq!(Point3::new(1.0, 2.0, 3.0).to_vec3(), Vec3::new(1.0, 2.0, 3.0));
+/// assert_eq!([1.0f32, 2.0, 3.0].to_vec3(), Vec3::new(1.0, 2.0, 3.0));
+/// ```
+pub trait AsPoint: Copy + Send + Sync {
+    /// The point's coordinates, metres.
+    fn to_vec3(&self) -> Vec3;
+
+    /// A slice of points as [`Vec3`]s: borrowed when they are [`Vec3`]s already.
+    fn as_vec3s(points: &[Self]) -> Cow<'_, [Vec3]> {
+        Cow::Owned(points.iter().map(Self::to_vec3).collect())
+    }
+}
+
+impl AsPoint for Vec3 {
+    fn to_vec3(&self) -> Vec3 {
+        *self
+    }
+
+    fn as_vec3s(points: &[Self]) -> Cow<'_, [Vec3]> {
+        Cow::Borrowed(points)
+    }
+}
+
+impl AsPoint for Point3<f64> {
+    fn to_vec3(&self) -> Vec3 {
+        self.coords
+    }
+}
+
+impl AsPoint for Vector3<f32> {
+    fn to_vec3(&self) -> Vec3 {
+        self.cast()
+    }
+}
+
+impl AsPoint for Point3<f32> {
+    fn to_vec3(&self) -> Vec3 {
+        self.coords.cast()
+    }
+}
+
+impl AsPoint for [f64; 3] {
+    fn to_vec3(&self) -> Vec3 {
+        Vec3::from(*self)
+    }
+}
+
+impl AsPoint for [f32; 3] {
+    fn to_vec3(&self) -> Vec3 {
+        Vector3::from(*self).cast()
+    }
+}
 
 /// The attitude of a body relative to the gravity-aligned world axes, in radians, as a
 /// measurement: the angles and how far a reading of them can be off ([`AttitudeSigma`]).

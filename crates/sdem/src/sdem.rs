@@ -7,7 +7,7 @@
 //! horizontal plane, whatever the robot's tilt. Cells with no return are *unknown*, never zero.
 
 use crate::error::{Error, Result};
-use crate::geometry::{fast_atan2, floor_i64, Attitude, Vec3};
+use crate::geometry::{fast_atan2, floor_i64, AsPoint, Attitude, Vec3};
 use serde::{Deserialize, Serialize};
 
 mod cell_means;
@@ -123,13 +123,8 @@ impl SdemConfig {
     /// assert_eq!((grid.elevation_min_deg, grid.elevation_max_deg), (-25.0, 16.0));
     /// assert_eq!((grid.azimuth_min_deg, grid.azimuth_max_deg), (-180.0, 180.0));
     /// ```
-    pub fn for_scan(points_in_sensor: &[nalgebra::Point3<f64>]) -> Self {
-        Self::for_directions(points_in_sensor.iter().map(|p| p.coords))
-    }
-
-    /// [`Self::for_scan`] for points as vectors (as [`Sdem::from_points`] takes them).
-    pub fn for_points(points_in_sensor: &[Vec3]) -> Self {
-        Self::for_directions(points_in_sensor.iter().copied())
+    pub fn for_scan<P: AsPoint>(points_in_sensor: &[P]) -> Self {
+        Self::for_directions(points_in_sensor.iter().map(AsPoint::to_vec3))
     }
 
     fn for_directions(points: impl Iterator<Item = Vec3>) -> Self {
@@ -721,7 +716,8 @@ impl Sdem {
     /// a localization reads it from there, so the levelling and the pose cannot disagree.
     ///
     /// # Arguments
-    /// * `points_in_sensor` — the scan, sensor frame, metres. Non-finite points are skipped.
+    /// * `points_in_sensor` — the scan, sensor frame, metres ([`AsPoint`]: nalgebra points or
+    ///   vectors, or arrays). Non-finite points are skipped.
     /// * `attitude` — the gyro/compass reading; its rotation takes the sensor frame to the
     ///   levelled frame (`Attitude::default()` for points already levelled).
     /// * `config` — grid resolution and extent.
@@ -737,8 +733,8 @@ impl Sdem {
     /// let (az, _el) = s.grid().cell_center(s.cells()[0] as usize);
     /// assert!((az.to_degrees() - 90.5).abs() < 1e-3); // levelled: the compass turned it to +y
     /// ```
-    pub fn from_points(
-        points_in_sensor: &[Vec3],
+    pub fn from_points<P: AsPoint>(
+        points_in_sensor: &[P],
         attitude: &Attitude,
         config: &SdemConfig,
     ) -> Result<Self> {
@@ -746,6 +742,7 @@ impl Sdem {
         let level_from_sensor = attitude.rotation();
         let levelled: Vec<[f32; 3]> = points_in_sensor
             .iter()
+            .map(AsPoint::to_vec3)
             .filter(|p| p.iter().all(|v| v.is_finite()))
             .map(|p| {
                 let q = level_from_sensor * p;

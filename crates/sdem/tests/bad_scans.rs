@@ -39,6 +39,45 @@ fn level() -> Option<Attitude> {
     Some(Attitude::default())
 }
 
+/// The same returns as nalgebra points, vectors, `f64` arrays or `f32` arrays (`AsPoint`) make
+/// the same scan; an infinite coordinate is refused, naming the point, in every form.
+#[test]
+fn every_point_type_makes_the_same_scan() {
+    let points = room();
+    let vectors: Vec<Vector3<f64>> = points.iter().map(|p| p.coords).collect();
+    let arrays: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let floats: Vec<[f32; 3]> = points
+        .iter()
+        .map(|p| [p.x as f32, p.y as f32, p.z as f32])
+        .collect();
+    let reading = Some(Attitude::from_degrees(1.0, -2.0, 30.0));
+    // Each cell's range, unknown cells (NaN) as 0.
+    let cells = |scan: Scan| -> Vec<f32> {
+        (scan.sdem().ranges().iter())
+            .map(|r| if r.is_nan() { 0.0 } else { *r })
+            .collect()
+    };
+    let expected = cells(Scan::from_points(&points, reading).unwrap());
+    assert_eq!(
+        cells(Scan::from_points(&vectors, reading).unwrap()),
+        expected
+    );
+    assert_eq!(
+        cells(Scan::from_points(&arrays, reading).unwrap()),
+        expected
+    );
+    // f32 coordinates round at 0.1 µm: the nearest return per cell stays in its cell.
+    let from_floats = cells(Scan::from_points(&floats, reading).unwrap());
+    assert_eq!(from_floats.len(), expected.len());
+    for (a, b) in from_floats.iter().zip(&expected) {
+        assert!(a == b || (a - b).abs() < 1e-6, "{a} {b}");
+    }
+    let mut bad = floats.clone();
+    bad[7][1] = f32::INFINITY;
+    let e = Scan::from_points(&bad, reading).unwrap_err();
+    assert!(e.to_string().contains("point 7"), "{e}");
+}
+
 /// Degrees given where radians are meant (`Attitude::new(30.0, …)`, roll beyond a full turn)
 /// are refused, naming the two constructors; a full turn itself passes.
 #[test]

@@ -27,7 +27,7 @@ fn street_pair(seed: u64, lidar: &SpinningLidar) -> (Sdem, Sdem, SdemConfig) {
     let scene = street(seed);
     let reference = spinning_scan(&scene, lidar, &Pose::identity(), 2 * seed);
     let query = spinning_scan(&scene, lidar, &street_truth(seed), 2 * seed + 1);
-    let grid = SdemConfig::for_points(&reference);
+    let grid = SdemConfig::for_scan(&reference);
     let level = Attitude::default();
     let (r, q) = Sdem::pair_from_points((&reference, &level), (&query, &level), &grid).unwrap();
     (r, q, grid)
@@ -55,7 +55,7 @@ fn the_grid_is_derived_from_the_scanner() {
         lidar.directions().iter().map(|d| d * 10.0).collect()
     };
     // 64 lasers 0.43° apart: cells of about one laser, the band −24.9..+2° widened by 5°.
-    let hdl64 = SdemConfig::for_points(&directions_as_points(&SpinningLidar::hdl64()));
+    let hdl64 = SdemConfig::for_scan(&directions_as_points(&SpinningLidar::hdl64()));
     assert!(
         (0.4..=0.5).contains(&hdl64.resolution_deg),
         "{}",
@@ -70,7 +70,7 @@ fn the_grid_is_derived_from_the_scanner() {
         (-180.0, 180.0)
     );
     // 32 lasers 1.33° apart.
-    let hdl32 = SdemConfig::for_points(&directions_as_points(&SpinningLidar::hdl32()));
+    let hdl32 = SdemConfig::for_scan(&directions_as_points(&SpinningLidar::hdl32()));
     assert!(
         (1.2..=1.5).contains(&hdl32.resolution_deg),
         "{}",
@@ -86,7 +86,7 @@ fn the_grid_is_derived_from_the_scanner() {
         .into_iter()
         .filter(|p| p.y.atan2(p.x).to_degrees().abs() <= 35.0)
         .collect();
-    let narrow = SdemConfig::for_points(&forward);
+    let narrow = SdemConfig::for_scan(&forward);
     assert_eq!(
         (narrow.azimuth_min_deg, narrow.azimuth_max_deg),
         (-180.0, 180.0)
@@ -102,11 +102,11 @@ fn the_grid_is_derived_from_the_scanner() {
         0.0,
         &mut rng,
     );
-    let sick = SdemConfig::for_points(&sweep.points_in_sensor());
+    let sick = SdemConfig::for_scan(&sweep.points_in_sensor());
     assert_eq!(sick.resolution_deg, sensor.matched_sdem_resolution_deg());
     // Too few points to tell: the default grid.
     assert_eq!(
-        SdemConfig::for_points(&directions_as_points(&SpinningLidar::hdl64())[..50]),
+        SdemConfig::for_scan(&directions_as_points(&SpinningLidar::hdl64())[..50]),
         SdemConfig::default()
     );
     // Every derived grid is a valid one.

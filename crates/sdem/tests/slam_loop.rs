@@ -472,7 +472,7 @@ fn a_relocalization_with_a_prediction_takes_it_along_a_corridor() {
     let level = Some(Attitude::default());
     let relocalized = |near: Near| {
         let found = relocalize(&map, &config, &points, level, Some(near), 1).unwrap();
-        let pose = Pose::from(&found.world_from_sensor);
+        let pose = found.world_from_sensor;
         (pose.translation.vector, found.diagnostics, found.doubts)
     };
     // A prediction 4 cm ahead of the truth along the corridor.

@@ -174,10 +174,7 @@ fn a_scan_is_relocalized_in_a_saved_map_without_a_prior_or_reported_not_found() 
     )
     .unwrap();
     assert!(found.trusted, "{found:?}");
-    let e = error_m(
-        &Pose::from(&found.world_from_sensor),
-        &fresh.world_from_sensor,
-    );
+    let e = error_m(&found.world_from_sensor, &fresh.world_from_sensor);
     assert!(e < 0.02, "{e} m off");
     assert!(!found.candidates.is_empty());
     // A scan of no place in the map is not found, with the nodes tried.

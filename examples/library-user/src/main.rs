@@ -1,8 +1,8 @@
 //! Uses sdem through its crate root only, as the README shows: two scans localized (with a gyro
-//! reading, and without one), then an incremental map over a run with odometry. Exits non-zero
-//! when a result is off the truth.
+//! reading, and without one), then an incremental map over a run with odometry, saved with
+//! `sdem_io` and a scan relocalized in it. Exits non-zero when a result is off the truth.
 
-use nalgebra::{Isometry3, Point3};
+use nalgebra::Isometry3;
 use sdem::{Attitude, LocalizeOptions, Scan, SensorConfig, Slam, SlamOptions, StepStatus};
 use sdem_sim::odometry::{simulate_odometry, OdometryNoise};
 use sdem_sim::sim;
@@ -28,11 +28,8 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     let sensor = SensorConfig::default();
     let stops = sim::collapsed_building_stops(&scene, SEED, STOPS, &sensor.lift)?;
     let run = sim::simulate_run(&scene, &stops, &sensor, SEED)?;
-    let points = |k: usize| -> Vec<Point3<f64>> {
-        (run[k].sweep.points_in_sensor().iter())
-            .map(|p| Point3::from(*p))
-            .collect()
-    };
+    // The returns as nalgebra vectors; `Point3`s or `[f32; 3]` arrays would do as well.
+    let points = |k: usize| run[k].sweep.points_in_sensor();
     let reading = |k: usize| -> Attitude { run[k].sweep.mean_attitude() };
 
     // 1. One scan against another: with both gyro readings, then with none for the query.
@@ -93,6 +90,29 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     );
     if ate_m > 0.02 {
         return Err(format!("the map is {ate_m} m off the truth (ATE)").into());
+    }
+
+    // 3. The map saved as `sdem slam` saves it, loaded back, and a stop's scan found in it with
+    //    no position given.
+    let folder = std::env::temp_dir().join(format!("sdem-library-user-{}", std::process::id()));
+    sdem_io::MapFolder::create(&folder)?.save_slam(&slam)?;
+    let saved = sdem_io::load_map(&folder);
+    std::fs::remove_dir_all(&folder)?;
+    let k = STOPS / 2;
+    let found = saved?.relocalize(&points(k), Some(reading(k)), None, None)?;
+    let off_m = (found.world_from_sensor.translation.vector
+        - world_from_sensor[k].translation.vector)
+        .norm();
+    println!(
+        "relocalized stop {k} in the saved map: node {}, {:.2} cm from its mapped pose, \
+         trusted {}, {:.0} ms",
+        found.node_id,
+        off_m * 100.0,
+        found.trusted,
+        found.time.as_secs_f64() * 1e3
+    );
+    if off_m > 0.05 {
+        return Err(format!("relocalized {off_m} m from the mapped pose").into());
     }
     Ok(())
 }

@@ -92,7 +92,7 @@ impl ReviewScanner {
     /// covers (almost) every azimuth (its rings spread over the scan's band of elevations at
     /// the scan's step), else the tilting SICK at 1° × 1° over the scan's band of tilts.
     pub fn like(points_in_sensor: &[Vec3]) -> Self {
-        let grid = sdem::sdem::SdemConfig::for_points(points_in_sensor);
+        let grid = sdem::sdem::SdemConfig::for_scan(points_in_sensor);
         let all_round = azimuth_sectors(points_in_sensor) >= ALL_ROUND_SECTORS;
         let (low, high) = tilt_band(points_in_sensor, all_round);
         if all_round {

@@ -118,7 +118,7 @@ pub struct SurfaceModel {
 impl SurfaceModel {
     /// Builds the model of `points_in_sensor` (a real scan, metres, its sensor at the origin).
     ///
-    /// The scan's angular step is the grid [`SdemConfig::for_points`] derives from it (its
+    /// The scan's angular step is the grid [`SdemConfig::for_scan`] derives from it (its
     /// coarser sampling step, the finest grid it fills without holes).
     ///
     /// # Errors
@@ -144,7 +144,7 @@ impl SurfaceModel {
                 ),
             });
         }
-        let step = SdemConfig::for_points(&points).resolution_deg.to_radians();
+        let step = SdemConfig::for_scan(&points).resolution_deg.to_radians();
         let coordinates: Vec<[f32; 3]> = points
             .iter()
             .map(|p| [p.x as f32, p.y as f32, p.z as f32])

@@ -323,7 +323,7 @@ pub fn relocalize_every_stop(
         outcome.scans += 1;
         match found {
             Ok(found) if found.trusted => {
-                let pose = Pose::from(&found.world_from_sensor);
+                let pose = found.world_from_sensor;
                 let pose = if segments[found.node_id] == segments[0] {
                     map_frame * pose
                 } else {

@@ -1,9 +1,8 @@
 //! A scan as it comes from the sensor: its checked points, its attitude and its S-DEM.
 
 use crate::error::{Error, Result};
-use crate::geometry::{Attitude, Vec3};
+use crate::geometry::{AsPoint, Attitude, Vec3};
 use crate::sdem::{no_usable_points, Sdem, SdemConfig};
-use nalgebra::Point3;
 
 /// The fewest S-DEM cells a scan must fill to be localized: the search compares at least this
 /// many points (the minimum overlap of [`crate::cost::CostConfig`]).
@@ -43,8 +42,9 @@ impl Scan {
     /// A scan on the default S-DEM grid (1° × 1°, [`SdemConfig::default`]).
     ///
     /// # Arguments
-    /// * `points_in_sensor` — the returns, sensor frame, metres. Points with a NaN coordinate
-    ///   are "no return", as sensors write them, and are skipped.
+    /// * `points_in_sensor` — the returns, sensor frame, metres, as nalgebra points or vectors
+    ///   or arrays, `f64` or `f32` ([`AsPoint`]). Points with a NaN coordinate are "no return",
+    ///   as sensors write them, and are skipped.
     /// * `attitude` — the gyro/compass reading at the scan, or `None` when there is none.
     ///
     /// # Errors
@@ -52,8 +52,8 @@ impl Scan {
     /// which), [`Error::NoUsablePoints`] when no cell of the S-DEM holds a return (saying why:
     /// no point, every point at the sensor's origin, …), [`Error::TooFewPoints`] when fewer
     /// than [`MIN_KNOWN_CELLS`] do.
-    pub fn from_points(
-        points_in_sensor: &[Point3<f64>],
+    pub fn from_points<P: AsPoint>(
+        points_in_sensor: &[P],
         attitude: Option<Attitude>,
     ) -> Result<Self> {
         Self::with_grid(points_in_sensor, attitude, &SdemConfig::default())
@@ -63,17 +63,17 @@ impl Scan {
     ///
     /// # Errors
     /// As [`Self::from_points`], and [`Error::Invalid`] for an invalid grid.
-    pub fn with_grid(
-        points_in_sensor: &[Point3<f64>],
+    pub fn with_grid<P: AsPoint>(
+        points_in_sensor: &[P],
         attitude: Option<Attitude>,
         grid: &SdemConfig,
     ) -> Result<Self> {
-        let points = checked_input(points_in_sensor, attitude.as_ref())?;
+        let given = P::as_vec3s(points_in_sensor);
+        let points = checked_input(&given, attitude.as_ref())?;
         let reading = attitude.unwrap_or_default();
         let sdem = Sdem::from_points(&points, &reading, grid)?;
         if sdem.known_cells() == 0 {
             // Said over every point given, the NaN ones ("no return") among them.
-            let given: Vec<Vec3> = points_in_sensor.iter().map(|p| p.coords).collect();
             return Err(no_usable_points(&given, &reading, grid));
         }
         if sdem.known_cells() < MIN_KNOWN_CELLS {
@@ -110,7 +110,7 @@ impl Scan {
 /// naming which; NaN points are no return and are dropped. [`crate::Slam::add`] checks its
 /// input with this too.
 pub(crate) fn checked_input(
-    points_in_sensor: &[Point3<f64>],
+    points_in_sensor: &[Vec3],
     attitude: Option<&Attitude>,
 ) -> Result<Vec<Vec3>> {
     if let Some(a) = attitude.filter(|a| !a.is_finite()) {
@@ -155,6 +155,6 @@ pub(crate) fn checked_input(
     }
     Ok((points_in_sensor.iter())
         .filter(|p| p.iter().all(|v| v.is_finite()))
-        .map(|p| p.coords)
+        .copied()
         .collect())
 }

@@ -257,7 +257,8 @@ impl Slam {
     /// [`GrowthOptions::fuse_each_stop`]): the loop `sdem slam` runs, one stop at a time.
     ///
     /// # Arguments
-    /// * `points_in_sensor` — the scan, sensor frame, metres (NaN points are skipped).
+    /// * `points_in_sensor` — the scan, sensor frame, metres, as nalgebra points or vectors or
+    ///   arrays ([`AsPoint`](crate::geometry::AsPoint)); NaN points are skipped.
     /// * `attitude` — the gyro/compass reading at the stop, or `None` without one.
     /// * `odom_from_sensor` — the odometry frame's pose of the sensor at the stop (as ROS's
     ///   `/odom` gives it), or `None` without odometry. Only its motion since the last call
@@ -296,13 +297,13 @@ impl Slam {
     /// assert!((world_from_sensor.translation.vector - Vector3::new(0.1, 0.0, 0.0)).norm() < 0.005);
     /// # Ok::<(), sdem::Error>(())
     /// ```
-    pub fn add(
+    pub fn add<P: crate::geometry::AsPoint>(
         &mut self,
-        points_in_sensor: &[nalgebra::Point3<f64>],
+        points_in_sensor: &[P],
         attitude: Option<crate::geometry::Attitude>,
         odom_from_sensor: Option<Pose>,
     ) -> Result<Step> {
-        let points = crate::scan::checked_input(points_in_sensor, attitude.as_ref())?;
+        let points = crate::scan::checked_input(&P::as_vec3s(points_in_sensor), attitude.as_ref())?;
         let odometry = odom_from_sensor.zip(self.last_odom_from_sensor).map(
             |(odom_from_sensor, odom_from_previous_sensor)| Odometry {
                 odom_from_sensor,

@@ -266,7 +266,7 @@ impl SlamOptions {
     ///
     /// * **a spinning multi-beam LiDAR** ([`is_spinning_lidar`]: every azimuth seen, within a
     ///   band of elevation), on a vehicle that moves continuously: the S-DEM grid derived from
-    ///   the scan's own angular sampling ([`SdemConfig::for_points`]), the search's step,
+    ///   the scan's own angular sampling ([`SdemConfig::for_scan`]), the search's step,
     ///   truncation and refinement from its ranges ([`LocalizeOptions::for_scan`]), loop
     ///   closure and the fused map on that step (voxels as large as the step, rays up to
     ///   20 m); the windows and the recovery stay the defaults (a vehicle's motion is
@@ -292,12 +292,13 @@ impl SlamOptions {
     /// let front: Vec<Vec3> = points.iter().filter(|p| p.x > 0.0).copied().collect();
     /// assert_eq!(SlamOptions::for_scan(&front), SlamOptions::default());
     /// ```
-    pub fn for_scan(points_in_sensor: &[crate::geometry::Vec3]) -> Self {
+    pub fn for_scan<P: crate::geometry::AsPoint>(points_in_sensor: &[P]) -> Self {
+        let points_in_sensor = &*P::as_vec3s(points_in_sensor);
         let default = Self::default();
         if !is_spinning_lidar(points_in_sensor) {
             return default;
         }
-        let sdem = SdemConfig::for_points(points_in_sensor);
+        let sdem = SdemConfig::for_scan(points_in_sensor);
         let Ok(scan) = crate::sdem::Sdem::from_points(
             points_in_sensor,
             &crate::geometry::Attitude::default(),

@@ -3,23 +3,27 @@
 use super::map_search::{Located, MapSearch};
 use super::predictions::take_prediction_along;
 use super::step::Attempt;
-use super::{ms, ScanInput, SlamOptions};
+use super::{ScanInput, SlamOptions};
 use crate::doubt::Doubt;
 use crate::error::{Error, Result};
-use crate::geometry::{Attitude, Vec3};
+use crate::geometry::{Attitude, Pose, PoseRecord, Vec3};
 use crate::localize::{localize, CostConfig, LocalizeOptions, OffsetPrior, SearchWindow};
 use crate::map::{world_from_query, Map};
 use crate::sdem::Sdem;
 use crate::search::HeadingWindow;
-use serde::Serialize;
-use std::time::Instant;
+use serde::{Serialize, Serializer};
+use std::time::{Duration, Instant};
 
 /// A scan relocalized in a saved map ([`relocalize`]).
+///
+/// Serialized (as `sdem localize --map --json` prints it) with the pose as DESIGN.md's
+/// [`PoseRecord`] and the time as `time_ms`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Relocalization {
     /// The scan's estimated pose in the map's world frame (in its node's segment's frame when
-    /// that is not the world's).
-    pub world_from_sensor: crate::geometry::PoseRecord,
+    /// that is not the world's), as [`crate::Step::world_from_sensor`] gives a stop's.
+    #[serde(serialize_with = "as_pose_record")]
+    pub world_from_sensor: Pose,
     /// The node it was matched against.
     pub node_id: usize,
     /// The segment of that node (0: the world's).
@@ -36,8 +40,9 @@ pub struct Relocalization {
     pub doubts: Vec<Doubt>,
     /// No doubt: the pose can be used as it is.
     pub trusted: bool,
-    /// Wall time, ms.
-    pub time_ms: f64,
+    /// Wall time.
+    #[serde(rename = "time_ms", serialize_with = "as_milliseconds")]
+    pub time: Duration,
 }
 
 /// Where a scan to relocalize was taken, roughly (see [`relocalize`]).
@@ -75,15 +80,16 @@ pub struct Near {
 /// that fills too few cells to compare ([`Error::TooFewPoints`]), a
 /// `near` that is not finite or whose σ is not a positive length, or ([`Error::NotFound`]) no
 /// node that matches with confidence, each tried node with its reason.
-pub fn relocalize(
+pub fn relocalize<P: crate::geometry::AsPoint>(
     map: &Map,
     config: &SlamOptions,
-    points_in_sensor: &[Vec3],
+    points_in_sensor: &[P],
     attitude: Option<Attitude>,
     near: Option<Near>,
     max_nodes: usize,
 ) -> Result<Relocalization> {
     let start = Instant::now();
+    let points_in_sensor = &*P::as_vec3s(points_in_sensor);
     if max_nodes == 0 {
         return Err(Error::Invalid(
             "max_nodes = 0: at least one node must be tried".into(),
@@ -113,7 +119,7 @@ pub fn relocalize(
         None => relocalize_anywhere(map, config, points_in_sensor, attitude, max_nodes),
     }
     .map(|mut found| {
-        found.time_ms = ms(start);
+        found.time = start.elapsed();
         found
     })
 }
@@ -165,7 +171,7 @@ fn relocalize_anywhere(
         return Err(Error::NotFound { tried });
     };
     Ok(Relocalization {
-        world_from_sensor: (&matched.world_from_sensor).into(),
+        world_from_sensor: matched.world_from_sensor,
         node_id: matched.references[0].0,
         segment,
         tried,
@@ -174,7 +180,7 @@ fn relocalize_anywhere(
         trusted: matched.doubts.is_empty(),
         diagnostics: matched.diagnostics,
         doubts: matched.doubts,
-        time_ms: 0.0,
+        time: Duration::ZERO,
     })
 }
 
@@ -242,7 +248,7 @@ fn relocalize_near(
         );
     }
     Ok(Relocalization {
-        world_from_sensor: (&pose).into(),
+        world_from_sensor: pose,
         node_id,
         segment: map.nodes[node_id].segment,
         tried,
@@ -251,8 +257,16 @@ fn relocalize_near(
         diagnostics,
         trusted: doubts.is_empty(),
         doubts,
-        time_ms: 0.0,
+        time: Duration::ZERO,
     })
+}
+
+fn as_pose_record<S: Serializer>(pose: &Pose, s: S) -> std::result::Result<S::Ok, S::Error> {
+    PoseRecord::from(pose).serialize(s)
+}
+
+fn as_milliseconds<S: Serializer>(time: &Duration, s: S) -> std::result::Result<S::Ok, S::Error> {
+    s.serialize_f64(time.as_secs_f64() * 1e3)
 }
 
 impl Near {
