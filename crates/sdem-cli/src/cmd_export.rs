@@ -20,7 +20,7 @@ pub struct Args {
     mcap: Option<PathBuf>,
     /// Write the aligned scans as an E57 survey: one scan per map node, its points in its own
     /// frame, its pose sdem's estimate. The points are the dataset's scans when the dataset the
-    /// map was made from is still there, else the nodes' S-DEM points.
+    /// map was made from is still there with the scans it mapped, else the nodes' S-DEM points.
     #[arg(long, value_name = "OUT.e57")]
     e57: Option<PathBuf>,
     /// With --e57: write each node's S-DEM points (one per cell, what sdem matched) instead of

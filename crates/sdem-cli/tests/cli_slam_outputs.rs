@@ -1,6 +1,7 @@
 //! What `sdem slam` and `sdem export` may write over, and which files they check before the
 //! work: a folder of the user's files, slam's own outputs named as `--mcap` or `--compare`, a
-//! map resumed with another dataset, what `--force` leaves of an earlier run, an existing E57.
+//! map resumed with another dataset, what `--force` leaves of an earlier run, an existing E57,
+//! scans replaced after mapping.
 
 mod common;
 
@@ -198,6 +199,34 @@ fn export_reads_the_maps_dataset_from_any_folder_and_keeps_an_existing_e57() {
     let e = run_err(dir.path(), &["export", "out", "--e57", "b.e57"]);
     assert!(e.contains("--force"), "{e}");
     run_ok(dir.path(), &["export", "out", "--e57", "b.e57", "--force"]);
+}
+
+/// A dataset whose scans were replaced after mapping (simulated again with another seed) would
+/// have put other scans at the map's poses: the export writes the nodes' points instead and says
+/// which scan changed.
+#[test]
+fn export_does_not_pair_the_maps_poses_with_scans_replaced_after_mapping() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "3");
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    let same = common::run_json(dir.path(), &["export", "out", "--e57", "a.e57", "--json"]);
+    assert_eq!(same["e57"]["points_from"], "dataset", "{same}");
+    run_ok(
+        dir.path(),
+        &[
+            "simulate", "--out", "data", "--stops", "3", "--seed", "4", "--force",
+        ],
+    );
+    let changed = common::run_json(dir.path(), &["export", "out", "--e57", "b.e57", "--json"]);
+    assert_eq!(changed["e57"]["points_from"], "nodes", "{changed}");
+    let note = changed["e57"]["note"].as_str().unwrap();
+    assert!(
+        note.contains("scan 0 ") && note.contains("changed after mapping"),
+        "{note}"
+    );
 }
 
 /// sdem's MCAP map holds its scans in the map's frame: imported back as scans in their
