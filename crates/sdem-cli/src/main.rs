@@ -86,6 +86,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    output::end_quietly_when_stdout_fails();
     let cli = Cli::parse();
     let done = |result: anyhow::Result<()>| result.map(|()| Outcome::Done);
     let result = match cli.command {

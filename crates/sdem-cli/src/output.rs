@@ -224,3 +224,31 @@ mod tests {
         assert_eq!(error_line(&error), "--route: unknown route");
     }
 }
+
+/// The exit status after a closed standard output: a process killed by `SIGPIPE` reports 128 + 13
+/// to its shell, as `sdem … | head` would without this.
+pub const EXIT_CLOSED_PIPE: i32 = 141;
+
+/// Makes a standard output that cannot be written end the process with a word instead of a
+/// panic: `println!` panics when the reader is gone (`sdem info BAG | head -3`, status 101 and a
+/// backtrace hint) or the device is full (`> /dev/full`). A closed pipe ends quietly with
+/// [`EXIT_CLOSED_PIPE`] (the reader has what it wanted, as with other tools); any other write
+/// error prints one line and ends with status 1. Whatever a command wrote to files is whole: they
+/// are written to a temporary and renamed (a later run removes a temporary left behind).
+pub fn end_quietly_when_stdout_fails() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let payload = info.payload();
+        let message = (payload.downcast_ref::<String>().map(String::as_str))
+            .or_else(|| payload.downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if let Some(reason) = message.strip_prefix("failed printing to stdout: ") {
+            if reason.contains("os error 32") {
+                std::process::exit(EXIT_CLOSED_PIPE);
+            }
+            eprintln!("sdem: error: cannot write to the standard output: {reason}");
+            std::process::exit(1);
+        }
+        default(info);
+    }));
+}

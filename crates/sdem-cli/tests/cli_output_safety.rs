@@ -334,3 +334,35 @@ fn view_cost_refuses_a_step_leaving_too_few_samples() {
     );
     assert!(!dir.path().join("c.png").exists());
 }
+
+/// A standard output that cannot be written (`sdem … | head` closing the pipe, `> /dev/full`)
+/// ended every command in a panic (status 101); a closed pipe now ends quietly as `SIGPIPE`
+/// would (141), a full device with one line (status 1).
+#[test]
+fn a_closed_or_full_standard_output_ends_without_a_panic() {
+    let dir = TempDir::new().unwrap();
+    let simulate = |out: &str, stdout: std::process::Stdio| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_sdem"))
+            .current_dir(dir.path())
+            .args(["simulate", "--out", out, "--stops", "2"])
+            .stdout(stdout)
+            .stderr(std::process::Stdio::piped())
+            .output()
+            .unwrap()
+    };
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let closed = simulate("a", writer.into());
+    let stderr = String::from_utf8_lossy(&closed.stderr);
+    assert_eq!(closed.status.code(), Some(141), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    if let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") {
+        let out = simulate("b", full.into());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains("cannot write to the standard output") && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+    }
+}
