@@ -87,6 +87,9 @@ enum Command {
 
 fn main() -> ExitCode {
     output::end_quietly_when_stdout_fails();
+    if let Some(usage) = non_utf8_argument() {
+        usage.exit();
+    }
     let cli = Cli::parse();
     let done = |result: anyhow::Result<()>| result.map(|()| Outcome::Done);
     let result = match cli.command {
@@ -120,4 +123,24 @@ fn main() -> ExitCode {
             }
         },
     }
+}
+
+/// A usage error for the first command-line argument that is not valid UTF-8. sdem writes the
+/// paths it reads and writes into its JSON (`--json`, `report.json`, the saved map's manifest),
+/// which holds only UTF-8: such a path failed after the work, with the outputs written and
+/// status 1 (or a panic for `export --mcap`).
+fn non_utf8_argument() -> Option<clap::Error> {
+    use clap::CommandFactory;
+    let (k, arg) = std::env::args_os()
+        .enumerate()
+        .skip(1)
+        .find(|(_, arg)| arg.to_str().is_none())?;
+    Some(Cli::command().error(
+        clap::error::ErrorKind::InvalidUtf8,
+        format!(
+            "argument {k} ({}) is not valid UTF-8: sdem names its files in its JSON outputs \
+             and saved maps, which hold only UTF-8; rename the file or folder",
+            arg.to_string_lossy()
+        ),
+    ))
 }

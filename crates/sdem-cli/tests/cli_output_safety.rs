@@ -366,3 +366,24 @@ fn a_closed_or_full_standard_output_ends_without_a_panic() {
         );
     }
 }
+
+/// A path that is not valid UTF-8 cannot be written into sdem's JSON: `export --mcap` to one
+/// panicked after writing the file, `import --json` failed with the dataset written. Refused as
+/// a usage error before anything is read or written.
+#[cfg(unix)]
+#[test]
+fn a_non_utf8_path_is_a_usage_error_before_anything_is_written() {
+    use std::os::unix::ffi::OsStrExt;
+    let dir = TempDir::new().unwrap();
+    let name = std::ffi::OsStr::from_bytes(b"d\xff");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sdem"))
+        .current_dir(dir.path())
+        .args(["simulate", "--stops", "2", "--out"])
+        .arg(name)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("not valid UTF-8"), "{stderr}");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
