@@ -432,6 +432,23 @@ fn read_binary(path: &Path, body: &Body, header: &Layout, layout: AxisLayout) ->
             ),
         ));
     }
+    // More data than the header declares, by a point or more: the count is wrong (a writer
+    // that patched it, a cloud appended), and the points beyond it would be dropped unsaid. Less
+    // than a point (a final newline) is let pass.
+    let extra = body.len() - point_count * point_bytes;
+    if extra >= point_bytes.max(1) {
+        return Err(Error::parse(
+            path,
+            header.count_line,
+            format!(
+                "the header declares {point_count} points of {point_bytes} bytes, but {extra} more \
+                 bytes follow them from byte offset {} ({} points' worth); the header's count is \
+                 wrong or data were appended",
+                body_start + point_count * point_bytes,
+                extra / point_bytes.max(1)
+            ),
+        ));
+    }
     let mut points = Vec::with_capacity(point_count);
     for (index, record) in body
         .chunks_exact(point_bytes.max(1))
@@ -890,6 +907,20 @@ mod tests {
             u64::MAX
         );
         expect_err(text.as_bytes(), None);
+    }
+
+    #[test]
+    fn binary_body_longer_than_the_header_declares() {
+        let dir = tempfile::tempdir().unwrap();
+        let whole = read_pcd(&write(dir.path(), "whole.pcd", &binary_pcd())).unwrap();
+        let mut bytes = binary_pcd();
+        bytes.push(b'\n'); // less than a point: let pass
+        let path = write(dir.path(), "newline.pcd", &bytes);
+        assert_eq!(read_pcd(&path).unwrap(), whole);
+        let point = bytes.len() / 4; // more than one point's worth of bytes
+        bytes.extend(std::iter::repeat_n(0u8, point));
+        let e = read_pcd(&write(dir.path(), "more.pcd", &bytes)).unwrap_err();
+        assert!(e.to_string().contains("more bytes follow them"), "{e}");
     }
 
     #[test]
