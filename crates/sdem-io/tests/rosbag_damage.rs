@@ -95,3 +95,39 @@ fn garbage_named_db3_is_damage_not_a_panic() {
     let (seen, troubled) = read(&path);
     assert!(seen.is_empty() && troubled);
 }
+
+/// A bag is known by its first bytes as well as its name: an MCAP file renamed in capitals or
+/// without an extension, and a folder of bag files whose `metadata.yaml` was lost, are bags; a
+/// text file named `.mcap` is said to be no MCAP file (it was called damaged, with advice to
+/// salvage it), and a file that cannot be opened says why.
+#[test]
+fn a_bag_is_known_by_its_bytes_and_a_file_of_another_kind_is_named_so() {
+    use sdem_io::rosbag::is_rosbag;
+    let (bytes, messages) = sample();
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["RUN.MCAP", "run-without-extension"] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, &bytes).unwrap();
+        assert!(is_rosbag(&path), "{name}");
+        let (seen, troubled) = read(&path);
+        assert!(!troubled && seen.len() == messages.len(), "{name}");
+    }
+    let folder = dir.path().join("killed-recording");
+    std::fs::create_dir(&folder).unwrap();
+    std::fs::write(folder.join("killed-recording_0.mcap"), &bytes).unwrap();
+    assert!(is_rosbag(&folder));
+    assert_eq!(read(&folder).0.len(), messages.len());
+
+    let text = dir.path().join("notes.mcap");
+    std::fs::write(&text, "these are notes, not a recording\n").unwrap();
+    let e = Bag::open(&text).unwrap_err().to_string();
+    assert!(e.contains("is not an MCAP file"), "{e}");
+    let named_db3 = dir.path().join("run.db3");
+    std::fs::write(&named_db3, &bytes).unwrap();
+    assert_eq!(
+        read(&named_db3).0.len(),
+        messages.len(),
+        "read by its bytes"
+    );
+    assert!(!is_rosbag(&dir.path().join("missing.mcap")));
+}

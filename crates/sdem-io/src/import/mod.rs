@@ -61,8 +61,10 @@ impl ImportFormat {
             return Ok(ImportFormat::Uos3dtk);
         }
         Err(Error::Invalid(format!(
-            "{} is neither a 3DTK folder (scanNNN.3d + scanNNN.pose) nor a KITTI sequence \
-             (velodyne/NNNNNN.bin); name the format or check the folder",
+            "{} is neither a 3DTK folder (scanNNN.3d + scanNNN.pose), a KITTI sequence \
+             (velodyne/NNNNNN.bin) nor a ROS 2 bag folder (metadata.yaml, .mcap or .db3 \
+             files); import also reads an .e57 file or one bag file. Name the format with \
+             --format or check the folder",
             source.display()
         )))
     }

@@ -450,6 +450,13 @@ fn imu_track(
         .map(|m| frame_name(&m.message.header.frame_id).to_string())
         .unwrap_or_default();
     let (imu_from_sensor, describe) = match tree.fixed_transform(&imu_frame, sensor_frame) {
+        Some(pose) if imu_frame == sensor_frame => (
+            pose,
+            format!(
+                "{}'s orientation of {imu_frame}, the clouds' own frame",
+                chosen.topic
+            ),
+        ),
         Some(pose) => (
             pose,
             format!(

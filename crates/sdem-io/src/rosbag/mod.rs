@@ -62,13 +62,29 @@ pub use select::Chosen;
 pub use stops::{StopPolicy, StopRules, CONTINUOUS_BELOW_S};
 pub use storage::{Bag, BagMessage, Damage, Storage};
 
-/// Whether `path` looks like a ROS 2 bag: a folder with `metadata.yaml`, or a `.mcap` or
-/// `.db3` file (optionally `.zstd`).
+/// Whether `path` looks like a ROS 2 bag: a folder with `metadata.yaml`, or one holding
+/// `.mcap` or `.db3` files and neither a KITTI sequence's `velodyne/` nor 3DTK's scans (a bag
+/// folder whose `metadata.yaml` was lost: a recording killed before writing it), or a file that
+/// is MCAP or SQLite by its extension in any case (optionally `.zstd`) or its first bytes.
 pub fn is_rosbag(path: &std::path::Path) -> bool {
     if path.is_dir() {
-        return path.join("metadata.yaml").is_file();
+        if path.join("metadata.yaml").is_file() {
+            return true;
+        }
+        let Ok(entries) = std::fs::read_dir(path) else {
+            return false;
+        };
+        let names: Vec<std::path::PathBuf> = entries.flatten().map(|e| e.path()).collect();
+        let holds_bag_files = names
+            .iter()
+            .any(|p| p.is_file() && storage::storage_by_name(p).is_some());
+        let holds_scans = path.join("velodyne").is_dir()
+            || names.iter().any(|p| {
+                p.extension().is_some_and(|e| e == "3d")
+                    && p.file_name()
+                        .is_some_and(|n| n.to_string_lossy().starts_with("scan"))
+            });
+        return holds_bag_files && !holds_scans;
     }
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
-    let name = name.strip_suffix(".zstd").unwrap_or(name);
-    path.is_file() && (name.ends_with(".mcap") || name.ends_with(".db3"))
+    path.is_file() && storage::storage_of_file(path).is_some()
 }

@@ -76,6 +76,11 @@ pub(super) struct Plan {
 /// `base_from_sensor` from `/tf_static`, or identity, with the mounting in words.
 pub(super) fn mounting(tree: &TfTree, base_frame: &str, sensor_frame: &str) -> (Pose, String) {
     match tree.fixed_transform(base_frame, sensor_frame) {
+        // One frame: nothing to join, whatever /tf_static holds.
+        Some(pose) if base_frame == sensor_frame => (
+            pose,
+            format!("identity: the clouds are in {base_frame}, the robot's own frame"),
+        ),
         Some(pose) => {
             let t = pose.translation.vector;
             let [r, p, y] = Attitude::from_quaternion(&pose.rotation).to_degrees();

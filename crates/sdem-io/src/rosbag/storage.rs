@@ -27,6 +27,22 @@ impl Storage {
             Storage::Sqlite3 => "sqlite3",
         }
     }
+
+    /// The kind of file, in words.
+    fn kind(self) -> &'static str {
+        match self {
+            Storage::Mcap => "an MCAP file",
+            Storage::Sqlite3 => "an SQLite database",
+        }
+    }
+
+    /// The extension of its files.
+    fn extension(self) -> &'static str {
+        match self {
+            Storage::Mcap => "mcap",
+            Storage::Sqlite3 => "db3",
+        }
+    }
 }
 
 /// An opened bag: its storage and files, not yet read.
@@ -115,7 +131,12 @@ impl Damage {
 /// Refuses a storage file of 0 bytes by name: read, it was called damaged at byte 0 (MCAP)
 /// or said to have no table of topics (SQLite), and offered `--salvage`, where nothing was
 /// ever recorded into it.
-fn refuse_empty(files: &[std::path::PathBuf]) -> Result<()> {
+/// Checks each of a bag's files before its storage reads it: an empty file, one that cannot be
+/// opened (said with the system's reason, not as damage), and one whose first bytes are not its
+/// storage's (a text file named `.mcap`, an MCAP named `.db3`) are refused by name. A file
+/// shorter than a header, or zstd-compressed, is left to the storage's reader.
+fn check_files(storage: Storage, files: &[std::path::PathBuf]) -> Result<()> {
+    use std::io::Read;
     for file in files {
         if std::fs::metadata(file).is_ok_and(|m| m.len() == 0) {
             return Err(Error::Invalid(format!(
@@ -123,8 +144,45 @@ fn refuse_empty(files: &[std::path::PathBuf]) -> Result<()> {
                 file.display()
             )));
         }
+        let mut opened = std::fs::File::open(file).map_err(|e| Error::io(file, e))?;
+        let mut head = [0u8; 16];
+        if has_zstd_extension(file) || opened.read_exact(&mut head).is_err() {
+            continue;
+        }
+        match magic_storage(&head) {
+            Some(found) if found == storage => {}
+            Some(found) => {
+                return Err(Error::Invalid(format!(
+                    "{} is {} data, but the bag's files are {}: rename it .{} or give it alone",
+                    file.display(),
+                    found.kind(),
+                    storage.kind(),
+                    found.extension()
+                )))
+            }
+            None => {
+                return Err(Error::Invalid(format!(
+                    "{} is not {}: its first bytes are not {}'s (a file of another kind under a \
+                     bag's name?)",
+                    file.display(),
+                    storage.kind(),
+                    storage.kind()
+                )))
+            }
+        }
     }
     Ok(())
+}
+
+/// The storage a file's first 16 bytes say: MCAP's magic or SQLite's header.
+fn magic_storage(head: &[u8; 16]) -> Option<Storage> {
+    if head.starts_with(b"\x89MCAP0\r\n") {
+        Some(Storage::Mcap)
+    } else if head == b"SQLite format 3\0" {
+        Some(Storage::Sqlite3)
+    } else {
+        None
+    }
 }
 
 impl Bag {
@@ -158,7 +216,7 @@ impl Bag {
             None => files_in_folder(path)?,
         };
         let (file_compressed, message_compressed) = compression(&metadata_path, metadata.as_ref())?;
-        refuse_empty(&files)?;
+        check_files(storage, &files)?;
         Ok(Bag {
             path: path.to_path_buf(),
             storage,
@@ -172,11 +230,12 @@ impl Bag {
     fn open_file(path: &Path) -> Result<Bag> {
         let storage = storage_of_file(path).ok_or_else(|| {
             Error::Invalid(format!(
-                "{} is neither an .mcap nor a .db3 file; give a rosbag2 folder or one .mcap file",
+                "{} is neither an MCAP nor an SQLite (.db3) file, by its name or its first bytes; \
+                 give a rosbag2 folder or one .mcap file",
                 path.display()
             ))
         })?;
-        refuse_empty(&[path.to_path_buf()])?;
+        check_files(storage, &[path.to_path_buf()])?;
         Ok(Bag {
             path: path.to_path_buf(),
             storage,
@@ -566,10 +625,16 @@ fn has_zstd_extension(path: &Path) -> bool {
     path.extension().is_some_and(|e| e == "zstd")
 }
 
-/// The storage of a file from its name: `.mcap` or `.db3`, optionally followed by `.zstd`.
-fn storage_of_file(path: &Path) -> Option<Storage> {
-    let name = path.file_name()?.to_str()?;
-    let name = name.strip_suffix(".zstd").unwrap_or(name);
+/// The storage of one bag file: by its first bytes (MCAP's magic, SQLite's header), else by
+/// its name ([`storage_by_name`]; a `.zstd` file's first bytes are zstd's).
+pub(crate) fn storage_of_file(path: &Path) -> Option<Storage> {
+    storage_by_magic(path).or_else(|| storage_by_name(path))
+}
+
+/// The storage a bag file's name says: `.mcap` or `.db3`, in any case, optionally `.zstd`.
+pub(crate) fn storage_by_name(path: &Path) -> Option<Storage> {
+    let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
+    let name = name.strip_suffix(".zstd").unwrap_or(&name);
     if name.ends_with(".mcap") {
         Some(Storage::Mcap)
     } else if name.ends_with(".db3") {
@@ -577,6 +642,14 @@ fn storage_of_file(path: &Path) -> Option<Storage> {
     } else {
         None
     }
+}
+
+/// The storage a file's first bytes say: MCAP's magic or SQLite's header.
+fn storage_by_magic(path: &Path) -> Option<Storage> {
+    use std::io::Read;
+    let mut head = [0u8; 16];
+    std::fs::File::open(path).ok()?.read_exact(&mut head).ok()?;
+    magic_storage(&head)
 }
 
 fn files_of_metadata(
@@ -617,7 +690,7 @@ fn files_in_folder(folder: &Path) -> Result<(Storage, Vec<PathBuf>)> {
     let mut found: Vec<(Storage, PathBuf)> = Vec::new();
     for entry in std::fs::read_dir(folder).map_err(|e| Error::io(folder, e))? {
         let path = entry.map_err(|e| Error::io(folder, e))?.path();
-        if let Some(storage) = storage_of_file(&path).filter(|_| path.is_file()) {
+        if let Some(storage) = storage_by_name(&path).filter(|_| path.is_file()) {
             found.push((storage, path));
         }
     }
