@@ -597,9 +597,9 @@ pub fn run(args: Args) -> Result<Outcome> {
     for (flag, index) in [("--reference", reference_index), ("--query", query_index)] {
         if index >= dataset.len() {
             bail!(
-                "{flag} {index} is out of range: {} has scans 0..={}",
+                "{flag} {index} is out of range: {} has {}",
                 dataset_path.display(),
-                dataset.len() - 1
+                crate::output::scans_numbered(dataset.len())
             );
         }
     }

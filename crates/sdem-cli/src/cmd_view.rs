@@ -400,10 +400,10 @@ fn scan_sdem(args: &ScanArgs) -> Result<(Sdem, String)> {
         let dataset = Dataset::open(input)?;
         if args.index >= dataset.len() {
             bail!(
-                "--index {} is out of range: {} has scans 0..={}",
+                "--index {} is out of range: {} has {}",
                 args.index,
                 input.display(),
-                dataset.len().saturating_sub(1)
+                crate::output::scans_numbered(dataset.len())
             );
         }
         let points = dataset.load_scan(args.index)?;
@@ -447,9 +447,9 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
     for (flag, index) in [("--reference", args.reference), ("--query", args.query)] {
         if index >= dataset.len() {
             bail!(
-                "{flag} {index} is out of range: {} has scans 0..={}",
+                "{flag} {index} is out of range: {} has {}",
                 args.dataset.display(),
-                dataset.len().saturating_sub(1)
+                crate::output::scans_numbered(dataset.len())
             );
         }
     }

@@ -252,3 +252,13 @@ pub fn end_quietly_when_stdout_fails() {
         default(info);
     }));
 }
+
+/// A dataset's scans in words, for an index out of range: `1 scan, numbered 0`, `40 scans,
+/// numbered 0 to 39`.
+pub fn scans_numbered(count: usize) -> String {
+    match count {
+        0 => "no scan".to_string(),
+        1 => "1 scan, numbered 0".to_string(),
+        n => format!("{n} scans, numbered 0 to {}", n - 1),
+    }
+}

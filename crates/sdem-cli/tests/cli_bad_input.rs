@@ -45,12 +45,12 @@ fn error_naming(dir: &Path, args: &[&str], wanted: &[&str]) -> String {
 }
 
 #[test]
-fn localize_names_a_nan_coordinate_in_a_scan() {
+fn localize_names_an_infinite_coordinate_in_a_scan() {
     let dir = tempfile::tempdir().unwrap();
     let ds = dataset(dir.path());
-    std::fs::write(ds.join("scans/000001.xyz"), "1 2 0.5\n1 nan 0.5\n").unwrap();
+    std::fs::write(ds.join("scans/000001.xyz"), "1 2 0.5\n1 inf 0.5\n").unwrap();
     let args = ["localize", s(&ds), "--reference", "0", "--query", "1"];
-    error_naming(dir.path(), &args, &["000001.xyz:2:", "NaN"]);
+    error_naming(dir.path(), &args, &["000001.xyz:2:", "inf"]);
 }
 
 #[test]

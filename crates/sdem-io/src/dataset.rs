@@ -235,9 +235,9 @@ impl Dataset {
     fn check_index(&self, index: usize) -> Result<&PathBuf> {
         self.scan_paths.get(index).ok_or_else(|| {
             Error::Invalid(format!(
-                "scan index {index} is out of range: {} has scans 0..={}",
+                "scan index {index} is out of range: {} has {} scans, numbered from 0",
                 self.root.display(),
-                self.len().saturating_sub(1)
+                self.len()
             ))
         })
     }
@@ -957,7 +957,7 @@ mod tests {
         let dataset = Dataset::open(&root).unwrap();
         let err = dataset.load_scan(2).unwrap_err();
         assert!(matches!(err, Error::Invalid(_)));
-        assert!(err.to_string().contains("0..=1"), "{err}");
+        assert!(err.to_string().contains("has 2 scans"), "{err}");
         assert!(dataset.load_sweep(7).is_err());
 
         // Two files for the same stop.

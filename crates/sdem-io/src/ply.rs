@@ -258,20 +258,38 @@ pub(super) fn read_ply(path: &Path) -> Result<Vec<Vec3>> {
     Ok(points)
 }
 
+/// A PLY scalar type as a header names it (`int`, `uchar`, …).
+fn type_name(t: &ScalarType) -> &'static str {
+    match t {
+        ScalarType::Char => "char",
+        ScalarType::UChar => "uchar",
+        ScalarType::Short => "short",
+        ScalarType::UShort => "ushort",
+        ScalarType::Int => "int",
+        ScalarType::UInt => "uint",
+        ScalarType::Float => "float",
+        ScalarType::Double => "double",
+    }
+}
+
 /// Refuses a vertex element without x, y and z stored as float or double.
 fn check_vertex_axes(path: &Path, vertex: &ElementDef) -> Result<()> {
     for axis in ["x", "y", "z"] {
         match vertex.properties.get(axis).map(|p| &p.data_type) {
             Some(PropertyType::Scalar(ScalarType::Float | ScalarType::Double)) => {}
             Some(other) => {
+                let stored = match other {
+                    PropertyType::Scalar(t) => format!("stored as {}", type_name(t)),
+                    PropertyType::List(..) => "a list".to_string(),
+                };
                 return Err(Error::parse(
                     path,
                     None,
                     format!(
-                        "vertex property '{axis}' is {other:?}; sdem reads x, y, z stored as float \
+                        "vertex property '{axis}' is {stored}; sdem reads x, y, z stored as float \
                          or double"
                     ),
-                ))
+                ));
             }
             None => {
                 return Err(Error::parse(

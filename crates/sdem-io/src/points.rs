@@ -203,8 +203,10 @@ fn fields(line: &str) -> Vec<&str> {
     }
 }
 
-/// Reads the first three fields of a text line as a finite point.
-fn text_point(path: &Path, line_no: usize, line: &str, unit: &str) -> Result<[f64; 3]> {
+/// Reads the first three fields of a text line as a point: `None` for a point with a NaN
+/// coordinate (no return, dropped as every other reader drops it); an infinite coordinate or a
+/// field that is no number is refused with its line.
+fn text_point(path: &Path, line_no: usize, line: &str, unit: &str) -> Result<Option<[f64; 3]>> {
     let f = fields(line);
     let [x, y, z] = match f.as_slice() {
         [x, y, z, ..] => [*x, *y, *z],
@@ -219,11 +221,16 @@ fn text_point(path: &Path, line_no: usize, line: &str, unit: &str) -> Result<[f6
             ))
         }
     };
-    Ok([
-        parse_finite(path, line_no, x, "coordinate x")?,
-        parse_finite(path, line_no, y, "coordinate y")?,
-        parse_finite(path, line_no, z, "coordinate z")?,
-    ])
+    let coordinate = |token: &str, what: &str| match token.parse::<f64>() {
+        Ok(v) if v.is_nan() => Ok(v),
+        _ => parse_finite(path, line_no, token, what),
+    };
+    let point = [
+        coordinate(x, "coordinate x")?,
+        coordinate(y, "coordinate y")?,
+        coordinate(z, "coordinate z")?,
+    ];
+    Ok(point.iter().all(|v| !v.is_nan()).then_some(point))
 }
 
 /// The part of a text line before any `#` comment, trimmed; `None` for comment-only lines.
@@ -254,8 +261,9 @@ fn read_xyz(path: &Path) -> Result<Vec<Vec3>> {
     let mut points = Vec::new();
     for (line_no, line) in numbered_lines(&text) {
         if let Some(data) = strip_comment(line) {
-            let [x, y, z] = text_point(path, line_no, data, "metres")?;
-            points.push(Vec3::new(x, y, z));
+            if let Some([x, y, z]) = text_point(path, line_no, data, "metres")? {
+                points.push(Vec3::new(x, y, z));
+            }
         }
     }
     Ok(points)
@@ -288,7 +296,10 @@ fn read_uos_3d(path: &Path) -> Result<Vec<Vec3>> {
         if std::mem::take(&mut first_data_line) && is_uos_size_header(data) {
             continue;
         }
-        let [x_right, y_up, z_forward] = text_point(path, line_no, data, "centimetres")?;
+        let Some([x_right, y_up, z_forward]) = text_point(path, line_no, data, "centimetres")?
+        else {
+            continue;
+        };
         // 3DTK (left-handed: x right, y up, z forward) → sdem (x forward, y left, z up).
         points.push(Vec3::new(z_forward, -x_right, y_up) / 100.0);
     }
@@ -387,6 +398,11 @@ mod tests {
         );
         let txt = write(dir.path(), "b.TXT", b"1 2 3\r\n4 5 6\r\n");
         assert_eq!(read_points(&txt).unwrap().len(), 2);
+        // NaN is no return, dropped as the binary readers drop it; 3DTK's too.
+        let nan = write(dir.path(), "n.xyz", b"1 2 3\n\n1 2 nan\nNaN 0 0\n4 5 6\n");
+        assert_eq!(read_points(&nan).unwrap().len(), 2);
+        let uos = write(dir.path(), "n.3d", b"100 200 300\n4 5 NaN\n");
+        assert_eq!(read_points(&uos).unwrap(), vec![Vec3::new(3.0, -1.0, 2.0)]);
     }
 
     #[test]
@@ -396,7 +412,6 @@ mod tests {
         expect_err("c.xyz", b"# only a comment\n", None);
         expect_err("n.xyz", b"1 2 3\n1 2\n", Some(2));
         expect_err("n.xyz", b"1 2 3\n1 two 3\n", Some(2));
-        expect_err("n.xyz", b"1 2 3\n\n1 2 nan\n", Some(3));
         expect_err("n.xyz", b"inf 2 3\n", Some(1));
         expect_err("n.xyz", b"1,,3\n", Some(1));
         expect_err("n.xyz", b"x y z\n1 2 3\n", Some(1));
@@ -464,7 +479,6 @@ mod tests {
         expect_err("b.3d", b"360 x 225\n1 2\n", Some(2));
         expect_err("b.3d", b"1 2 3\n360 x 225\n", Some(2));
         expect_err("b.3d", b"1 2 3\n4 5 -inf\n", Some(2));
-        expect_err("b.3d", b"1 2 3\n4 5 NaN\n", Some(2));
         expect_err("b.3d", b"1 2 3\n4 5 six\n", Some(2));
     }
 

@@ -631,7 +631,7 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Empty, n, "# only a comment\n\n", &[Has("no points")]));
     c.push(file(r, f, Truncated, n, "1 2 0.5\n-3 0.2", &[Line(2)]));
     c.push(file(r, f, Truncated, n, "1 2 0.5\n-3 0.25 1.5e", &[Line(2)]));
-    c.push(file(r, f, Nan, n, "1 2 0.5\n-3 nan 1.5\n", &[Line(2)]));
+    c.push(file(r, f, Nan, n, "nan 2 0.5\n-3 nan 1.5\n", &[Has("no points")]));
     c.push(file(r, f, Inf, n, "1 2 0.5\n-3 0.25 inf\n", &[Line(2)]));
     c.push(file(r, f, Inf, n, "-inf 2 0.5\n", &[Line(1)]));
     c.push(file(r, f, Header, n, "x y z\n1 2 0.5\n", &[Line(1)]));
@@ -655,7 +655,7 @@ fn cases() -> Vec<Case> {
     c.push(file(r, f, Empty, n, "360 x 225\n", &[Has("no points")]));
     c.push(file(r, f, Truncated, n, "100 50 200\n10 20", &[Line(2)]));
     c.push(file(r, f, Truncated, n, "100 50 200\n10 20 3e", &[Line(2)]));
-    c.push(file(r, f, Nan, n, "100 50 200\n10 NaN 30\n", &[Line(2)]));
+    c.push(file(r, f, Nan, n, "NaN 50 200\n10 NaN 30\n", &[Has("no points")]));
     c.push(file(r, f, Inf, n, "100 50 200\n10 20 -inf\n", &[Line(2)]));
     c.push(file(r, f, Header, n, "360 x\n100 50 200\n", &[Line(1)]));
     c.push(file(r, f, Header, n, "100 50 200\n360 x 225\n", &[Line(2)]));
@@ -1114,8 +1114,8 @@ fn cases() -> Vec<Case> {
         f,
         Nan,
         "000001.xyz",
-        dataset_with("scans/000001.xyz", "1 2 0.5\nnan 0 1\n"),
-        &[Line(2)],
+        dataset_with("scans/000001.xyz", "nan 2 0.5\nnan 0 1\n"),
+        &[Has("no points")],
     ));
     c.push(folder(
         r,

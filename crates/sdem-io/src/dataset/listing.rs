@@ -9,8 +9,7 @@ use std::path::{Path, PathBuf};
 
 fn is_hidden(path: &Path) -> bool {
     path.file_name()
-        .and_then(|n| n.to_str())
-        .is_none_or(|n| n.starts_with('.'))
+        .is_none_or(|n| n.to_string_lossy().starts_with('.'))
 }
 
 /// Compares two names in natural order: runs of ASCII digits by their value, the rest by
@@ -85,7 +84,10 @@ pub(super) fn point_files(folder: &Path) -> Result<ScanListing> {
         if is_hidden(&path) {
             continue;
         }
-        let why = if path.is_file() {
+        let why = if path.file_name().is_some_and(|n| n.to_str().is_none()) {
+            // The scan's file name goes into report.json and the map, which hold UTF-8 only.
+            "a name that is not UTF-8"
+        } else if path.is_file() {
             if PointFormat::from_path(&path).is_some() {
                 scans.push(path);
                 continue;

@@ -122,10 +122,14 @@ fn selection(
     let count = options.count.unwrap_or(total.saturating_sub(options.first));
     let end = options.first.saturating_add(count);
     if options.first >= total || count == 0 || end > total {
+        let asked = match options.count {
+            Some(count) => format!("--first {} --count {count}", options.first),
+            None => format!("--first {}", options.first),
+        };
         return Err(Error::Invalid(format!(
-            "{} holds {total} scans (numbered from 0); scans {}..{end} were asked",
+            "{} holds {total} scans (numbered from 0), and {asked} asks for scans beyond them \
+             (or none)",
             source.display(),
-            options.first,
         )));
     }
     Ok(options.first..end)
