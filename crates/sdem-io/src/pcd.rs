@@ -7,8 +7,9 @@
 //! may be of any type and count and are skipped using their `SIZE` and `COUNT`. Binary data is
 //! little-endian, one point after another; compressed data is an LZF block of the fields one
 //! after another (see [`read_compressed`]). An organized cloud (`HEIGHT` > 1) is read row after
-//! row; its points with a NaN coordinate (no return) are dropped. `VERSION` and `VIEWPOINT` are
-//! ignored, as are unknown keys.
+//! row; its points with a NaN coordinate (no return) are dropped. A `VIEWPOINT` (where the sensor
+//! stood in the points' frame, PCL's `tx ty tz qw qx qy qz`) takes the points into the sensor's
+//! frame; `VERSION` and unknown keys are ignored.
 
 use super::{count_newlines, fmt_point, parse_count, read_bytes};
 use crate::error::{Error, Result};
@@ -38,6 +39,8 @@ struct PcdHeader {
     height: Option<usize>,
     points: Option<usize>,
     data: Option<String>,
+    /// `VIEWPOINT tx ty tz qw qx qy qz`: where the sensor stood in the points' frame.
+    viewpoint: Option<nalgebra::Isometry3<f64>>,
     /// The 1-based lines of `WIDTH`, `POINTS` and `DATA`, to name in errors.
     width_line: Option<usize>,
     points_line: Option<usize>,
@@ -78,6 +81,7 @@ pub(super) fn read_pcd(path: &Path) -> Result<Vec<Vec3>> {
         ));
     }
     let (header, body_start, header_lines) = parse_header(path, &bytes)?;
+    let viewpoint = header.viewpoint;
     let header = check_header(path, header)?;
     let axes = axis_layout(path, &header.fields)?;
     let body = Body {
@@ -85,7 +89,7 @@ pub(super) fn read_pcd(path: &Path) -> Result<Vec<Vec3>> {
         start: body_start,
         first_line: header_lines + 1,
     };
-    match header.data.as_str() {
+    let mut points = match header.data.as_str() {
         "ascii" => read_ascii(path, &body, &header, axes),
         "binary" => read_binary(path, &body, &header, axes),
         "binary_compressed" => read_compressed(path, &body, &header, axes),
@@ -94,7 +98,15 @@ pub(super) fn read_pcd(path: &Path) -> Result<Vec<Vec3>> {
             header.data_line,
             format!("unknown DATA '{other}'; expected ascii, binary or binary_compressed"),
         )),
+    }?;
+    // The points are in a frame where the sensor stood at the viewpoint: into the sensor's.
+    let identity = nalgebra::Isometry3::identity();
+    if let Some(sensor_from_points) = viewpoint.filter(|v| *v != identity).map(|v| v.inverse()) {
+        for p in &mut points {
+            *p = sensor_from_points.transform_point(&(*p).into()).coords;
+        }
     }
+    Ok(points)
 }
 
 /// The data after the `DATA` line: its bytes, its byte offset in the file and its first line.
@@ -212,11 +224,56 @@ impl PcdHeader {
                 self.data_line = Some(line_no);
                 return Ok(true);
             }
-            // VERSION, VIEWPOINT and keys of later PCD versions do not change x, y, z.
+            "VIEWPOINT" => {
+                if self.viewpoint.is_some() {
+                    return Err(duplicate());
+                }
+                self.viewpoint = Some(parse_viewpoint(path, line_no, values)?);
+            }
+            // VERSION and keys of later PCD versions do not change x, y, z.
             _ => {}
         }
         Ok(false)
     }
+}
+
+/// The pose of a `VIEWPOINT` line: translation `tx ty tz`, then the quaternion `qw qx qy qz`
+/// (PCL's order), which must be a unit quaternion.
+fn parse_viewpoint(
+    path: &Path,
+    line_no: usize,
+    values: &[&str],
+) -> Result<nalgebra::Isometry3<f64>> {
+    let bad = |message: String| Error::parse(path, Some(line_no), message);
+    if values.len() != 7 {
+        return Err(bad(format!(
+            "VIEWPOINT needs 7 numbers (tx ty tz qw qx qy qz), found {}",
+            values.len()
+        )));
+    }
+    let mut v = [0f64; 7];
+    for (value, token) in v.iter_mut().zip(values) {
+        *value = token
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| bad(format!("VIEWPOINT value '{token}' is not a finite number")))?;
+    }
+    let q = nalgebra::Quaternion::new(v[3], v[4], v[5], v[6]);
+    if (q.norm() - 1.0).abs() > 1e-3 {
+        return Err(bad(format!(
+            "VIEWPOINT's quaternion (qw qx qy qz) = ({}, {}, {}, {}) has length {:.4}, not 1",
+            v[3],
+            v[4],
+            v[5],
+            v[6],
+            q.norm()
+        )));
+    }
+    Ok(nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(v[0], v[1], v[2]),
+        nalgebra::UnitQuaternion::from_quaternion(q),
+    ))
 }
 
 /// The values of a `SIZE` line: 1, 2, 4 or 8 bytes each.
@@ -907,6 +964,34 @@ mod tests {
             u64::MAX
         );
         expect_err(text.as_bytes(), None);
+    }
+
+    /// A viewpoint 1 m along x turned 90° about z: a point 2 m ahead of the sensor (its x)
+    /// lies at (1, 2, 0) in the file's frame.
+    #[test]
+    fn a_viewpoint_takes_the_points_into_the_sensors_frame() {
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let header = |viewpoint: &str| {
+            format!(
+                "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nHEIGHT 1\n{viewpoint}\nPOINTS 1\n\
+                 DATA ascii\n1 2 0\n"
+            )
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let turned = header(&format!("VIEWPOINT 1 0 0 {h} 0 0 {h}"));
+        let points = read_pcd(&write(dir.path(), "v.pcd", turned.as_bytes())).unwrap();
+        assert!(
+            (points[0] - Vec3::new(2.0, 0.0, 0.0)).norm() < 1e-6,
+            "{}",
+            points[0]
+        );
+        let e = read_pcd(&write(
+            dir.path(),
+            "q.pcd",
+            header("VIEWPOINT 0 0 0 2 0 0 0").as_bytes(),
+        ))
+        .unwrap_err();
+        assert!(e.to_string().contains("not 1"), "{e}");
     }
 
     #[test]
