@@ -137,7 +137,7 @@ fn run_case(
                 if tally.record(Some(&result)) {
                     failures_flagged += usize::from(d.ambiguous);
                     failures.push(format!(
-                        "pair {i}: error {:.1} mm, {:.2}°, {:.0} % of points matched, {} ({:?})",
+                        "pair {i}: error {:.1} mm, {:.2}°, {:.0} % of points matched, {} ({})",
                         result.translation_error_m * 1e3,
                         result.rotation_error_deg,
                         d.inlier_fraction * 100.0,
@@ -278,6 +278,10 @@ fn print_text(report: &Report, config: &FaultConfig) {
             c.what
         );
     }
+    println!(
+        "flagged: the failures (error of 2 cm or more) whose doubts said not to trust them, of all \
+         the failures"
+    );
     for c in &report.cases {
         for f in &c.failures {
             println!("{} failed: {f}", c.case);

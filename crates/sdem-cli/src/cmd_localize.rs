@@ -870,13 +870,18 @@ fn print_estimate(report: &Report, found: &Localization, truth: Option<&Pose>) {
     if let (Some(e_m), Some(e_deg)) = (report.error_m, report.error_deg) {
         println!("  error     {:.2} cm, {:.3}°", e_m * 100.0, e_deg);
     }
+    let how = match found.refined {
+        sdem::localize::RefineOutcome::None => "not asked (the grid optimum)",
+        sdem::localize::RefineOutcome::SixDof => "6-DoF",
+        sdem::localize::RefineOutcome::Quadratic => {
+            "by a quadratic fit of the grid's costs (the 6-DoF refinement failed)"
+        }
+        sdem::localize::RefineOutcome::Failed => "failed (the grid optimum)",
+    };
     let refined = match (report.refinement.iterations, report.refinement.converged) {
-        (Some(n), Some(true)) => format!("{:?}, {n} iterations", found.refined),
-        (Some(n), _) => format!(
-            "{:?}, stopped at its limit of {n} iterations still moving",
-            found.refined
-        ),
-        _ => format!("{:?}", found.refined),
+        (Some(n), Some(true)) => format!("{how}, {n} iterations"),
+        (Some(n), _) => format!("{how}, stopped at its limit of {n} iterations still moving"),
+        _ => how.to_string(),
     };
     let to = match report.attitude.source {
         AttitudeKind::Unknown => None,
@@ -940,11 +945,15 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
 /// Prints the search's effort.
 fn print_search(report: &Report, config: &LocalizeOptions) {
     println!(
-        "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({:?})",
+        "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({})",
         report.candidates_evaluated,
         report.candidates_total,
         report.nodes_bounded,
         report.time_ms,
-        config.mode
+        match config.mode {
+            SearchMode::Exhaustive => "exhaustive search",
+            SearchMode::BranchAndBound => "exact branch-and-bound search",
+            SearchMode::CoarseToFine => "coarse-to-fine search",
+        }
     );
 }

@@ -731,7 +731,10 @@ fn print_text(args: &Args, report: &Report) {
     if report.segments.len() > 1 {
         let floating: Vec<String> = (report.segments.iter())
             .filter(|s| !s.in_world)
-            .map(|s| format!("{} ({} nodes)", s.id, s.nodes))
+            .map(|s| match s.nodes {
+                1 => format!("{} (1 node)", s.id),
+                n => format!("{} ({n} nodes)", s.id),
+            })
             .collect();
         println!(
             "{} map segments: the world's and {}, whose place in the world is not known (their \
@@ -807,9 +810,8 @@ fn print_doubtful_steps(args: &Args, report: &Report) {
                 "  scan {} {}{}",
                 step["scan_index"],
                 status,
-                step["recovery"]
-                    .as_str()
-                    .map(|how| format!(" ({})", how.replace('_', " ")))
+                serde_json::from_value::<PredictionSource>(step["recovery"].clone())
+                    .map(|how| format!(" ({})", recovery_words(how)))
                     .unwrap_or_default()
             ),
             "new_segment" => {

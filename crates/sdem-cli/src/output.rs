@@ -201,30 +201,6 @@ pub fn error_line(error: &anyhow::Error) -> String {
     line
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// An `sdem_io` I/O error says its OS error in its message and carries it as its source:
-    /// the line says it once, and keeps every context above it.
-    #[test]
-    fn error_line_says_each_cause_once() {
-        let os = std::io::Error::from(std::io::ErrorKind::NotFound);
-        let os_text = os.to_string();
-        let io = sdem_io::Error::io("/proc/x.png", os);
-        let error = anyhow::Error::new(io).context("cannot write the picture");
-        let line = error_line(&error);
-        assert_eq!(line.matches(&os_text).count(), 1, "{line}");
-        assert!(
-            line.starts_with("cannot write the picture: /proc/x.png: "),
-            "{line}"
-        );
-        // A cause that adds something is kept.
-        let error = anyhow::anyhow!("unknown route").context("--route");
-        assert_eq!(error_line(&error), "--route: unknown route");
-    }
-}
-
 /// The exit status after a closed standard output: a process killed by `SIGPIPE` reports 128 + 13
 /// to its shell, as `sdem … | head` would without this.
 pub const EXIT_CLOSED_PIPE: i32 = 141;
@@ -260,5 +236,29 @@ pub fn scans_numbered(count: usize) -> String {
         0 => "no scan".to_string(),
         1 => "1 scan, numbered 0".to_string(),
         n => format!("{n} scans, numbered 0 to {}", n - 1),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An `sdem_io` I/O error says its OS error in its message and carries it as its source:
+    /// the line says it once, and keeps every context above it.
+    #[test]
+    fn error_line_says_each_cause_once() {
+        let os = std::io::Error::from(std::io::ErrorKind::NotFound);
+        let os_text = os.to_string();
+        let io = sdem_io::Error::io("/proc/x.png", os);
+        let error = anyhow::Error::new(io).context("cannot write the picture");
+        let line = error_line(&error);
+        assert_eq!(line.matches(&os_text).count(), 1, "{line}");
+        assert!(
+            line.starts_with("cannot write the picture: /proc/x.png: "),
+            "{line}"
+        );
+        // A cause that adds something is kept.
+        let error = anyhow::anyhow!("unknown route").context("--route");
+        assert_eq!(error_line(&error), "--route: unknown route");
     }
 }

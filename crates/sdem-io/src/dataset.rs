@@ -173,9 +173,12 @@ impl Dataset {
             let readings = read_attitude_readings(&attitude_path, attitude_sigma)?;
             if readings.attitudes.len() != scan_paths.len() {
                 return Err(Error::Invalid(format!(
-                    "{} has {} rows but {} holds {} scans; they must match one to one{}",
+                    "{} has {} but {} holds {} scans; they must match one to one{}",
                     attitude_path.display(),
-                    readings.attitudes.len(),
+                    match readings.attitudes.len() {
+                        1 => "1 row".to_string(),
+                        n => format!("{n} rows"),
+                    },
                     scans_dir.display(),
                     scan_paths.len(),
                     listing.skipped_note()

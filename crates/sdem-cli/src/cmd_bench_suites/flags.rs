@@ -49,7 +49,7 @@ pub struct SuiteArgs {
     /// GICP), routes (the stop-and-go loop on six seeded routes without and with odometry,
     /// relocalization at every stop of a saved map, and the KITTI frames beside KISS-ICP;
     /// --quick: without odometry only, 8 relocalizations), scale (the loop on long routes as
-    /// the map grows: --sizes, --routes). The peers run beside it when found.
+    /// the map grows: --sizes, --route). The peers run beside it when found.
     #[arg(long, value_enum, conflicts_with = "faults")]
     pub suite: Option<Suite>,
     /// With --suite real-geometry: a real scan to re-view (any point file sdem reads, in its

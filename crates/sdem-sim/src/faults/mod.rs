@@ -302,3 +302,32 @@ pub struct Injected {
     /// The errors added to the query's roll and pitch readings, degrees.
     pub gyro_error_deg: [f64; 2],
 }
+
+/// What was injected, in words: only what the pair has (`nothing injected` for a clean pair).
+impl std::fmt::Display for Injected {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mut parts = Vec::new();
+        for (count, what) in [
+            (self.dust_returns, "returns from dust"),
+            (self.lost_returns, "returns lost"),
+            (self.person_returns, "returns on a walking person"),
+            (self.rubble_returns, "returns on moved rubble"),
+        ] {
+            if count > 0 {
+                parts.push(format!("{count} {what}"));
+            }
+        }
+        if self.compass_error_deg != 0.0 {
+            parts.push(format!("compass off {:+.1}°", self.compass_error_deg));
+        }
+        if self.gyro_error_deg != [0.0; 2] {
+            let [roll, pitch] = self.gyro_error_deg;
+            parts.push(format!("roll off {roll:+.2}°, pitch {pitch:+.2}°"));
+        }
+        if parts.is_empty() {
+            f.write_str("nothing injected")
+        } else {
+            write!(f, "injected: {}", parts.join(", "))
+        }
+    }
+}

@@ -3,7 +3,7 @@
 use crate::doubt::Doubt;
 use crate::geometry::Pose;
 use crate::map::LoopClosure;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Where the heading prior came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -22,7 +22,7 @@ pub enum HeadingPrior {
 }
 
 /// Where a search of one stop started from ([`Attempt::source`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum PredictionSource {
     /// The last node's pose moved by the odometry's motion.
