@@ -1,10 +1,11 @@
 //! `sdem.Slam` (the incremental loop) with its `sdem.Step`s, and `sdem.Map` (a saved map to
 //! relocalize in) with its `sdem.Relocalization`.
 
-use crate::arrays::{matrices4, matrix4, numbers, points_array, points_from, pose_from};
+use crate::arrays::{matrices4, matrix4, matrix6, numbers, points_array, points_from, pose_from};
 use crate::errors::{invalid, invalid_input, io_error, sdem_error};
 use crate::localize::{attitude_from, doubt_list};
 use crate::options::{to_json, to_python, with_overrides};
+use nalgebra::Matrix6;
 use numpy::PyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -276,6 +277,7 @@ pub struct Step {
     trusted: bool,
     node_id: usize,
     time_ms: f64,
+    covariance: Option<[[f64; 6]; 6]>,
     report: Value,
 }
 
@@ -294,6 +296,7 @@ impl Step {
             trusted: step.report.trusted,
             node_id: step.report.node_id,
             time_ms: step.report.time_ms,
+            covariance: step.report.covariance,
             report,
         })
     }
@@ -339,6 +342,15 @@ impl Step {
     #[getter]
     fn time_ms(&self) -> f64 {
         self.time_ms
+    }
+
+    /// The match's covariance of ``[x, y, z, roll, pitch, yaw]`` (metres, radians; world axes),
+    /// ``(6, 6)`` float64, as the pose graph's edges carry it (``report["covariance"]``); None
+    /// for the first scan or a match without a 6-DoF refinement.
+    #[getter]
+    fn covariance<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        (self.covariance.as_ref())
+            .map(|c| matrix6(py, &Matrix6::from_fn(|i, j| c[i][j])).into_any())
     }
 
     /// The step as ``report.json`` holds it: ``scan_index``, ``node_id``, ``time_ms``,
@@ -513,6 +525,7 @@ pub struct Relocalization {
     doubts: Vec<RustDoubt>,
     trusted: bool,
     time_ms: f64,
+    covariance: Option<[[f64; 6]; 6]>,
 }
 
 impl Relocalization {
@@ -526,6 +539,7 @@ impl Relocalization {
             doubts: found.doubts.clone(),
             trusted: found.trusted,
             time_ms: found.time.as_secs_f64() * 1e3,
+            covariance: found.diagnostics.covariance,
         })
     }
 }
@@ -578,6 +592,14 @@ impl Relocalization {
     #[getter]
     fn time_ms(&self) -> f64 {
         self.time_ms
+    }
+
+    /// The match's covariance of ``[x, y, z, roll, pitch, yaw]`` (metres, radians), ``(6, 6)``
+    /// float64 (``diagnostics["covariance"]``); None without a 6-DoF refinement.
+    #[getter]
+    fn covariance<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
+        (self.covariance.as_ref())
+            .map(|c| matrix6(py, &Matrix6::from_fn(|i, j| c[i][j])).into_any())
     }
 
     fn __repr__(&self) -> String {

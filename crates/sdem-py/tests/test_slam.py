@@ -51,6 +51,13 @@ def test_add_returns_world_from_sensor_and_the_step_says_how_it_went(run):
     assert report["heading_prior"] == "odometry" and report["trusted"] is True
     assert report["world_from_sensor"]["x"] == pytest.approx(second[0, 3])
     assert step.time_ms > 0
+    # The match's covariance as an array, the report's figures; none for the first scan.
+    assert step.covariance.shape == (6, 6)
+    np.testing.assert_allclose(step.covariance, report["covariance"])
+    assert np.all(np.linalg.eigvalsh(step.covariance) > 0)
+    fresh = sdem.Slam()
+    fresh.add(run["points"][0], attitude_deg=run["attitude_deg"][0])
+    assert fresh.last_step.covariance is None
 
 
 def test_progress_is_a_callback_with_each_step_in_order(mapped):
@@ -145,6 +152,9 @@ def test_relocalizing_near_a_position_and_with_bad_arguments(run, mapped, tmp_pa
                           near=truth[:3, 3] + [0.1, -0.1, 0.0], near_sigma_m=0.2)
     assert translation_error_m(res.world_from_sensor, truth) < 0.02
     assert res.diagnostics["inlier_fraction"] > 0.5 and res.time_ms > 0
+    np.testing.assert_allclose(res.covariance, res.diagnostics["covariance"])
+    # One σ of the position under a centimetre, as the error is.
+    assert np.all(np.sqrt(np.diag(res.covariance)[:3]) < 0.01)
     with pytest.raises(sdem.InvalidInputError, match="give near"):
         loaded.localize(run["points"][5], near_sigma_m=0.2)
     with pytest.raises(sdem.InvalidInputError, match="max_nodes"):
