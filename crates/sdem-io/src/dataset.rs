@@ -912,7 +912,7 @@ mod tests {
         write_attitude_csv(&root.join("attitude.csv"), &[Attitude::default()]).unwrap();
         let err = Dataset::open(&root).unwrap_err().to_string();
         assert!(
-            err.contains("1 rows")
+            err.contains("1 row ")
                 && err.contains("2 scans")
                 && err.contains("attitude.csv")
                 && err.contains("scans"),

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A file could not be opened, read or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {source}{}", path.display(), io_hint(path, source))]
     Io {
         /// The file.
         path: PathBuf,
@@ -58,6 +58,23 @@ impl Error {
     }
 }
 
+/// What the operating system's words leave out, for the two errors a user meets most: a path
+/// whose folder is missing (the file's own name is not what is wrong), and a folder given where
+/// a file is wanted.
+fn io_hint(path: &std::path::Path, source: &std::io::Error) -> String {
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+    match source.kind() {
+        std::io::ErrorKind::NotFound => match parent {
+            Some(folder) if !folder.exists() => {
+                format!(" (the folder {} does not exist)", folder.display())
+            }
+            _ => String::new(),
+        },
+        std::io::ErrorKind::IsADirectory => " (a folder: give a file)".to_string(),
+        _ => String::new(),
+    }
+}
+
 /// The result of reading or writing a file.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -69,4 +86,29 @@ pub(crate) fn one_line(e: &impl std::fmt::Display) -> String {
         .split_whitespace()
         .collect::<Vec<_>>()
         .join(" ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A missing folder is named, not only the file; a folder given for a file is said to be
+    /// one; a missing file in a folder that exists keeps the system's words alone.
+    #[test]
+    fn io_errors_say_what_the_system_leaves_out() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing_folder = dir.path().join("nodir/x.mcap");
+        let e = Error::io(
+            &missing_folder,
+            std::fs::File::create(&missing_folder).unwrap_err(),
+        );
+        assert!(e.to_string().contains("nodir does not exist"), "{e}");
+        let folder = dir.path().join("a.ply");
+        std::fs::create_dir(&folder).unwrap();
+        let e = Error::io(&folder, std::fs::read(&folder).unwrap_err());
+        assert!(e.to_string().contains("a folder: give a file"), "{e}");
+        let missing_file = dir.path().join("b.ply");
+        let e = Error::io(&missing_file, std::fs::read(&missing_file).unwrap_err());
+        assert!(!e.to_string().contains("does not exist)"), "{e}");
+    }
 }
