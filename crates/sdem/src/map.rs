@@ -28,9 +28,9 @@ use crate::search::HeadingWindow;
 use nalgebra::{Isometry3, Matrix6, Translation3, UnitQuaternion};
 use serde::{Deserialize, Serialize};
 
-/// How far a cell's range from a scan may lie from a node's for [`Node::cells_matching_scan`]
-/// to count it the same, metres: a node's point is the mean of its cell's returns on the nearest
-/// surface, within 4 σ of the nearest return (2 cm at the SICK's 5 mm).
+/// How far beyond half its cell a node's point may lie from a return of its scan for
+/// [`Node::share_found_in_scan`], metres: the cell's returns average within 4 σ of the nearest
+/// surface (2 cm at the SICK's 5 mm), and a curved surface's mean lies off it.
 pub const SAME_SCAN_RANGE_M: f32 = 0.05;
 
 /// One scan in the map.
@@ -99,32 +99,41 @@ impl Node {
         })
     }
 
-    /// The share of this node's S-DEM cells whose range the scan `points_in_sensor` gives
-    /// again, within [`SAME_SCAN_RANGE_M`], on the grid `sdem` levelled by the node's pose: 1
-    /// or nearly for the scan the node was made from (its points are that scan's cell means,
-    /// which bin into the cells they came from), low for any other. It tells a dataset whose
-    /// scan was replaced after mapping.
+    /// The share of this node's points that lie near a return of the scan `points_in_sensor`
+    /// (sensor frame): 1 or nearly for the scan the node was made from, low for any other. It
+    /// tells a dataset whose scan was replaced after mapping.
+    ///
+    /// A node's point is the mean of its S-DEM cell's returns on the nearest surface, so it lies
+    /// among them: within half the cell's diagonal at its range (the grid `sdem`'s resolution)
+    /// of one, plus [`SAME_SCAN_RANGE_M`] for the surface's curvature. Read against the raw
+    /// returns, not against an S-DEM of the scan, the test does not depend on where the cells
+    /// lie: a node whose pose a loop closure turned by half a cell (its points were binned on
+    /// the grid levelled by its first pose) matches its scan all the same.
     ///
     /// # Errors
     /// An invalid `sdem` configuration.
-    pub fn cells_matching_scan(&self, points_in_sensor: &[Vec3], sdem: &SdemConfig) -> Result<f64> {
-        let attitude = attitude_of(&self.world_from_sensor);
-        let scan = Sdem::from_points(points_in_sensor, &attitude, sdem)?;
-        let own = Sdem::from_points(&self.points_in_sensor, &attitude, sdem)?;
-        let (mut known, mut matching) = (0usize, 0usize);
-        for (own, scan) in own.ranges().iter().zip(scan.ranges()) {
-            if own.is_finite() {
-                known += 1;
-                if (own - scan).abs() <= SAME_SCAN_RANGE_M {
-                    matching += 1;
-                }
-            }
+    pub fn share_found_in_scan(&self, points_in_sensor: &[Vec3], sdem: &SdemConfig) -> Result<f64> {
+        let half_diagonal =
+            crate::sdem::GridSpec::new(sdem)?.resolution() * std::f64::consts::SQRT_2 / 2.0;
+        let returns: Vec<[f64; 3]> = points_in_sensor
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()))
+            .map(|p| [p.x, p.y, p.z])
+            .collect();
+        if self.points_in_sensor.is_empty() || returns.is_empty() {
+            return Ok(0.0);
         }
-        Ok(if known == 0 {
-            0.0
-        } else {
-            matching as f64 / known as f64
-        })
+        let tree: kiddo::ImmutableKdTree<f64, 3> = kiddo::ImmutableKdTree::new_from_slice(&returns);
+        let matching = (self.points_in_sensor.iter())
+            .filter(|p| {
+                let x = [p[0] as f64, p[1] as f64, p[2] as f64];
+                let range = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt();
+                let reach = range * half_diagonal + SAME_SCAN_RANGE_M as f64;
+                let found = tree.nearest_one::<kiddo::SquaredEuclidean>(&x);
+                found.distance <= reach * reach
+            })
+            .count();
+        Ok(matching as f64 / self.points_in_sensor.len() as f64)
     }
 
     /// The node's points in the sensor frame, as `f64` vectors.

@@ -118,3 +118,33 @@ fn a_turn_matched_against_a_node_comes_out_as_far_as_it_turned() {
         across * 1e3
     );
 }
+
+/// A node knows its own scan again whatever its pose became: after a loop closure turned it by
+/// half a cell (its points were binned on the grid levelled by its first pose) every point is
+/// still found among the scan's returns; the next stop's scan, 0.35 m on, explains far fewer.
+#[test]
+fn a_node_finds_its_own_scan_again_after_its_pose_moved_and_not_the_next_one() {
+    let sensor = SensorConfig::default();
+    let run = long_run(LongRoute::Wings, 1, 3, &sensor.lift).unwrap();
+    let truth = run.truth(&sensor.lift).unwrap();
+    let sims = run.simulate(&sensor, 1, 0..2).unwrap();
+    let grid = SdemConfig::default();
+    let scan = sims[0].sweep.points_in_sensor();
+    let mut node = Node::from_scan(0, 0, truth[0], None, &scan, &grid).unwrap();
+    assert_eq!(node.share_found_in_scan(&scan, &grid).unwrap(), 1.0);
+    for (roll, yaw) in [(0.0, 0.5), (1.0, 0.25), (0.3, 0.7)] {
+        let turn = nalgebra::UnitQuaternion::from_euler_angles(
+            f64::to_radians(roll),
+            0.0,
+            f64::to_radians(yaw),
+        );
+        node.world_from_sensor = Pose::from_parts(truth[0].translation, turn * truth[0].rotation);
+        let share = node.share_found_in_scan(&scan, &grid).unwrap();
+        assert!(share > 0.99, "turned roll {roll}°, yaw {yaw}°: {share}");
+    }
+    let moved = (truth[1].translation.vector - truth[0].translation.vector).norm();
+    let next = node
+        .share_found_in_scan(&sims[1].sweep.points_in_sensor(), &grid)
+        .unwrap();
+    assert!(next < 0.8, "the next scan, {moved:.2} m on: {next}");
+}
