@@ -279,8 +279,8 @@ fn print_text(report: &Report, config: &FaultConfig) {
         );
     }
     println!(
-        "flagged: the failures (error of 2 cm or more) whose doubts said not to trust them, of all \
-         the failures"
+        "flagged: the failures (error of 2 cm or more) the diagnostics marked ambiguous, or that \
+         ended in an error, of all the failures"
     );
     for c in &report.cases {
         for f in &c.failures {

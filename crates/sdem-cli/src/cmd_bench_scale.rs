@@ -361,13 +361,7 @@ impl SizeInput<'_> {
         let errors = trajectory_errors(&truth, &self.slam.poses())?;
         let save_start = Instant::now();
         let slam = self.slam;
-        folder.save(
-            slam.config(),
-            &slam.map,
-            &slam.edges,
-            &slam.loop_closures,
-            &[],
-        )?;
+        folder.save_slam(slam)?;
         let save_ms = elapsed_ms(save_start);
         Ok(SizeReport {
             nodes: slam.map.nodes.len(),

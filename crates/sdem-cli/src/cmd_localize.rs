@@ -599,7 +599,7 @@ pub fn run(args: Args) -> Result<Outcome> {
             bail!(
                 "{flag} {index} is out of range: {} has {}",
                 dataset_path.display(),
-                crate::output::scans_numbered(dataset.len())
+                sdem_io::scans_numbered(dataset.len())
             );
         }
     }

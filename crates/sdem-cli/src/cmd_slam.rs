@@ -810,9 +810,13 @@ fn print_doubtful_steps(args: &Args, report: &Report) {
                 "  scan {} {}{}",
                 step["scan_index"],
                 status,
-                serde_json::from_value::<PredictionSource>(step["recovery"].clone())
-                    .map(|how| format!(" ({})", recovery_words(how)))
-                    .unwrap_or_default()
+                match serde_json::from_value::<PredictionSource>(step["recovery"].clone()) {
+                    Ok(how) => format!(" ({})", recovery_words(how)),
+                    Err(_) => step["recovery"]
+                        .as_str()
+                        .map(|how| format!(" ({})", how.replace('_', " ")))
+                        .unwrap_or_default(),
+                }
             ),
             "new_segment" => {
                 println!(

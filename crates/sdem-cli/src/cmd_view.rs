@@ -403,7 +403,7 @@ fn scan_sdem(args: &ScanArgs) -> Result<(Sdem, String)> {
                 "--index {} is out of range: {} has {}",
                 args.index,
                 input.display(),
-                crate::output::scans_numbered(dataset.len())
+                sdem_io::scans_numbered(dataset.len())
             );
         }
         let points = dataset.load_scan(args.index)?;
@@ -449,7 +449,7 @@ fn write_cost_picture(args: &CostArgs) -> Result<()> {
             bail!(
                 "{flag} {index} is out of range: {} has {}",
                 args.dataset.display(),
-                crate::output::scans_numbered(dataset.len())
+                sdem_io::scans_numbered(dataset.len())
             );
         }
     }

@@ -219,24 +219,23 @@ pub fn end_quietly_when_stdout_fails() {
             .or_else(|| payload.downcast_ref::<&str>().copied())
             .unwrap_or("");
         if let Some(reason) = message.strip_prefix("failed printing to stdout: ") {
-            if reason.contains("os error 32") {
+            // EPIPE (32) on Unix, ERROR_NO_DATA (232) on Windows.
+            if ["os error 32)", "os error 232)"]
+                .iter()
+                .any(|e| reason.ends_with(e))
+            {
                 std::process::exit(EXIT_CLOSED_PIPE);
             }
-            eprintln!("sdem: error: cannot write to the standard output: {reason}");
+            // Not eprintln!: with stderr unwritable too it would panic inside the hook (abort).
+            use std::io::Write;
+            let _ = writeln!(
+                std::io::stderr(),
+                "sdem: error: cannot write to the standard output: {reason}"
+            );
             std::process::exit(1);
         }
         default(info);
     }));
-}
-
-/// A dataset's scans in words, for an index out of range: `1 scan, numbered 0`, `40 scans,
-/// numbered 0 to 39`.
-pub fn scans_numbered(count: usize) -> String {
-    match count {
-        0 => "no scan".to_string(),
-        1 => "1 scan, numbered 0".to_string(),
-        n => format!("{n} scans, numbered 0 to {}", n - 1),
-    }
 }
 
 #[cfg(test)]

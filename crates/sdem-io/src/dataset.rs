@@ -89,6 +89,16 @@ impl SigmaSource {
     }
 }
 
+/// A dataset's scans in words, for an index out of range: `1 scan, numbered 0`, `40 scans,
+/// numbered 0 to 39`.
+pub fn scans_numbered(count: usize) -> String {
+    match count {
+        0 => "no scan".to_string(),
+        1 => "1 scan, numbered 0".to_string(),
+        n => format!("{n} scans, numbered 0 to {}", n - 1),
+    }
+}
+
 impl Dataset {
     /// Opens a dataset folder: lists `scans/` and reads `attitude.csv`, `odometry.txt`,
     /// `poses_truth.txt` and `sensor.toml` when present. Point clouds are read later, one at a
@@ -238,9 +248,9 @@ impl Dataset {
     fn check_index(&self, index: usize) -> Result<&PathBuf> {
         self.scan_paths.get(index).ok_or_else(|| {
             Error::Invalid(format!(
-                "scan index {index} is out of range: {} has {} scans, numbered from 0",
+                "scan index {index} is out of range: {} has {}",
                 self.root.display(),
-                self.len()
+                scans_numbered(self.len())
             ))
         })
     }
@@ -960,7 +970,10 @@ mod tests {
         let dataset = Dataset::open(&root).unwrap();
         let err = dataset.load_scan(2).unwrap_err();
         assert!(matches!(err, Error::Invalid(_)));
-        assert!(err.to_string().contains("has 2 scans"), "{err}");
+        assert!(
+            err.to_string().contains("has 2 scans, numbered 0 to 1"),
+            "{err}"
+        );
         assert!(dataset.load_sweep(7).is_err());
 
         // Two files for the same stop.

@@ -8,13 +8,16 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     /// A file could not be opened, read or written.
-    #[error("{}: {source}{}", path.display(), io_hint(path, source))]
+    #[error("{}: {source}{hint}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
         /// What the operating system said.
         #[source]
         source: std::io::Error,
+        /// What the system's words leave out, as seen when the error was made (` (the folder F
+        /// does not exist)`, ` (a folder: give a file)`), or empty.
+        hint: String,
     },
     /// A file was read but its content is malformed.
     #[error("{}{}: {message}", path.display(), line.map(|l| format!(":{l}")).unwrap_or_default())]
@@ -38,10 +41,9 @@ pub enum Error {
 impl Error {
     /// An I/O error on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io {
-            path: path.into(),
-            source,
-        }
+        let path = path.into();
+        let hint = io_hint(&path, &source);
+        Error::Io { path, source, hint }
     }
 
     /// A parse error in `path` at 1-based `line` (or `None` for the whole file).

@@ -29,7 +29,7 @@
 //! | extension | format |
 //! |---|---|
 //! | `.ply` | PLY, `ascii`, `binary_little_endian` or `binary_big_endian`; element `vertex` with properties `x`, `y`, `z` stored as `float` or `double`; other properties and elements are ignored; vertices with a NaN coordinate are skipped (no return) |
-//! | `.pcd` | PCL PCD, `DATA ascii`, `binary` (little-endian) or `binary_compressed` (LZF, as PCL and Open3D write it); fields `x`, `y`, `z` of `TYPE F`, `SIZE 4` or `8`, `COUNT 1`, in any order among other fields of any type and count, which are ignored; organized clouds (`HEIGHT` > 1) row after row; points with a NaN coordinate are skipped. `VIEWPOINT` is ignored |
+//! | `.pcd` | PCL PCD, `DATA ascii`, `binary` (little-endian) or `binary_compressed` (LZF, as PCL and Open3D write it); fields `x`, `y`, `z` of `TYPE F`, `SIZE 4` or `8`, `COUNT 1`, in any order among other fields of any type and count, which are ignored; organized clouds (`HEIGHT` > 1) row after row; points with a NaN coordinate are skipped. A `VIEWPOINT` (the sensor's pose in the points' frame) takes the points into the sensor's frame |
 //! | `.xyz`, `.txt` | text, one point per line: `x y z` separated by spaces, tabs or commas; further columns ignored; blank lines and everything after `#` (or a line starting with `//`) ignored |
 //! | `.bin` | KITTI Velodyne: little-endian `f32` records `x y z intensity`, 16 bytes per point, no header |
 //! | `.3d` | 3DTK "uos": text `x y z` in **centimetres**, left-handed with x right, y up, z forward; converted to metres with x forward, y left, z up: `(z, −x, y) / 100`. An optional first line like `360 x 225` is skipped; further columns ignored |
@@ -37,9 +37,9 @@
 //! | `.sweep` | a raw tilting-LRF sweep (below), turned into points with [`Sweep::points_in_sensor`] |
 //!
 //! A cloud with no points is an error on reading and on writing: sdem cannot use an empty scan.
-//! Infinite coordinates are always an error. NaN is skipped only in the binary-capable formats
-//! (PLY, PCD, KITTI `.bin`), where sensors write it for "no return"; in the plain text formats
-//! (`.xyz`, `.txt`, `.3d`) any coordinate that is not a finite number is an error naming the line.
+//! Infinite coordinates are always an error. A point with a NaN coordinate is skipped in every
+//! format: sensors write NaN for "no return". In the text formats (`.xyz`, `.txt`, `.3d`) a field
+//! that is no number at all is an error naming the line.
 //! Scans are metres in the sensor frame: a coordinate beyond the range of `f32` (in which sdem
 //! keeps points) is an error, and so is a scan of which half the points lie farther than
 //! [`MAX_MEDIAN_RANGE_M`] (1 km) from the sensor — millimetres, or world coordinates.
@@ -258,9 +258,9 @@ pub use attitude::{
     MAX_YAW_READING_DEG,
 };
 pub use dataset::{
-    clear_dataset, write_dataset, write_dataset_streamed, Dataset, DatasetPlan, SigmaSource,
-    StreamedScan, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE, SCANS_DIR, SENSOR_FILE,
-    SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
+    clear_dataset, scans_numbered, write_dataset, write_dataset_streamed, Dataset, DatasetPlan,
+    SigmaSource, StreamedScan, ATTITUDE_FILE, DATASET_ENTRIES, ODOMETRY_FILE, SCANS_DIR,
+    SENSOR_FILE, SLAM6D_FILE, SWEEPS_DIR, TRUTH_FILE,
 };
 pub use import::{
     import_3dtk, import_dataset, import_e57, import_kitti, kitti_velodyne_poses,

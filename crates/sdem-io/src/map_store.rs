@@ -92,7 +92,11 @@ impl MapFolder {
     }
 
     /// Saves the loop's map as it stands: its options, nodes, pose-graph edges and loop
-    /// closures ([`Self::save`] with the loop's own parts and no dataset named).
+    /// closures ([`Self::save`] with the loop's own parts). It names no dataset: a map loaded
+    /// from `sdem slam`'s folder and saved so loses the names of its runs' datasets (`sdem export
+    /// --e57` then writes the nodes' points, `sdem slam --resume` asks for the dataset); to keep
+    /// them, give [`crate::SavedMap::datasets_by_run`] to [`Self::save`]. Keep this `MapFolder`
+    /// between saves: a new one writes every node file again.
     ///
     /// # Errors
     /// The file system's errors, naming the file; a node parked in another store.

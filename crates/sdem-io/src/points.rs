@@ -59,9 +59,8 @@ impl PointFormat {
 /// `.ply`, `.pcd`, `.xyz`/`.txt`, KITTI `.bin`, 3DTK `.3d`, `.las`/`.laz` or sdem's `.sweep` (see the
 /// [module documentation](crate) for each format's details).
 ///
-/// Points with a NaN coordinate are skipped in PLY, PCD and KITTI files (no return); any other
-/// non-finite or unparsable coordinate is an error naming the file and line. A file that yields
-/// no point at all is an error.
+/// Points with a NaN coordinate are skipped (no return); an infinite or unparsable coordinate is
+/// an error naming the file and line. A file that yields no point at all is an error.
 ///
 /// # Example
 /// ```

@@ -122,6 +122,9 @@ fn a_bag_is_known_by_its_bytes_and_a_file_of_another_kind_is_named_so() {
     std::fs::write(&text, "these are notes, not a recording\n").unwrap();
     let e = Bag::open(&text).unwrap_err().to_string();
     assert!(e.contains("is not an MCAP file"), "{e}");
+    std::fs::write(&text, "notes\n").unwrap(); // shorter than a header
+    let e = Bag::open(&text).unwrap_err().to_string();
+    assert!(e.contains("is not an MCAP file"), "{e}");
     let named_db3 = dir.path().join("run.db3");
     std::fs::write(&named_db3, &bytes).unwrap();
     assert_eq!(

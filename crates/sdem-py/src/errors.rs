@@ -198,7 +198,7 @@ pub fn sdem_error(error: sdem::Error) -> PyErr {
 /// `sdem.InvalidError`, or the algorithms' error it passes on.
 pub fn io_error(error: sdem_io::Error) -> PyErr {
     Python::attach(|py| match error {
-        sdem_io::Error::Io { path, source } => file_error(py, &path, &source),
+        sdem_io::Error::Io { path, source, .. } => file_error(py, &path, &source),
         sdem_io::Error::Parse {
             ref path,
             line,

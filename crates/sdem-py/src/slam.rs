@@ -349,8 +349,7 @@ impl Step {
     /// for the first scan or a match without a 6-DoF refinement.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
-        (self.covariance.as_ref())
-            .map(|c| matrix6(py, &Matrix6::from_fn(|i, j| c[i][j])).into_any())
+        covariance_array(py, self.covariance.as_ref())
     }
 
     /// The step as ``report.json`` holds it: ``scan_index``, ``node_id``, ``time_ms``,
@@ -598,8 +597,7 @@ impl Relocalization {
     /// float64 (``diagnostics["covariance"]``); None without a 6-DoF refinement.
     #[getter]
     fn covariance<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyAny>> {
-        (self.covariance.as_ref())
-            .map(|c| matrix6(py, &Matrix6::from_fn(|i, j| c[i][j])).into_any())
+        covariance_array(py, self.covariance.as_ref())
     }
 
     fn __repr__(&self) -> String {
@@ -661,4 +659,12 @@ pub fn slam_options_for_scan<'py>(
         .collect();
     let base = py.detach(|| SlamOptions::for_scan(&points));
     to_python(py, &with_overrides(&base, overrides, "slam options")?)
+}
+
+/// A report's covariance (`[[f64; 6]; 6]`) as a `(6, 6)` array, or None.
+fn covariance_array<'py>(
+    py: Python<'py>,
+    covariance: Option<&[[f64; 6]; 6]>,
+) -> Option<Bound<'py, PyAny>> {
+    covariance.map(|c| matrix6(py, &Matrix6::from_fn(|i, j| c[i][j])).into_any())
 }

@@ -15,10 +15,14 @@ pub type Vec3 = Vector3<f64>;
 /// A rigid transform `a_from_b`.
 pub type Pose = Isometry3<f64>;
 
-/// A point in metres as a caller holds one: every function of the library that takes a scan's
-/// returns takes them as any of these, so points read from a file (`sdem_io::read_points`
-/// gives [`Vec3`]), built with nalgebra's `Point3`, or held as arrays (`[f32; 3]`, as a
-/// LiDAR driver gives them) need no conversion first.
+/// A point in metres as a caller holds one. The functions a robot's program calls with a scan's
+/// returns take them as any of these: [`crate::Scan::from_points`], [`crate::Slam::add`],
+/// [`crate::slam::relocalize`] (and `sdem_io::SavedMap::relocalize`),
+/// [`crate::SdemConfig::for_scan`], [`crate::SlamOptions::for_scan`] and
+/// [`crate::sdem::Sdem::from_points`]. So points read from a file (`sdem_io::read_points` gives
+/// [`Vec3`]), built with nalgebra's `Point3`, or held as arrays (`[f32; 3]`, as a LiDAR driver
+/// gives them) need no conversion first. The lower-level parts (`ScanInput`, `Node::from_scan`,
+/// the voxel map) take [`Vec3`].
 ///
 /// ```
 /// use nalgebra::Point3;

@@ -185,7 +185,7 @@ mod tests {
             index.moved(id, p);
         }
         let now = |id: usize| {
-            if id % 7 == 0 {
+            if id.is_multiple_of(7) {
                 positions[id] + Vec3::new(2.5, -1.0, 0.0)
             } else {
                 positions[id]

@@ -127,6 +127,15 @@ impl SdemConfig {
         Self::for_directions(points_in_sensor.iter().map(AsPoint::to_vec3))
     }
 
+    /// [`Self::for_scan`], which takes vectors too.
+    #[deprecated(
+        since = "0.1.0",
+        note = "use SdemConfig::for_scan, which takes vectors too"
+    )]
+    pub fn for_points(points_in_sensor: &[Vec3]) -> Self {
+        Self::for_scan(points_in_sensor)
+    }
+
     fn for_directions(points: impl Iterator<Item = Vec3>) -> Self {
         let default = Self::default();
         // Azimuth in [0, 360) and elevation in [-90, 90], degrees.

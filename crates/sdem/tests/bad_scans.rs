@@ -67,15 +67,34 @@ fn every_point_type_makes_the_same_scan() {
         expected
     );
     // f32 coordinates round at 0.1 µm: the nearest return per cell stays in its cell.
-    let from_floats = cells(Scan::from_points(&floats, reading).unwrap());
-    assert_eq!(from_floats.len(), expected.len());
-    for (a, b) in from_floats.iter().zip(&expected) {
-        assert!(a == b || (a - b).abs() < 1e-6, "{a} {b}");
+    let vectors32: Vec<Vector3<f32>> = floats.iter().map(|p| Vector3::from(*p)).collect();
+    let points32: Vec<Point3<f32>> = floats.iter().map(|p| Point3::from(*p)).collect();
+    for from_floats in [
+        cells(Scan::from_points(&floats, reading).unwrap()),
+        cells(Scan::from_points(&vectors32, reading).unwrap()),
+        cells(Scan::from_points(&points32, reading).unwrap()),
+    ] {
+        assert_eq!(from_floats.len(), expected.len());
+        for (a, b) in from_floats.iter().zip(&expected) {
+            assert!(a == b || (a - b).abs() < 1e-6, "{a} {b}");
+        }
     }
-    let mut bad = floats.clone();
-    bad[7][1] = f32::INFINITY;
-    let e = Scan::from_points(&bad, reading).unwrap_err();
-    assert!(e.to_string().contains("point 7"), "{e}");
+    // An infinite coordinate is refused, naming the point, in every form.
+    let refused = |e: sdem::Error| assert!(e.to_string().contains("point 7"), "{e}");
+    let mut bad = (
+        points.clone(),
+        vectors.clone(),
+        arrays.clone(),
+        floats.clone(),
+    );
+    bad.0[7].y = f64::INFINITY;
+    bad.1[7].y = f64::INFINITY;
+    bad.2[7][1] = f64::INFINITY;
+    bad.3[7][1] = f32::INFINITY;
+    refused(Scan::from_points(&bad.0, reading).unwrap_err());
+    refused(Scan::from_points(&bad.1, reading).unwrap_err());
+    refused(Scan::from_points(&bad.2, reading).unwrap_err());
+    refused(Scan::from_points(&bad.3, reading).unwrap_err());
 }
 
 /// Degrees given where radians are meant (`Attitude::new(30.0, …)`, roll beyond a full turn)

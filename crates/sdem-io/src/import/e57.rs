@@ -123,12 +123,12 @@ fn selection(
     let end = options.first.saturating_add(count);
     if options.first >= total || count == 0 || end > total {
         let asked = match options.count {
-            Some(count) => format!("--first {} --count {count}", options.first),
-            None => format!("--first {}", options.first),
+            Some(count) => format!("{count} from scan {}", options.first),
+            None => format!("scans from {} on", options.first),
         };
         return Err(Error::Invalid(format!(
-            "{} holds {total} scans (numbered from 0), and {asked} asks for scans beyond them \
-             (or none)",
+            "{} holds {total} scans (numbered from 0), and the import asks for {asked}: beyond \
+             them, or none",
             source.display(),
         )));
     }

@@ -54,10 +54,10 @@ impl ImportFormat {
             return Ok(ImportFormat::E57);
         }
         check_source(source)?;
-        if source.join("velodyne").is_dir() {
+        if is_kitti_sequence(source) {
             return Ok(ImportFormat::Kitti);
         }
-        if !numbered_files(source, "scan", "3d")?.is_empty() {
+        if is_3dtk_folder(source)? {
             return Ok(ImportFormat::Uos3dtk);
         }
         Err(Error::Invalid(format!(
@@ -68,6 +68,22 @@ impl ImportFormat {
             source.display()
         )))
     }
+}
+
+/// Whether `folder` is a KITTI sequence: it has `velodyne/`.
+fn is_kitti_sequence(folder: &Path) -> bool {
+    folder.join("velodyne").is_dir()
+}
+
+/// Whether `folder` is a 3DTK folder: it has `scanNNN.3d` files.
+fn is_3dtk_folder(folder: &Path) -> Result<bool> {
+    Ok(!numbered_files(folder, "scan", "3d")?.is_empty())
+}
+
+/// Whether `folder` holds the scans of a KITTI sequence or a 3DTK folder ([`ImportFormat::detect`]'s
+/// rules): a folder that also holds bag files is still not a bag.
+pub(crate) fn holds_scans(folder: &Path) -> bool {
+    is_kitti_sequence(folder) || is_3dtk_folder(folder).unwrap_or(false)
 }
 
 /// Which scans to import and where extra inputs are.

@@ -260,7 +260,7 @@ impl CdrWriter {
     }
 
     fn align(&mut self, size: usize) {
-        while (self.bytes.len() - HEADER) % size != 0 {
+        while !(self.bytes.len() - HEADER).is_multiple_of(size) {
             self.bytes.push(0);
         }
     }

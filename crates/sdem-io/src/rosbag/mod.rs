@@ -74,17 +74,11 @@ pub fn is_rosbag(path: &std::path::Path) -> bool {
         let Ok(entries) = std::fs::read_dir(path) else {
             return false;
         };
-        let names: Vec<std::path::PathBuf> = entries.flatten().map(|e| e.path()).collect();
-        let holds_bag_files = names
-            .iter()
-            .any(|p| p.is_file() && storage::storage_by_name(p).is_some());
-        let holds_scans = path.join("velodyne").is_dir()
-            || names.iter().any(|p| {
-                p.extension().is_some_and(|e| e == "3d")
-                    && p.file_name()
-                        .is_some_and(|n| n.to_string_lossy().starts_with("scan"))
-            });
-        return holds_bag_files && !holds_scans;
+        let holds_bag_files = entries
+            .flatten()
+            .map(|e| e.path())
+            .any(|p| p.is_file() && storage::storage_by_name(&p).is_some());
+        return holds_bag_files && !crate::import::holds_scans(path);
     }
     path.is_file() && storage::storage_of_file(path).is_some()
 }

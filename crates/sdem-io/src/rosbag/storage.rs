@@ -36,6 +36,14 @@ impl Storage {
         }
     }
 
+    /// The bytes its files begin with: MCAP's magic, SQLite's header string.
+    fn magic(self) -> &'static [u8] {
+        match self {
+            Storage::Mcap => b"\x89MCAP0\r\n",
+            Storage::Sqlite3 => b"SQLite format 3\0",
+        }
+    }
+
     /// The extension of its files.
     fn extension(self) -> &'static str {
         match self {
@@ -133,8 +141,9 @@ impl Damage {
 /// ever recorded into it.
 /// Checks each of a bag's files before its storage reads it: an empty file, one that cannot be
 /// opened (said with the system's reason, not as damage), and one whose first bytes are not its
-/// storage's (a text file named `.mcap`, an MCAP named `.db3`) are refused by name. A file
-/// shorter than a header, or zstd-compressed, is left to the storage's reader.
+/// storage's (a text file named `.mcap`, an MCAP named `.db3`) are refused by name. A file that
+/// holds only the start of its storage's header (cut short), or is zstd-compressed, is left to
+/// the storage's reader.
 fn check_files(storage: Storage, files: &[std::path::PathBuf]) -> Result<()> {
     use std::io::Read;
     for file in files {
@@ -144,13 +153,19 @@ fn check_files(storage: Storage, files: &[std::path::PathBuf]) -> Result<()> {
                 file.display()
             )));
         }
-        let mut opened = std::fs::File::open(file).map_err(|e| Error::io(file, e))?;
-        let mut head = [0u8; 16];
-        if has_zstd_extension(file) || opened.read_exact(&mut head).is_err() {
+        let opened = std::fs::File::open(file).map_err(|e| Error::io(file, e))?;
+        if has_zstd_extension(file) {
             continue;
         }
+        let mut head = Vec::with_capacity(16);
+        opened
+            .take(16)
+            .read_to_end(&mut head)
+            .map_err(|e| Error::io(file, e))?;
         match magic_storage(&head) {
             Some(found) if found == storage => {}
+            // The start of its storage's own header: a file cut short, for the reader to say.
+            None if storage.magic().starts_with(&head) => {}
             Some(found) => {
                 return Err(Error::Invalid(format!(
                     "{} is {} data, but the bag's files are {}: rename it .{} or give it alone",
@@ -174,15 +189,11 @@ fn check_files(storage: Storage, files: &[std::path::PathBuf]) -> Result<()> {
     Ok(())
 }
 
-/// The storage a file's first 16 bytes say: MCAP's magic or SQLite's header.
-fn magic_storage(head: &[u8; 16]) -> Option<Storage> {
-    if head.starts_with(b"\x89MCAP0\r\n") {
-        Some(Storage::Mcap)
-    } else if head == b"SQLite format 3\0" {
-        Some(Storage::Sqlite3)
-    } else {
-        None
-    }
+/// The storage a file's first bytes say (up to 16): MCAP's magic or SQLite's header.
+fn magic_storage(head: &[u8]) -> Option<Storage> {
+    [Storage::Mcap, Storage::Sqlite3]
+        .into_iter()
+        .find(|s| head.starts_with(s.magic()))
 }
 
 impl Bag {
@@ -511,7 +522,7 @@ impl Bag {
             )?;
             *last_id = id;
             n += 1;
-            if n % 256 == 0 && rows_total > 0 {
+            if n.is_multiple_of(256) && rows_total > 0 {
                 progress(state.bytes_before + size * n.min(rows_total) / rows_total);
             }
         }
@@ -647,8 +658,9 @@ pub(crate) fn storage_by_name(path: &Path) -> Option<Storage> {
 /// The storage a file's first bytes say: MCAP's magic or SQLite's header.
 fn storage_by_magic(path: &Path) -> Option<Storage> {
     use std::io::Read;
-    let mut head = [0u8; 16];
-    std::fs::File::open(path).ok()?.read_exact(&mut head).ok()?;
+    let mut head = Vec::with_capacity(16);
+    let file = std::fs::File::open(path).ok()?;
+    file.take(16).read_to_end(&mut head).ok()?;
     magic_storage(&head)
 }
 

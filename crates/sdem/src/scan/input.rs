@@ -68,12 +68,12 @@ impl Scan {
         attitude: Option<Attitude>,
         grid: &SdemConfig,
     ) -> Result<Self> {
-        let given = P::as_vec3s(points_in_sensor);
-        let points = checked_input(&given, attitude.as_ref())?;
+        let points = checked_input(points_in_sensor, attitude.as_ref())?;
         let reading = attitude.unwrap_or_default();
         let sdem = Sdem::from_points(&points, &reading, grid)?;
         if sdem.known_cells() == 0 {
             // Said over every point given, the NaN ones ("no return") among them.
+            let given = P::as_vec3s(points_in_sensor);
             return Err(no_usable_points(&given, &reading, grid));
         }
         if sdem.known_cells() < MIN_KNOWN_CELLS {
@@ -109,8 +109,8 @@ impl Scan {
 /// infinite coordinate or a non-finite attitude (or standard deviation) is [`Error::InvalidInput`]
 /// naming which; NaN points are no return and are dropped. [`crate::Slam::add`] checks its
 /// input with this too.
-pub(crate) fn checked_input(
-    points_in_sensor: &[Vec3],
+pub(crate) fn checked_input<P: AsPoint>(
+    points_in_sensor: &[P],
     attitude: Option<&Attitude>,
 ) -> Result<Vec<Vec3>> {
     if let Some(a) = attitude.filter(|a| !a.is_finite()) {
@@ -142,19 +142,19 @@ pub(crate) fn checked_input(
     }
     if let Some(i) = points_in_sensor
         .iter()
-        .position(|p| p.iter().any(|v| v.is_infinite()))
+        .position(|p| p.to_vec3().iter().any(|v| v.is_infinite()))
     {
         return Err(Error::InvalidInput {
             what: format!("point {i}"),
             problem: format!(
                 "{:?} has an infinite coordinate (NaN means no return; infinity means \
                  nothing)",
-                points_in_sensor[i]
+                points_in_sensor[i].to_vec3().as_slice()
             ),
         });
     }
     Ok((points_in_sensor.iter())
+        .map(AsPoint::to_vec3)
         .filter(|p| p.iter().all(|v| v.is_finite()))
-        .copied()
         .collect())
 }

@@ -303,7 +303,7 @@ impl Slam {
         attitude: Option<crate::geometry::Attitude>,
         odom_from_sensor: Option<Pose>,
     ) -> Result<Step> {
-        let points = crate::scan::checked_input(&P::as_vec3s(points_in_sensor), attitude.as_ref())?;
+        let points = crate::scan::checked_input(points_in_sensor, attitude.as_ref())?;
         let odometry = odom_from_sensor.zip(self.last_odom_from_sensor).map(
             |(odom_from_sensor, odom_from_previous_sensor)| Odometry {
                 odom_from_sensor,
