@@ -578,7 +578,7 @@ fn localize_without_attitude_is_unknown_or_assumed_level() {
         &["localize", s(&ds), "--reference", "0", "--query", "1"],
     );
     assert!(
-        m.contains("attitude.csv") && m.contains("1 rows") && m.contains("2 scans"),
+        m.contains("attitude.csv") && m.contains("1 row ") && m.contains("2 scans"),
         "{m}"
     );
 }
