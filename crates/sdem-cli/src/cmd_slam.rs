@@ -288,7 +288,8 @@ pub fn run(args: Args) -> Result<Outcome> {
     if let Some(existing) = &args.map {
         check_extended_map(existing, &args.out)?;
     }
-    prepare_out(&args, &map_dir)?;
+    // Held to the end of the run: no other sdem slam writes this folder meanwhile.
+    let _lock = prepare_out(&args, &map_dir)?;
     let mut run = match (&args.map, args.resume) {
         (Some(existing), _) => extend(existing, &map_dir)?,
         (None, true) => resume(&args, &map_dir)?,

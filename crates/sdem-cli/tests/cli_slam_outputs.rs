@@ -257,3 +257,36 @@ fn clouds_in_a_world_frame_are_not_imported_as_a_sensors_scans() {
         "{e}"
     );
 }
+
+/// A second `sdem slam` into a folder another one is writing, with `--force` or `--resume`,
+/// replaced or continued the map under it: both ended with status 0 and the map was left with
+/// one run's manifest and the other's node files. The folder's lock (held here as a running
+/// slam holds it) refuses it before anything is touched; once released, the run goes on.
+#[test]
+fn a_folder_another_slam_is_writing_is_refused() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    let manifest = std::fs::read(dir.path().join("out/map/map.json")).unwrap();
+    let lock = std::fs::File::create(dir.path().join("out/.sdem-slam.lock")).unwrap();
+    lock.try_lock().unwrap();
+    for flag in ["--force", "--resume"] {
+        let e = run_err(
+            dir.path(),
+            &["slam", "data", "--out", "out", "--no-pictures", flag],
+        );
+        assert!(e.contains("another sdem slam is writing"), "{flag}: {e}");
+    }
+    assert_eq!(
+        std::fs::read(dir.path().join("out/map/map.json")).unwrap(),
+        manifest
+    );
+    drop(lock);
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures", "--force"],
+    );
+}

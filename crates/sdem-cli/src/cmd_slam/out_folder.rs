@@ -51,11 +51,41 @@ pub(super) fn check_beside_outputs(out: &Path, path: &Path, flag: &str) -> Resul
     Ok(())
 }
 
+/// The file in the output folder that a running `sdem slam` holds locked
+/// ([`lock_out`]): it holds nothing, and an interrupted run's lock goes with its process.
+pub(super) const LOCK_FILE: &str = ".sdem-slam.lock";
+
+/// Takes the output folder for this run: an advisory lock on [`LOCK_FILE`], held until the
+/// returned file is dropped (the process ends). A second `sdem slam` into the same folder with
+/// `--force` or `--resume` replaced or continued the map while the first still wrote it: both
+/// ended with status 0 and left a map whose manifest and node files belonged to different runs.
+fn lock_out(out: &Path) -> Result<std::fs::File> {
+    let path = out.join(LOCK_FILE);
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&path)
+        .with_context(|| format!("cannot open {}", path.display()))?;
+    match file.try_lock() {
+        Ok(()) => Ok(file),
+        Err(std::fs::TryLockError::WouldBlock) => bail!(
+            "another sdem slam is writing {} (it holds {}); wait for it to end, or choose \
+             another --out",
+            out.display(),
+            LOCK_FILE
+        ),
+        Err(std::fs::TryLockError::Error(e)) => {
+            Err(e).with_context(|| format!("cannot lock {}", path.display()))
+        }
+    }
+}
+
 /// Refuses to overwrite or resume the wrong map, or to write over files of the same names as
-/// its outputs in a folder that holds no map; with `--force`, takes the earlier run's outputs
-/// away (its pictures and map nodes would otherwise stay beside the new run's); then creates
-/// the output folder.
-pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
+/// its outputs in a folder that holds no map; creates the output folder and takes it for this
+/// run ([`lock_out`]: the returned file holds the lock); with `--force`, then takes the earlier
+/// run's outputs away (its pictures and map nodes would otherwise stay beside the new run's).
+pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<std::fs::File> {
     let out = &args.out;
     let has_map = map_dir.join(sdem_io::MAP_MANIFEST).exists();
     // A folder holding a map is continued (--resume) or replaced (--force) below; in one
@@ -77,6 +107,15 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
             "--resume: {} holds no saved map ({} is missing); run without --resume",
             out.display(),
             map_dir.join(sdem_io::MAP_MANIFEST).display()
+        );
+    }
+    create_folder(out)?;
+    let lock = lock_out(out)?;
+    // What was checked above may have changed before the lock was taken.
+    if map_dir.join(sdem_io::MAP_MANIFEST).exists() != has_map {
+        bail!(
+            "{} changed while this run started (another sdem slam?); run again",
+            out.display()
         );
     }
     if args.force && !args.resume {
@@ -115,5 +154,5 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<()> {
                 .with_context(|| format!("--force: cannot remove {}", map_dir.display()))?;
         }
     }
-    create_folder(out)
+    Ok(lock)
 }
