@@ -218,6 +218,12 @@ impl Slam {
             .collect();
         slam.unplaced_segments.sort_unstable();
         slam.unplaced_segments.dedup();
+        // The pause after the last accepted closure goes on where it stopped: a run resumed
+        // within `closure_interval` stops of one looked for closures the uninterrupted run did
+        // not (6 accepted instead of 4 on a 40-stop run resumed at 32).
+        for c in loop_closures.iter().filter(|c| c.accepted) {
+            slam.upkeep.closure_accepted(c.to);
+        }
         slam.loop_closures = loop_closures;
         if let Some(last) = slam.map.nodes.last() {
             slam.run = last.run;
