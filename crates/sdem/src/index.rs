@@ -104,16 +104,32 @@ impl NodeIndex {
         let lo = cell_of(&(position - Vec3::repeat(radius_m)));
         let hi = cell_of(&(position + Vec3::repeat(radius_m)));
         let mut found = Vec::new();
-        for x in lo[0]..=hi[0] {
-            for y in lo[1]..=hi[1] {
-                for z in lo[2]..=hi[2] {
-                    for &id in self.cells.get(&[x, y, z]).into_iter().flatten() {
-                        let entry = self.entries[id]
-                            .as_ref()
-                            .expect("indexed nodes have entries");
-                        if (entry.position - position).norm() <= radius_m {
-                            found.push(id);
-                        }
+        let mut take = |ids: &[usize]| {
+            for &id in ids {
+                let entry = self.entries[id]
+                    .as_ref()
+                    .expect("indexed nodes have entries");
+                if (entry.position - position).norm() <= radius_m {
+                    found.push(id);
+                }
+            }
+        };
+        // The cube's cells, or the occupied cells when they are fewer: a radius of a kilometre
+        // spans 1e9 cells of 2 m, and a loop-closure search over it never ended.
+        let span: u128 = (0..3)
+            .map(|a| (hi[a] as i128 - lo[a] as i128 + 1) as u128)
+            .product();
+        if span > self.cells.len() as u128 {
+            for (cell, ids) in &self.cells {
+                if (0..3).all(|a| (lo[a]..=hi[a]).contains(&cell[a])) {
+                    take(ids);
+                }
+            }
+        } else {
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        take(self.cells.get(&[x, y, z]).map_or(&[], Vec::as_slice));
                     }
                 }
             }
@@ -191,10 +207,14 @@ mod tests {
                 positions[id]
             }
         };
+        // A radius whose cube spans more cells than the index holds is answered from the
+        // occupied cells (a kilometre's cube of 2 m cells never finished).
         for (centre, radius) in [
             (Vec3::zeros(), 1.5),
             (Vec3::new(6.0, 0.0, 0.0), 3.0),
             (Vec3::new(-2.0, 3.9, 0.1), 0.7),
+            (Vec3::new(1.0, 1.0, 0.0), 20.0),
+            (Vec3::zeros(), 1e6),
         ] {
             let brute: Vec<usize> = (0..300)
                 .filter(|&id| (now(id) - centre).norm() <= radius)

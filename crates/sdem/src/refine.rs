@@ -126,9 +126,21 @@ impl RefineConfig {
                 )));
             }
         }
+        // Each normal fits (2r + 1)² cells: 100 took 3 s a scan, 1e9 never ended.
+        if !(1..=MAX_NORMAL_RADIUS_CELLS).contains(&self.normal_radius_cells) {
+            return Err(Error::Invalid(format!(
+                "refinement.normal_radius_cells = {} must lie in 1..={MAX_NORMAL_RADIUS_CELLS} \
+                 (the default is 2)",
+                self.normal_radius_cells
+            )));
+        }
         Ok(())
     }
 }
+
+/// The widest neighbourhood a surface normal may be fitted over, cells each way: ±10 cells are
+/// 441 cells a normal, ten times ±3's (the widest measured, `docs/accuracy.md`).
+pub const MAX_NORMAL_RADIUS_CELLS: usize = 10;
 
 /// The result of a refinement.
 #[derive(Debug, Clone, PartialEq)]

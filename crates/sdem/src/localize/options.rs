@@ -248,6 +248,10 @@ fn validate(config: &LocalizeOptions) -> Result<()> {
     let in_range = |name: &str, value: f64, lo: f64, hi: f64| {
         if (lo..=hi).contains(&value) {
             Ok(())
+        } else if hi == f64::MAX {
+            Err(Error::Invalid(format!(
+                "{name} = {value} must be a finite number of at least {lo}"
+            )))
         } else {
             Err(Error::Invalid(format!(
                 "{name} = {value} must lie in {lo}..={hi}"

@@ -410,8 +410,95 @@ impl SlamOptions {
                 "edge_sigma_floor_m and edge_sigma_floor_deg must be positive".into(),
             ));
         }
+        // Checked here, before the first scan: the pose graph's settings were checked at the
+        // first solve and the loop closure's at the first closure, so a run stopped there
+        // (scan 23 or 31 of 40) and `--resume`, reading the same settings, stopped again.
+        self.optimize.validate()?;
+        validate_loop_closure(&self.loop_closure)?;
+        // A grid too fine for its window was refused at the second scan.
+        for (what, half, step) in [
+            ("window_half_m", &self.window_half_m, self.localize.step_m),
+            (
+                "window_half_no_odometry_m",
+                &self.window_half_no_odometry_m,
+                self.localize.step_m,
+            ),
+            (
+                "loop_closure.window_half_m",
+                &self.loop_closure.window_half_m,
+                self.loop_closure.step_m,
+            ),
+        ] {
+            let positions: f64 = half
+                .iter()
+                .map(|h| (2.0 * h / step).floor() + 1.0)
+                .product();
+            if positions > crate::search::MAX_GRID_CANDIDATES as f64 {
+                return Err(Error::Invalid(format!(
+                    "{what} {half:?} m searched at steps of {step} m is {positions:.3e} \
+                     positions, more than the {} a search may have; give a larger step or a \
+                     smaller window",
+                    crate::search::MAX_GRID_CANDIDATES
+                )));
+            }
+        }
         Ok(())
     }
+}
+
+/// The loop closure's settings: every distance, angle and share in its range (a negative
+/// `max_correction_m` or `search_radius_m` silently turned every closure off).
+fn validate_loop_closure(c: &crate::map::LoopClosureConfig) -> Result<()> {
+    let positive = [
+        ("search_radius_m", c.search_radius_m),
+        ("reference_radius_m", c.reference_radius_m),
+        ("step_m", c.step_m),
+        ("max_correction_m", c.max_correction_m),
+        ("max_loop_sigmas", c.max_loop_sigmas),
+    ];
+    for (name, v) in positive {
+        if !(v.is_finite() && v > 0.0) {
+            return Err(Error::Invalid(format!(
+                "loop_closure.{name} = {v} must be a positive number"
+            )));
+        }
+    }
+    if !(c.max_descriptor_distance.is_finite() && c.max_descriptor_distance >= 0.0) {
+        return Err(Error::Invalid(format!(
+            "loop_closure.max_descriptor_distance = {} must be a number >= 0",
+            c.max_descriptor_distance
+        )));
+    }
+    for (name, v) in [
+        ("heading_half_deg", c.heading_half_deg),
+        ("max_heading_correction_deg", c.max_heading_correction_deg),
+    ] {
+        if !(v.is_finite() && (0.0..=180.0).contains(&v)) {
+            return Err(Error::Invalid(format!(
+                "loop_closure.{name} = {v} must lie in 0..=180 degrees"
+            )));
+        }
+    }
+    for (name, v) in [
+        ("min_inlier_fraction", c.min_inlier_fraction),
+        ("min_shared_inlier_fraction", c.min_shared_inlier_fraction),
+    ] {
+        if !(0.0..=1.0).contains(&v) {
+            return Err(Error::Invalid(format!(
+                "loop_closure.{name} = {v} must lie in 0..=1"
+            )));
+        }
+    }
+    if c.window_half_m
+        .iter()
+        .any(|h| !(h.is_finite() && *h >= 0.0))
+    {
+        return Err(Error::Invalid(format!(
+            "loop_closure.window_half_m {:?} must hold finite numbers >= 0",
+            c.window_half_m
+        )));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -420,6 +507,42 @@ mod tests {
 
     /// A search step wider than the tracking window is refused, naming the widest it may be;
     /// the defaults, and a spinning LiDAR's derived options, pass.
+    /// Settings that stopped a run at its first pose-graph solve or loop closure (then
+    /// `--resume`, with the same settings, stopped again), that hung it, or that silently turned
+    /// loop closure off, are refused before the first scan, naming the setting.
+    #[test]
+    fn settings_checked_late_or_never_are_refused_up_front() {
+        type Change = fn(&mut SlamOptions);
+        let cases: [(&str, Change); 8] = [
+            ("robust_kernel_width", |o| {
+                o.optimize.robust_kernel_width = 0.0
+            }),
+            ("initial_damping", |o| o.optimize.initial_damping = -1.0),
+            ("loop_closure.max_correction_m", |o| {
+                o.loop_closure.max_correction_m = -1.0
+            }),
+            ("loop_closure.search_radius_m", |o| {
+                o.loop_closure.search_radius_m = -1.0
+            }),
+            ("loop_closure.heading_half_deg", |o| {
+                o.loop_closure.heading_half_deg = 1e9
+            }),
+            ("loop_closure.window_half_m", |o| {
+                o.loop_closure.step_m = 1e-9
+            }),
+            ("window_half_m", |o| o.localize.step_m = 1e-4),
+            ("normal_radius_cells", |o| {
+                o.localize.refinement.normal_radius_cells = 1_000_000_000
+            }),
+        ];
+        for (name, change) in cases {
+            let mut options = SlamOptions::default();
+            change(&mut options);
+            let e = options.validate().unwrap_err().to_string();
+            assert!(e.contains(name), "{name}: {e}");
+        }
+    }
+
     #[test]
     fn a_step_wider_than_the_tracking_window_is_refused() {
         let mut options = SlamOptions::default();
