@@ -290,3 +290,29 @@ fn a_folder_another_slam_is_writing_is_refused() {
         &["slam", "data", "--out", "out", "--no-pictures", "--force"],
     );
 }
+
+/// A run killed before its first save leaves its config and step log but no map: `--resume`
+/// said "already holds config.toml … --force" as if the folder were a user's; it now says the
+/// run stopped before its first save. A killed run's temporary step log in the folder is
+/// removed by the next run (the map's own were already).
+#[test]
+fn a_run_stopped_before_its_first_save_is_said_so_and_its_temporaries_go() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    let out = dir.path().join("out");
+    std::fs::create_dir(&out).unwrap();
+    std::fs::write(out.join("config.toml"), "").unwrap();
+    std::fs::write(out.join("steps.json"), "[]").unwrap();
+    let e = run_err(dir.path(), &["slam", "data", "--out", "out", "--resume"]);
+    assert!(
+        e.contains("stopped before its first save") && e.contains("--force"),
+        "{e}"
+    );
+    let stale = out.join(".steps.json.tmp-4000000000-0"); // no such process
+    std::fs::write(&stale, "[").unwrap();
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures", "--force"],
+    );
+    assert!(!stale.exists());
+}

@@ -60,9 +60,9 @@ impl Error {
     }
 }
 
-/// What the operating system's words leave out, for the two errors a user meets most: a path
-/// whose folder is missing (the file's own name is not what is wrong), and a folder given where
-/// a file is wanted.
+/// What the operating system's words leave out, for the errors a user meets most: a path whose
+/// folder is missing (the file's own name is not what is wrong), a folder given where a file is
+/// wanted, and a full disk (what to do, and that the saved map is whole).
 fn io_hint(path: &std::path::Path, source: &std::io::Error) -> String {
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
     match source.kind() {
@@ -73,6 +73,11 @@ fn io_hint(path: &std::path::Path, source: &std::io::Error) -> String {
             _ => String::new(),
         },
         std::io::ErrorKind::IsADirectory => " (a folder: give a file)".to_string(),
+        std::io::ErrorKind::StorageFull => {
+            " (free some space and run again; a map being saved keeps its previous version, \
+             and `sdem slam --resume` goes on from it)"
+                .to_string()
+        }
         _ => String::new(),
     }
 }
@@ -112,5 +117,8 @@ mod tests {
         let missing_file = dir.path().join("b.ply");
         let e = Error::io(&missing_file, std::fs::read(&missing_file).unwrap_err());
         assert!(!e.to_string().contains("does not exist)"), "{e}");
+        let full = std::io::Error::from(std::io::ErrorKind::StorageFull);
+        let e = Error::io(dir.path().join("map/map.json"), full);
+        assert!(e.to_string().contains("free some space") && e.to_string().contains("--resume"));
     }
 }

@@ -380,7 +380,7 @@ pub fn write_atomic(
 /// process killed mid-save left in `folder`: those of other processes that are no longer running (on Linux; on
 /// other systems, those of every other process). Best effort: a file that cannot be removed is
 /// left, as it does no harm but take room.
-pub(crate) fn remove_stale_temporaries(folder: &Path) {
+pub fn remove_stale_temporaries(folder: &Path) {
     let Ok(entries) = std::fs::read_dir(folder) else {
         return;
     };

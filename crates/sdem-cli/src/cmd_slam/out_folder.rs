@@ -95,6 +95,21 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<std::fs::File> 
     } else {
         output_names().collect()
     };
+    if args.resume && !has_map {
+        // A run stopped before its first save leaves its config and step log, not a map.
+        let started = out.join(super::STEPS_FILE).exists() || out.join("config.toml").exists();
+        bail!(
+            "--resume: {} holds no saved map ({} is missing){}",
+            out.display(),
+            map_dir.join(sdem_io::MAP_MANIFEST).display(),
+            if started {
+                ": the run there stopped before its first save; start it again with --force \
+                 (a map given with --map is read, never written)"
+            } else {
+                "; run without --resume"
+            }
+        );
+    }
     check_output_folder(out, "--out", &names, args.force)?;
     if has_map && !args.resume && !args.force {
         bail!(
@@ -102,15 +117,11 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<std::fs::File> 
             out.display()
         );
     }
-    if args.resume && !has_map {
-        bail!(
-            "--resume: {} holds no saved map ({} is missing); run without --resume",
-            out.display(),
-            map_dir.join(sdem_io::MAP_MANIFEST).display()
-        );
-    }
     create_folder(out)?;
     let lock = lock_out(out)?;
+    // A killed run's half-written step log or report (`.steps.json.tmp-PID-N`); the map's own
+    // are removed when the map is saved.
+    sdem_io::remove_stale_temporaries(out);
     // What was checked above may have changed before the lock was taken.
     if map_dir.join(sdem_io::MAP_MANIFEST).exists() != has_map {
         bail!(
