@@ -295,6 +295,9 @@ pub fn run(args: Args) -> Result<Outcome> {
         (None, true) => resume(&args, &map_dir)?,
         (None, false) => start_fresh(&args, &dataset)?,
     };
+    if args.resume {
+        out_folder::remove_final_outputs(&args.out)?;
+    }
     write_config(&args.out, run.slam.config())?;
     let total = map_scans(&args, &dataset, sigma, &map_dir, &mut run)?;
     let outputs = write_outputs(&args, &mut run.slam, &run.steps)?;

@@ -316,3 +316,37 @@ fn a_run_stopped_before_its_first_save_is_said_so_and_its_temporaries_go() {
     );
     assert!(!stale.exists());
 }
+
+/// A resumed run that stops (killed, or at a bad scan) left the earlier run's poses, cloud and
+/// report beside its longer map (`view map` drew the old cloud with the new trajectory): they
+/// are taken away once the resume has taken the map on, and the next good run writes them.
+#[test]
+fn a_resumed_run_that_stops_leaves_no_earlier_outputs_beside_its_map() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    let args = ["slam", "data", "--out", "out", "--no-pictures"];
+    run_ok(dir.path(), &[&args[..], &["--max-scans", "2"]].concat());
+    let out = dir.path().join("out");
+    assert!(out.join("poses.txt").is_file() && out.join("report.json").is_file());
+    let scan = dir.path().join("data/scans/000002.ply");
+    let good = std::fs::read(&scan).unwrap();
+    std::fs::write(&scan, &good[..good.len() / 2]).unwrap();
+    let e = run_err(dir.path(), &[&args[..], &["--resume"]].concat());
+    assert!(e.contains("000002.ply"), "{e}");
+    for name in ["poses.txt", "poses.tum", "map.ply", "report.json"] {
+        assert!(
+            !out.join(name).exists(),
+            "{name} of the 2-scan run is still there"
+        );
+    }
+    assert!(out.join("map/map.json").is_file() && out.join("steps.json").is_file());
+    std::fs::write(&scan, &good).unwrap();
+    run_ok(dir.path(), &[&args[..], &["--resume"]].concat());
+    assert_eq!(
+        std::fs::read_to_string(out.join("poses.txt"))
+            .unwrap()
+            .lines()
+            .count(),
+        3
+    );
+}
