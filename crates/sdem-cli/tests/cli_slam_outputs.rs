@@ -350,3 +350,39 @@ fn a_resumed_run_that_stops_leaves_no_earlier_outputs_beside_its_map() {
         3
     );
 }
+
+/// A step log deleted or damaged before a resume: the run went on and its report listed fewer
+/// steps than scans without a word (a damaged one was refused, with no hint). It goes on from
+/// the whole map either way and says what the report will lack.
+#[test]
+fn a_lost_step_log_is_said_so_when_the_run_resumes() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    let args = ["slam", "data", "--out", "out", "--no-pictures"];
+    let out = dir.path().join("out");
+    for damage in ["delete", "truncate"] {
+        run_ok(
+            dir.path(),
+            &[&args[..], &["--max-scans", "2", "--force"]].concat(),
+        );
+        let log = out.join("steps.json");
+        match damage {
+            "delete" => std::fs::remove_file(&log).unwrap(),
+            _ => std::fs::write(&log, "[{\"scan_index\": 0").unwrap(),
+        }
+        let resumed = common::run(dir.path(), &[&args[..], &["--resume"]].concat());
+        assert_eq!(resumed.code, Some(0), "{damage}: {}", resumed.stderr);
+        assert!(
+            resumed.stderr.contains("warning") && resumed.stderr.contains("only 0 of their steps"),
+            "{damage}: {}",
+            resumed.stderr
+        );
+        assert_eq!(
+            std::fs::read_to_string(out.join("poses.txt"))
+                .unwrap()
+                .lines()
+                .count(),
+            3
+        );
+    }
+}

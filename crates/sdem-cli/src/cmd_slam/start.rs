@@ -137,12 +137,26 @@ pub(super) fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
 /// is mapped again; one further ahead is another run's. (A map saved before its log, as
 /// earlier versions did, may be a step ahead of the log: that step's line is missing.)
 fn read_steps(path: &Path, nodes: usize) -> Result<Vec<Value>> {
+    // The map is what a resume goes on from; a step log that is missing, damaged or short
+    // only costs the report those steps, so the run goes on, saying so (it did without a word).
+    let lost = |why: &str, kept: usize| {
+        if nodes > kept {
+            eprintln!(
+                "sdem: warning: {} {why}: the map's {nodes} nodes are whole, but this run's \
+                 report will list only {kept} of their steps",
+                path.display()
+            );
+        }
+    };
     if !path.exists() {
+        lost("is missing", 0);
         return Ok(Vec::new());
     }
     let text = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let mut values: Vec<Value> = serde_json::from_slice(&text)
-        .with_context(|| format!("{}: not a step log", path.display()))?;
+    let Ok(mut values) = serde_json::from_slice::<Vec<Value>>(&text) else {
+        lost("is damaged (not a step log)", 0);
+        return Ok(Vec::new());
+    };
     if values.len() == nodes + 1 {
         values.pop();
     }
@@ -152,6 +166,10 @@ fn read_steps(path: &Path, nodes: usize) -> Result<Vec<Value>> {
             path.display(),
             values.len()
         );
+    }
+    // One step behind is a map saved before its log (sdem before the log was written first).
+    if values.len() + 1 < nodes {
+        lost(&format!("logs {} steps", values.len()), values.len());
     }
     Ok(values)
 }
