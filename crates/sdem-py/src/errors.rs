@@ -198,7 +198,7 @@ pub fn sdem_error(error: sdem::Error) -> PyErr {
 /// `sdem.InvalidError`, or the algorithms' error it passes on.
 pub fn io_error(error: sdem_io::Error) -> PyErr {
     Python::attach(|py| match error {
-        sdem_io::Error::Io { path, source, .. } => file_error(py, &path, &source),
+        sdem_io::Error::Io { path, source, hint } => file_error(py, &path, &source, &hint),
         sdem_io::Error::Parse {
             ref path,
             line,
@@ -221,18 +221,28 @@ pub fn io_error(error: sdem_io::Error) -> PyErr {
 /// `sdem.FileError(errno, strerror, filename)` as `OSError` makes it, so that `errno` and
 /// `filename` read as for any `OSError`; without an operating-system code, the message alone
 /// with `filename` set.
-fn file_error(py: Python<'_>, path: &std::path::Path, source: &std::io::Error) -> PyErr {
+fn file_error(
+    py: Python<'_>,
+    path: &std::path::Path,
+    source: &std::io::Error,
+    hint: &str,
+) -> PyErr {
     let filename = path.display().to_string();
     let made = match source.raw_os_error() {
+        // The system's words, then what they leave out (a missing folder, a folder for a
+        // file, a full disk), as the command line says it.
         Some(errno) => py
             .import("os")
             .and_then(|os| os.call_method1("strerror", (errno,)))
             .and_then(|text| text.extract::<String>())
-            .and_then(|text| instance(py, "FileError", (errno, text, filename.clone()), vec![])),
+            .and_then(|text| {
+                let text = format!("{text}{hint}");
+                instance(py, "FileError", (errno, text, filename.clone()), vec![])
+            }),
         None => instance(
             py,
             "FileError",
-            (format!("{filename}: {source}"),),
+            (format!("{filename}: {source}{hint}"),),
             vec![("filename", py_value(py, filename.clone()))],
         ),
     };

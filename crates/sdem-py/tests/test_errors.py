@@ -192,6 +192,10 @@ def test_file_errors_are_os_errors_and_parse_errors_name_the_line(tmp_path):
         sdem.read_points(missing)
     assert isinstance(info.value, OSError) and info.value.errno == errno.ENOENT
     assert info.value.filename == str(missing)
+    # What the system's words leave out is said, as on the command line.
+    with pytest.raises(sdem.FileError) as info:
+        sdem.read_points(tmp_path / "no-such-folder" / "scan.ply")
+    assert info.value.errno == errno.ENOENT and "no-such-folder does not exist" in str(info.value)
     bad = tmp_path / "bad.xyz"
     bad.write_text("1 2 3\n4 five 6\n")
     with pytest.raises(sdem.ParseError) as info:
