@@ -5,7 +5,6 @@
 use crate::output::print_json;
 use anyhow::{bail, Context, Result};
 use sdem::Slam;
-use sdem_io::load_map;
 use std::path::{Path, PathBuf};
 
 /// Arguments of `sdem export`.
@@ -85,7 +84,7 @@ fn export_mcap(map: &Path, mcap: &Path, force: bool, json: bool) -> Result<serde
             folder.join(sdem_io::MAP_MANIFEST).display()
         );
     }
-    let saved = load_map(&folder)?;
+    let saved = crate::output::load_saved_map(&folder)?;
     let slam = Slam::restore(saved.config, saved.map, saved.edges, saved.loop_closures)
         .with_context(|| format!("the map in {} cannot be restored", folder.display()))?;
     let summary = crate::export_mcap::write(mcap, &slam)?;

@@ -482,7 +482,7 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
             "--map needs the scan to relocalize: --map DIR SCAN (or --scan SCAN)",
         ));
     };
-    let saved = sdem_io::load_map(&folder)?;
+    let saved = crate::output::load_saved_map(&folder)?;
     let points = sdem_io::read_points(scan)?;
     // The map's own search settings (its config.toml), not this command's --step.
     let found = saved.relocalize(&points, attitude, near, None);

@@ -13,7 +13,7 @@ use sdem::localize::{localize, LocalizeOptions, SearchWindow};
 use sdem::map::{LoopClosure, Map};
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::slam::SlamOptions;
-use sdem_io::{load_map, read_points, write_atomic, Dataset};
+use sdem_io::{read_points, write_atomic, Dataset};
 use sdem_viz::{
     cost_surface, encode_png, map_plan, map_section, sample_cost_slice, sdem_panorama,
     sdem_polar_slice, viewer_html_with_status, MapView, RgbImage, Section,
@@ -226,7 +226,7 @@ fn write_map_view(map: MapArgs, json: bool) -> Result<Vec<PathBuf>> {
             map_dir.join(sdem_io::MAP_MANIFEST).display()
         );
     }
-    let saved = load_map(&map_dir)?;
+    let saved = crate::output::load_saved_map(&map_dir)?;
     let cloud_path = map.slam_out.join("map.ply");
     let cloud = if cloud_path.exists() {
         read_points(&cloud_path)?

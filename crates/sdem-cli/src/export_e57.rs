@@ -56,7 +56,7 @@ impl Summary {
 /// Writes the map at `map` (a `sdem slam` output folder or its `map/`) to `out` as E57.
 pub fn export(map: &Path, out: &Path, node_points: bool) -> Result<Summary> {
     let folder = map_folder(map)?;
-    let saved = sdem_io::load_map(&folder)?;
+    let saved = crate::output::load_saved_map(&folder)?;
     if saved.map.nodes.is_empty() {
         bail!(
             "the map {} has no nodes; there is nothing to export",

@@ -201,6 +201,23 @@ pub fn error_line(error: &anyhow::Error) -> String {
     line
 }
 
+/// The saved map in `folder`, read: an error reading a map whose manifest is there says the map
+/// is damaged and what to do, before the cause (a deleted node file, a truncated manifest).
+pub fn load_saved_map(folder: &Path) -> Result<sdem_io::SavedMap> {
+    let loaded = sdem_io::load_map(folder);
+    if !folder.join(sdem_io::MAP_MANIFEST).is_file() {
+        // Not a saved map at all: the reader's own words say so.
+        return Ok(loaded?);
+    }
+    loaded.with_context(|| {
+        format!(
+            "the saved map {} is damaged (restore the folder from a copy, or map again with \
+             sdem slam --force)",
+            folder.display()
+        )
+    })
+}
+
 /// The exit status after a closed standard output: a process killed by `SIGPIPE` reports 128 + 13
 /// to its shell, as `sdem … | head` would without this.
 pub const EXIT_CLOSED_PIPE: i32 = 141;

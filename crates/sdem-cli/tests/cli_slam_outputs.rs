@@ -386,3 +386,29 @@ fn a_lost_step_log_is_said_so_when_the_run_resumes() {
         );
     }
 }
+
+/// A saved map with a node file gone: every command that reads it said only the file and the
+/// system's words; each now says the map is damaged and what to do, before the cause.
+#[test]
+fn a_damaged_map_is_said_so_by_every_command_that_reads_it() {
+    let dir = TempDir::new().unwrap();
+    simulate(dir.path(), "data", "1");
+    run_ok(
+        dir.path(),
+        &["slam", "data", "--out", "out", "--no-pictures"],
+    );
+    std::fs::remove_file(dir.path().join("out/map/nodes/000001.pts")).unwrap();
+    let scan = "data/scans/000000.ply";
+    for args in [
+        &["localize", "--map", "out", scan][..],
+        &["view", "map", "out", "--out-dir", "pictures"][..],
+        &["export", "out", "--e57", "x.e57"][..],
+        &["slam", "data", "--out", "out", "--resume"][..],
+    ] {
+        let e = run_err(dir.path(), args);
+        assert!(
+            e.contains("is damaged") && e.contains("--force") && e.contains("000001.pts"),
+            "{args:?}: {e}"
+        );
+    }
+}

@@ -19,13 +19,7 @@ fn same_dataset(saved: &Path, given: &Path) -> bool {
 
 /// `--resume`: the saved map and step log, with the saved configuration.
 pub(super) fn resume(args: &Args, map_dir: &Path) -> Result<Run> {
-    let mut saved = load_map(map_dir).with_context(|| {
-        format!(
-            "--resume: the saved map {} is damaged (restore the folder from a copy, or map \
-             again with --force)",
-            map_dir.display()
-        )
-    })?;
+    let mut saved = crate::output::load_saved_map(map_dir).context("--resume")?;
     if let Some(made_from) = &saved.dataset {
         if !same_dataset(made_from, &args.dataset) {
             bail!(
