@@ -485,6 +485,73 @@ pub struct LoopClosureConfig {
     pub max_loop_sigmas: f64,
 }
 
+impl LoopClosureConfig {
+    /// Checks every distance, angle and share in its range (a negative `max_correction_m` or
+    /// `search_radius_m` silently turned every closure off).
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] naming the first bad setting (`loop_closure.NAME`) and its range.
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("search_radius_m", self.search_radius_m),
+            ("reference_radius_m", self.reference_radius_m),
+            ("step_m", self.step_m),
+            ("max_correction_m", self.max_correction_m),
+            ("max_loop_sigmas", self.max_loop_sigmas),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(Error::Invalid(format!(
+                    "loop_closure.{name} = {v} must be a positive number"
+                )));
+            }
+        }
+        if !(self.max_descriptor_distance.is_finite() && self.max_descriptor_distance >= 0.0) {
+            return Err(Error::Invalid(format!(
+                "loop_closure.max_descriptor_distance = {} must be a number >= 0",
+                self.max_descriptor_distance
+            )));
+        }
+        for (name, v) in [
+            ("heading_half_deg", self.heading_half_deg),
+            (
+                "max_heading_correction_deg",
+                self.max_heading_correction_deg,
+            ),
+        ] {
+            if !(v.is_finite() && (0.0..=180.0).contains(&v)) {
+                return Err(Error::Invalid(format!(
+                    "loop_closure.{name} = {v} must lie in 0..=180 degrees"
+                )));
+            }
+        }
+        for (name, v) in [
+            ("min_inlier_fraction", self.min_inlier_fraction),
+            (
+                "min_shared_inlier_fraction",
+                self.min_shared_inlier_fraction,
+            ),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(Error::Invalid(format!(
+                    "loop_closure.{name} = {v} must lie in 0..=1"
+                )));
+            }
+        }
+        if self
+            .window_half_m
+            .iter()
+            .any(|h| !(h.is_finite() && *h >= 0.0))
+        {
+            return Err(Error::Invalid(format!(
+                "loop_closure.window_half_m {:?} must hold finite numbers >= 0",
+                self.window_half_m
+            )));
+        }
+        Ok(())
+    }
+}
+
 impl Default for LoopClosureConfig {
     fn default() -> Self {
         Self {

@@ -414,7 +414,7 @@ impl SlamOptions {
         // first solve and the loop closure's at the first closure, so a run stopped there
         // (scan 23 or 31 of 40) and `--resume`, reading the same settings, stopped again.
         self.optimize.validate()?;
-        validate_loop_closure(&self.loop_closure)?;
+        self.loop_closure.validate()?;
         // A grid too fine for its window was refused at the second scan.
         for (what, half, step) in [
             ("window_half_m", &self.window_half_m, self.localize.step_m),
@@ -429,10 +429,11 @@ impl SlamOptions {
                 self.loop_closure.step_m,
             ),
         ] {
-            let positions: f64 = half
-                .iter()
-                .map(|h| (2.0 * h / step).floor() + 1.0)
-                .product();
+            let window =
+                crate::search::SearchWindow::around(&crate::geometry::Vec3::zeros(), *half);
+            let counts = (window.positions(step))
+                .map_err(|e| Error::Invalid(format!("{what} at steps of {step} m: {e}")))?;
+            let positions: f64 = counts.iter().map(|&n| n as f64).product();
             if positions > crate::search::MAX_GRID_CANDIDATES as f64 {
                 return Err(Error::Invalid(format!(
                     "{what} {half:?} m searched at steps of {step} m is {positions:.3e} \
@@ -444,61 +445,6 @@ impl SlamOptions {
         }
         Ok(())
     }
-}
-
-/// The loop closure's settings: every distance, angle and share in its range (a negative
-/// `max_correction_m` or `search_radius_m` silently turned every closure off).
-fn validate_loop_closure(c: &crate::map::LoopClosureConfig) -> Result<()> {
-    let positive = [
-        ("search_radius_m", c.search_radius_m),
-        ("reference_radius_m", c.reference_radius_m),
-        ("step_m", c.step_m),
-        ("max_correction_m", c.max_correction_m),
-        ("max_loop_sigmas", c.max_loop_sigmas),
-    ];
-    for (name, v) in positive {
-        if !(v.is_finite() && v > 0.0) {
-            return Err(Error::Invalid(format!(
-                "loop_closure.{name} = {v} must be a positive number"
-            )));
-        }
-    }
-    if !(c.max_descriptor_distance.is_finite() && c.max_descriptor_distance >= 0.0) {
-        return Err(Error::Invalid(format!(
-            "loop_closure.max_descriptor_distance = {} must be a number >= 0",
-            c.max_descriptor_distance
-        )));
-    }
-    for (name, v) in [
-        ("heading_half_deg", c.heading_half_deg),
-        ("max_heading_correction_deg", c.max_heading_correction_deg),
-    ] {
-        if !(v.is_finite() && (0.0..=180.0).contains(&v)) {
-            return Err(Error::Invalid(format!(
-                "loop_closure.{name} = {v} must lie in 0..=180 degrees"
-            )));
-        }
-    }
-    for (name, v) in [
-        ("min_inlier_fraction", c.min_inlier_fraction),
-        ("min_shared_inlier_fraction", c.min_shared_inlier_fraction),
-    ] {
-        if !(0.0..=1.0).contains(&v) {
-            return Err(Error::Invalid(format!(
-                "loop_closure.{name} = {v} must lie in 0..=1"
-            )));
-        }
-    }
-    if c.window_half_m
-        .iter()
-        .any(|h| !(h.is_finite() && *h >= 0.0))
-    {
-        return Err(Error::Invalid(format!(
-            "loop_closure.window_half_m {:?} must hold finite numbers >= 0",
-            c.window_half_m
-        )));
-    }
-    Ok(())
 }
 
 #[cfg(test)]
