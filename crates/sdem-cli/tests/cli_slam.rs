@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{doubt_kinds, fails, run, run_ok, usage_error};
+use common::{doubt_kinds, fails, lines, run, run_ok, usage_error};
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -39,13 +39,6 @@ fn kitti(path: &Path) -> Vec<[f64; 12]> {
                 .unwrap_or_else(|v| panic!("{}: {v:?}", path.display()))
         })
         .collect()
-}
-
-fn lines(path: &Path) -> usize {
-    std::fs::read_to_string(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-        .lines()
-        .count()
 }
 
 #[test]

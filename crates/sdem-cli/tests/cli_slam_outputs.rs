@@ -342,13 +342,7 @@ fn a_resumed_run_that_stops_leaves_no_earlier_outputs_beside_its_map() {
     assert!(out.join("map/map.json").is_file() && out.join("steps.json").is_file());
     std::fs::write(&scan, &good).unwrap();
     run_ok(dir.path(), &[&args[..], &["--resume"]].concat());
-    assert_eq!(
-        std::fs::read_to_string(out.join("poses.txt"))
-            .unwrap()
-            .lines()
-            .count(),
-        3
-    );
+    assert_eq!(common::lines(&out.join("poses.txt")), 3);
 }
 
 /// A step log deleted or damaged before a resume: the run went on and its report listed fewer
@@ -377,13 +371,7 @@ fn a_lost_step_log_is_said_so_when_the_run_resumes() {
             "{damage}: {}",
             resumed.stderr
         );
-        assert_eq!(
-            std::fs::read_to_string(out.join("poses.txt"))
-                .unwrap()
-                .lines()
-                .count(),
-            3
-        );
+        assert_eq!(common::lines(&out.join("poses.txt")), 3);
     }
 }
 

@@ -190,3 +190,11 @@ pub fn run_python(dir: &Path, script: &str, args: &[&str]) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// The number of lines of a text file (a KITTI pose file's poses).
+pub fn lines(path: &Path) -> usize {
+    std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .lines()
+        .count()
+}
