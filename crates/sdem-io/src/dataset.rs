@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 mod listing;
 
+pub use listing::scans_numbered;
 use listing::{point_files, ScanListing};
 
 /// The folder of point clouds, one file per stop.
@@ -86,16 +87,6 @@ impl SigmaSource {
             SigmaSource::SensorToml => SENSOR_FILE,
             SigmaSource::AttitudeCsv => ATTITUDE_FILE,
         }
-    }
-}
-
-/// A dataset's scans in words, for an index out of range: `1 scan, numbered 0`, `40 scans,
-/// numbered 0 to 39`.
-pub fn scans_numbered(count: usize) -> String {
-    match count {
-        0 => "no scan".to_string(),
-        1 => "1 scan, numbered 0".to_string(),
-        n => format!("{n} scans, numbered 0 to {}", n - 1),
     }
 }
 

@@ -1,6 +1,7 @@
 //! Which files of a dataset's `scans/` are its scans, and in which order: the visible files
 //! with a point-cloud extension, in the natural order of their names; the entries left out are
-//! kept to be named when the per-scan files' row counts do not match.
+//! kept to be named when the per-scan files' row counts do not match; and the scans' count in
+//! words, for an index out of range.
 
 use crate::error::{Error, Result};
 use crate::{PointFormat, POINT_EXTENSIONS};
@@ -112,6 +113,16 @@ pub(super) fn point_files(folder: &Path) -> Result<ScanListing> {
     scans.sort_by(|a, b| natural_cmp(&name(a), &name(b)));
     skipped.sort_by(|a, b| natural_cmp(a, b));
     Ok(ScanListing { scans, skipped })
+}
+
+/// A dataset's scans in words, for an index out of range: `1 scan, numbered 0`, `40 scans,
+/// numbered 0 to 39`.
+pub fn scans_numbered(count: usize) -> String {
+    match count {
+        0 => "no scan".to_string(),
+        1 => "1 scan, numbered 0".to_string(),
+        n => format!("{n} scans, numbered 0 to {}", n - 1),
+    }
 }
 
 #[cfg(test)]
