@@ -154,13 +154,7 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<std::fs::File> 
                 );
             }
         }
-        for name in output_names() {
-            let path = out.join(name);
-            if path.is_file() {
-                std::fs::remove_file(&path)
-                    .with_context(|| format!("--force: cannot remove {}", path.display()))?;
-            }
-        }
+        remove_files(out, output_names(), "--force")?;
         if has_map {
             std::fs::remove_dir_all(map_dir)
                 .with_context(|| format!("--force: cannot remove {}", map_dir.display()))?;
@@ -176,12 +170,19 @@ pub(super) fn prepare_out(args: &Args, map_dir: &Path) -> Result<std::fs::File> 
 pub(super) fn remove_final_outputs(out: &Path) -> Result<()> {
     let finals = (OUTPUT_FILES.iter())
         .filter(|&&name| name != STEPS_FILE && name != "config.toml")
-        .chain(crate::cmd_view::MAP_PICTURE_FILES);
-    for name in finals {
+        .chain(crate::cmd_view::MAP_PICTURE_FILES)
+        .copied();
+    remove_files(out, finals, "--resume")
+}
+
+/// Removes the files `names` in `out` that are there (a folder of such a name stays); an error
+/// names the file and the `flag` that asked for it.
+fn remove_files<'a>(out: &Path, names: impl Iterator<Item = &'a str>, flag: &str) -> Result<()> {
+    for name in names {
         let path = out.join(name);
         if path.is_file() {
             std::fs::remove_file(&path)
-                .with_context(|| format!("--resume: cannot remove {}", path.display()))?;
+                .with_context(|| format!("{flag}: cannot remove {}", path.display()))?;
         }
     }
     Ok(())
