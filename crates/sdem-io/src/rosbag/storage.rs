@@ -145,7 +145,6 @@ impl Damage {
 /// holds only the start of its storage's header (cut short), or is zstd-compressed, is left to
 /// the storage's reader.
 fn check_files(storage: Storage, files: &[std::path::PathBuf]) -> Result<()> {
-    use std::io::Read;
     for file in files {
         if std::fs::metadata(file).is_ok_and(|m| m.len() == 0) {
             return Err(Error::Invalid(format!(
@@ -153,15 +152,11 @@ fn check_files(storage: Storage, files: &[std::path::PathBuf]) -> Result<()> {
                 file.display()
             )));
         }
-        let opened = std::fs::File::open(file).map_err(|e| Error::io(file, e))?;
         if has_zstd_extension(file) {
+            std::fs::File::open(file).map_err(|e| Error::io(file, e))?;
             continue;
         }
-        let mut head = Vec::with_capacity(16);
-        opened
-            .take(16)
-            .read_to_end(&mut head)
-            .map_err(|e| Error::io(file, e))?;
+        let head = first_bytes(file).map_err(|e| Error::io(file, e))?;
         match magic_storage(&head) {
             Some(found) if found == storage => {}
             // The start of its storage's own header: a file cut short, for the reader to say.
@@ -657,11 +652,15 @@ pub(crate) fn storage_by_name(path: &Path) -> Option<Storage> {
 
 /// The storage a file's first bytes say: MCAP's magic or SQLite's header.
 fn storage_by_magic(path: &Path) -> Option<Storage> {
+    magic_storage(&first_bytes(path).ok()?)
+}
+
+/// A file's first 16 bytes (fewer for a shorter file): enough for either storage's header.
+fn first_bytes(path: &Path) -> std::io::Result<Vec<u8>> {
     use std::io::Read;
     let mut head = Vec::with_capacity(16);
-    let file = std::fs::File::open(path).ok()?;
-    file.take(16).read_to_end(&mut head).ok()?;
-    magic_storage(&head)
+    std::fs::File::open(path)?.take(16).read_to_end(&mut head)?;
+    Ok(head)
 }
 
 fn files_of_metadata(
