@@ -302,6 +302,17 @@ pub struct ReviewConfig {
     /// The query's origin must lie at least this far from every surface, metres, and in space
     /// the scan saw to be empty.
     pub min_clearance_m: f64,
+    /// The reference's roll and pitch are each within ± this, degrees (uniform; 0: the scan's
+    /// own axes, as it was taken).
+    #[serde(default)]
+    pub reference_tilt_max_deg: f64,
+    /// The reference's heading is within ± this of the scan's, degrees (uniform).
+    #[serde(default)]
+    pub reference_yaw_spread_deg: f64,
+    /// With a turned reference, at least this share of the query's returns must lie within
+    /// 10 cm of one of the reference's (0: not checked).
+    #[serde(default)]
+    pub min_overlap: f64,
 }
 
 impl ReviewConfig {
@@ -319,6 +330,9 @@ impl ReviewConfig {
             compass_noise_deg: 0.1,
             drop_fraction: 0.2,
             min_clearance_m: 0.3,
+            reference_tilt_max_deg: 0.0,
+            reference_yaw_spread_deg: 0.0,
+            min_overlap: 0.0,
         }
     }
 
@@ -332,6 +346,23 @@ impl ReviewConfig {
             tilt_max_deg: 1.0,
             min_clearance_m: 1.0,
             ..Self::tilting(scanner)
+        }
+    }
+
+    /// For scans without attitude readings ([`Self::for_scanner`]'s otherwise): both views
+    /// rolled and pitched each up to ±30°, at any heading, the query's origin within ±0.7 m
+    /// (±0.1 m in height, so within 1 m across) of the reference's, half the query's returns or
+    /// more within 10 cm of the reference's. The readings drawn are for callers that want
+    /// them (`sdem bench`'s measurements give sdem none).
+    pub fn unlevelled(scanner: ReviewScanner) -> Self {
+        Self {
+            displacement_half_m: [0.7, 0.7, 0.1],
+            yaw_spread_deg: 180.0,
+            tilt_max_deg: 30.0,
+            reference_tilt_max_deg: 30.0,
+            reference_yaw_spread_deg: 180.0,
+            min_overlap: 0.5,
+            ..Self::for_scanner(scanner)
         }
     }
 
@@ -359,6 +390,9 @@ impl ReviewConfig {
             ("tilt_sensor_noise_deg", self.tilt_sensor_noise_deg),
             ("compass_noise_deg", self.compass_noise_deg),
             ("min_clearance_m", self.min_clearance_m),
+            ("reference_tilt_max_deg", self.reference_tilt_max_deg),
+            ("reference_yaw_spread_deg", self.reference_yaw_spread_deg),
+            ("min_overlap", self.min_overlap),
         ];
         crate::benchmark::check_non_negative("re-views", &fields)?;
         if !(0.0..1.0).contains(&self.drop_fraction) {
@@ -376,9 +410,11 @@ impl ReviewConfig {
 pub struct Review {
     /// Which pair of the seed's stream.
     pub index: usize,
-    /// The reference view, from the scan's own origin and axes: points in its sensor frame.
+    /// The reference view, from the scan's own origin (and axes, unless the config turns it):
+    /// points in its sensor frame.
     pub reference_points: Vec<Vec3>,
-    /// The reference's attitude reading (level and heading 0 in the scan's frame, plus noise).
+    /// The reference's attitude reading: the truth (level and heading 0 in the scan's frame,
+    /// unless turned) plus noise.
     pub reference_attitude: Attitude,
     /// The query view: points in its sensor frame.
     pub query_points: Vec<Vec3>,
@@ -386,8 +422,11 @@ pub struct Review {
     pub query_attitude: Attitude,
     /// True `reference_from_query`.
     pub truth: Pose,
-    /// The query sensor's pose in the scan's frame (the reference's is the identity).
+    /// The query sensor's pose in the scan's frame.
     pub world_from_query: Pose,
+    /// The reference sensor's pose in the scan's frame (the identity unless the config turns
+    /// it).
+    pub world_from_reference: Pose,
 }
 
 /// Query poses drawn per pair before giving up on one with enough clearance.
@@ -431,12 +470,35 @@ fn draw_review(
     rng: &mut ChaCha8Rng,
 ) -> Result<Review> {
     let drop = config.drop_fraction;
-    let reference_attitude = reading(config, Attitude::default(), rng);
-    let reference_points = {
+    let turned = config.reference_tilt_max_deg > 0.0 || config.reference_yaw_spread_deg > 0.0;
+    let reference_view = |world_from_reference: &Pose, rng: &mut ChaCha8Rng| {
+        let truth = sdem::geometry::attitude_of(world_from_reference);
+        let attitude = reading(config, truth, rng);
         let mut rng = ChaCha8Rng::seed_from_u64(rng.random());
-        view(model, &config.scanner, &Pose::identity(), drop, &mut rng)
+        let points = view(model, &config.scanner, world_from_reference, drop, &mut rng);
+        (attitude, points)
     };
-    for _ in 0..MAX_QUERY_VIEWS {
+    let (mut world_from_reference, mut reference_attitude, mut reference_points) = {
+        let (a, p) = reference_view(&Pose::identity(), rng);
+        (Pose::identity(), a, p)
+    };
+    let tries = if turned {
+        MAX_TURNED_VIEWS
+    } else {
+        MAX_QUERY_VIEWS
+    };
+    for _ in 0..tries {
+        if turned {
+            world_from_reference = pose_from_parts(
+                Vec3::zeros(),
+                Attitude::new(
+                    symmetric(rng, config.reference_tilt_max_deg).to_radians(),
+                    symmetric(rng, config.reference_tilt_max_deg).to_radians(),
+                    symmetric(rng, config.reference_yaw_spread_deg).to_radians(),
+                ),
+            );
+            (reference_attitude, reference_points) = reference_view(&world_from_reference, rng);
+        }
         let world_from_query = draw_query_pose(model, config, rng).ok_or_else(|| {
             Error::Invalid(format!(
                 "re-view {index}: no query origin within {:?} m of the scan's origin lies {} m \
@@ -456,7 +518,17 @@ fn draw_review(
             drop,
             &mut view_rng,
         );
-        if (query_points.len() as f64) < MIN_QUERY_SHARE * reference_points.len() as f64 {
+        let (q, r) = (query_points.len() as f64, reference_points.len() as f64);
+        if q < MIN_QUERY_SHARE * r
+            || (turned && r < MIN_QUERY_SHARE * q)
+            || (config.min_overlap > 0.0
+                && overlap(
+                    &reference_points,
+                    &world_from_reference,
+                    &query_points,
+                    &world_from_query,
+                ) < config.min_overlap)
+        {
             continue;
         }
         return Ok(Review {
@@ -465,15 +537,48 @@ fn draw_review(
             reference_attitude,
             query_points,
             query_attitude,
-            truth: world_from_query,
+            truth: world_from_reference.inverse() * world_from_query,
             world_from_query,
+            world_from_reference,
         });
     }
     Err(Error::Invalid(format!(
-        "re-view {index}: {MAX_QUERY_VIEWS} query poses in a row saw less than {:.0} % as many \
-         returns as the reference (the scan saw too little around them)",
-        MIN_QUERY_SHARE * 100.0
+        "re-view {index}: {tries} pairs of views in a row saw less than {:.0} % as many returns \
+         as each other, or overlapped less than {:.0} % (the scan saw too little around them)",
+        MIN_QUERY_SHARE * 100.0,
+        config.min_overlap * 100.0
     )))
+}
+
+/// Views drawn per pair, when the reference is turned too, before giving up.
+const MAX_TURNED_VIEWS: usize = 200;
+
+/// Two returns this close, metres, see the same surface ([`overlap`]).
+const OVERLAP_M: f64 = 0.1;
+
+/// The share of `query`'s returns (in its sensor's frame, at `world_from_query`) within about
+/// [`OVERLAP_M`] of one of `reference`'s (at `world_from_reference`): those in or beside a
+/// 10 cm cube that holds one.
+fn overlap(
+    reference: &[Vec3],
+    world_from_reference: &Pose,
+    query: &[Vec3],
+    world_from_query: &Pose,
+) -> f64 {
+    let cube = |p: Vec3| (p / OVERLAP_M).map(|c| c.floor() as i64);
+    let seen: std::collections::HashSet<_> = (reference.iter())
+        .map(|p| cube(world_from_reference.transform_point(&(*p).into()).coords))
+        .collect();
+    let near = |c: nalgebra::Vector3<i64>| {
+        (-1..=1).any(|x| {
+            (-1..=1)
+                .any(|y| (-1..=1).any(|z| seen.contains(&(c + nalgebra::Vector3::new(x, y, z)))))
+        })
+    };
+    let shared = (query.iter())
+        .filter(|p| near(cube(world_from_query.transform_point(&(**p).into()).coords)))
+        .count();
+    shared as f64 / query.len().max(1) as f64
 }
 
 /// A query view must hold at least this share of the reference view's returns: the scan

@@ -182,6 +182,45 @@ fn review_pairs_are_seeded_per_index() {
     }
 }
 
+/// Unlevelled re-views turn both views: the reference stands at the scan's origin tilted and
+/// turned, the truth is the query's pose seen from it, and the two views share at least half the
+/// query's returns; the draws of the other configs are not changed by it (the reference there
+/// stays at the scan's origin and axes).
+#[test]
+fn unlevelled_re_views_turn_both_views_and_keep_them_overlapping() {
+    let (_, model) = room_model();
+    let config = ReviewConfig::unlevelled(ReviewScanner::tilting_sick(-45.0, 40.0));
+    let pairs = review_pairs(&model, &config, 4, 0..4).unwrap();
+    let tilt = |p: &Pose| (p.rotation * Vec3::z()).angle(&Vec3::z()).to_degrees();
+    assert!(pairs.iter().any(|p| tilt(&p.world_from_reference) > 5.0));
+    for pair in &pairs {
+        assert_eq!(pair.world_from_reference.translation.vector, Vec3::zeros());
+        let attitude = sdem::geometry::attitude_of(&pair.world_from_reference);
+        assert!(
+            attitude.roll.abs() <= 30f64.to_radians() + 1e-9,
+            "{attitude:?}"
+        );
+        assert!(
+            attitude.pitch.abs() <= 30f64.to_radians() + 1e-9,
+            "{attitude:?}"
+        );
+        let truth = pair.world_from_reference.inverse() * pair.world_from_query;
+        assert!((truth.translation.vector - pair.truth.translation.vector).norm() < 1e-12);
+        assert!(truth.rotation.angle_to(&pair.truth.rotation) < 1e-12);
+        let shared = overlap(
+            &pair.reference_points,
+            &pair.world_from_reference,
+            &pair.query_points,
+            &pair.world_from_query,
+        );
+        assert!(shared >= 0.5, "{shared}");
+    }
+    let level = ReviewConfig::tilting(ReviewScanner::tilting_sick(-45.0, 40.0));
+    for pair in review_pairs(&model, &level, 4, 0..2).unwrap() {
+        assert_eq!(pair.world_from_reference, Pose::identity());
+    }
+}
+
 /// A scanner is chosen like the one that took the scan: a front-half scan gets the tilting
 /// scanner over its band of tilts, an all-round one a spinning LiDAR over its band of
 /// elevations.
