@@ -572,7 +572,6 @@ fn verify(v: Verifying, hypotheses: &[RotationHypothesis]) -> Result<Localizatio
         ..options.clone()
     };
     let refined = localize(reference_sdem, best_query, &refining)?;
-    let best_rotation = level_rotation(&refined);
     // Searched again, levelled by the refined rotation, with the caller's options, so that
     // the diagnostics (runner-up, shape of the cost) are those of the levelled search.
     let final_options = LocalizeOptions {
@@ -583,7 +582,31 @@ fn verify(v: Verifying, hypotheses: &[RotationHypothesis]) -> Result<Localizatio
         },
         ..options.clone()
     };
+    let mut best_rotation = level_rotation(&refined);
     let mut found = localize(reference_sdem, &levelled(&best_rotation)?, &final_options)?;
+    // A refinement that fails from the hypothesis's rotation (a few degrees off, so the grid's
+    // optimum is centimetres off and far points pair with nothing) is run again allowed to
+    // pair and move further ([`super::relaxed_refinement`]); its rotation is kept when the
+    // search levelled by it refines within the usual bounds and compares better.
+    if refining.refine && super::refinement_failed(&refined) {
+        let relaxed = LocalizeOptions {
+            refinement: super::relaxed_refinement(&options.refinement),
+            ..refining.clone()
+        };
+        let again = localize(reference_sdem, best_query, &relaxed)
+            .ok()
+            .filter(|r| r.refinement.is_some())
+            .map(|r| level_rotation(&r))
+            .and_then(|rotation| {
+                let f = localize(reference_sdem, &levelled(&rotation).ok()?, &final_options);
+                Some((rotation, f.ok()?))
+            });
+        if let Some((rotation, f)) = again {
+            if !super::refinement_failed(&f) && f.cost <= found.cost {
+                (best_rotation, found) = (rotation, f);
+            }
+        }
+    }
     let rivals =
         (screened[1..].iter()).map(|(_, f)| (level_rotation(f).angle_to(&best_rotation), f));
     let rival = (rivals.clone())
