@@ -309,8 +309,8 @@ pub struct ReviewConfig {
     /// The reference's heading is within ± this of the scan's, degrees (uniform).
     #[serde(default)]
     pub reference_yaw_spread_deg: f64,
-    /// With a turned reference, at least this share of the query's returns must lie within
-    /// 10 cm of one of the reference's (0: not checked).
+    /// At least this share of the query's returns must lie beside one of the reference's: in
+    /// or next to a 10 cm cube that holds one (0: not checked).
     #[serde(default)]
     pub min_overlap: f64,
 }
@@ -351,9 +351,9 @@ impl ReviewConfig {
 
     /// For scans without attitude readings ([`Self::for_scanner`]'s otherwise): both views
     /// rolled and pitched each up to ±30°, at any heading, the query's origin within ±0.7 m
-    /// (±0.1 m in height, so within 1 m across) of the reference's, half the query's returns or
-    /// more within 10 cm of the reference's. The readings drawn are for callers that want
-    /// them (`sdem bench`'s measurements give sdem none).
+    /// (±0.1 m in height, so within 1 m across) of the reference's, half the query's returns
+    /// or more beside the reference's ([`Self::min_overlap`]). The readings drawn are for
+    /// callers that want them (the example `real_unlevelled` gives sdem none).
     pub fn unlevelled(scanner: ReviewScanner) -> Self {
         Self {
             displacement_half_m: [0.7, 0.7, 0.1],
@@ -553,12 +553,12 @@ fn draw_review(
 /// Views drawn per pair, when the reference is turned too, before giving up.
 const MAX_TURNED_VIEWS: usize = 200;
 
-/// Two returns this close, metres, see the same surface ([`overlap`]).
+/// The cubes [`overlap`] bins returns into, metres.
 const OVERLAP_M: f64 = 0.1;
 
-/// The share of `query`'s returns (in its sensor's frame, at `world_from_query`) within about
-/// [`OVERLAP_M`] of one of `reference`'s (at `world_from_reference`): those in or beside a
-/// 10 cm cube that holds one.
+/// The share of `query`'s returns (in its sensor's frame, at `world_from_query`) beside one of
+/// `reference`'s (at `world_from_reference`): in or next to a cube of [`OVERLAP_M`] that holds
+/// one (up to about 35 cm away).
 fn overlap(
     reference: &[Vec3],
     world_from_reference: &Pose,

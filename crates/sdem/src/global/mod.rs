@@ -43,7 +43,7 @@ use crate::level::{
 };
 use crate::localize::{localize, localize_below, HeadingWindow, Localization, LocalizeOptions};
 use crate::scan::input::Scan;
-use crate::sdem::Sdem;
+use crate::sdem::{Sdem, SdemConfig, SCAN_ELEVATION_MARGIN_DEG};
 use crate::search::matched_heading_step;
 use nalgebra::Rotation3;
 use std::f64::consts::PI;
@@ -169,8 +169,9 @@ pub fn localize_unlevelled(
     };
     let mut found = if levelled_by_surfaces(&r) && levelled_by_surfaces(&q) {
         let (ra, qa) = (r.attitude.expect("levelled"), q.attitude.expect("levelled"));
+        let grid = grid_for_tilt(reference.sdem().config(), tilt_of(&ra).max(tilt_of(&qa)));
         search_headings(
-            reference, &r.cells, &ra, query, &q.cells, &qa, options, prior,
+            reference, &r.cells, &ra, query, &q.cells, &qa, &grid, options, prior,
         )?
     } else {
         let residual = RotationPrior {
@@ -194,6 +195,30 @@ pub fn localize_unlevelled(
     Ok(found)
 }
 
+/// The angle between a scan's z axis and the vertical under `attitude`, radians.
+fn tilt_of(attitude: &Attitude) -> f64 {
+    (attitude.rotation() * Vec3::z()).angle(&Vec3::z())
+}
+
+/// A grid that holds a scan's directions once it is levelled by a tilt of up to `tilt`
+/// (radians). [`SdemConfig::for_scan`] measures a scan's band of elevations in its sensor's
+/// frame and widens it by [`SCAN_ELEVATION_MARGIN_DEG`] for the tilt its attitude reading
+/// brings; a scan levelled by its surfaces may be tilted far more (a spinning LiDAR tilted 30°
+/// would lose most of its ground on one side and its rooftops on the other), so the band is
+/// widened by the tilt beyond the margin. `config` itself where the margin covers it or the
+/// band is the whole sphere already.
+fn grid_for_tilt(config: &SdemConfig, tilt: f64) -> SdemConfig {
+    let beyond = tilt.to_degrees() - SCAN_ELEVATION_MARGIN_DEG;
+    if beyond <= 0.0 {
+        return config.clone();
+    }
+    SdemConfig {
+        elevation_min_deg: (config.elevation_min_deg - beyond).floor().max(-90.0),
+        elevation_max_deg: (config.elevation_max_deg + beyond).ceil().min(90.0),
+        ..config.clone()
+    }
+}
+
 /// Both scans levelled: the heading hypotheses of their surfaces, each searched exactly over
 /// the window and ±[`HYPOTHESIS_HEADING_DEG`], the best kept; a different heading within the
 /// ambiguity ratio of its cost is a doubt.
@@ -205,10 +230,10 @@ fn search_headings(
     query: &Scan,
     query_cells: &[OrientedCell],
     query_level: &Attitude,
+    config: &SdemConfig,
     options: &LocalizeOptions,
     prior: &RotationPrior,
 ) -> Result<Localization> {
-    let config = reference.sdem().config();
     let (reference_sdem, hypotheses) = rayon::join(
         || Sdem::from_points(reference.points_in_sensor(), reference_level, config),
         || {
@@ -308,11 +333,20 @@ fn search_headings(
             }
         }
     }
-    if let Some((heading, again)) =
-        relevelled(&reference_sdem, reference_level, query, &found, &full)
-    {
+    // Rivals were searched at the surfaces' levelling: they are judged against the best cost
+    // found there, not against the cost of a search levelled again by the points.
+    let rival_base = found.cost;
+    let relevel = Relevel {
+        reference_sdem: &reference_sdem,
+        reference_level,
+        query_level,
+        query,
+        options: &full,
+        prior,
+    };
+    if let Some((heading, again)) = relevel.run(&found) {
         others.push((best_heading, std::mem::replace(&mut found, again)));
-        best_heading = wrap_pi(heading - query_level.yaw);
+        best_heading = heading;
     }
     let found_heading = wrap_pi(best_heading + found.heading_correction);
     // A scanner that sees part of the way round, turned round, sees what the other did not:
@@ -343,14 +377,14 @@ fn search_headings(
         .collect();
     let rival = (rivals.iter())
         .filter(|(angle, f)| {
-            *angle > OTHER_ROTATION && f.cost < options.ambiguous_cost_ratio * found.cost
+            *angle > OTHER_ROTATION && f.cost < options.ambiguous_cost_ratio * rival_base
         })
         .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
     if let Some(&(angle, f)) = rival {
         found.doubts.push(Doubt::AnotherRotation {
             angle_deg: angle.to_degrees(),
             cost: f.cost,
-            best_cost: found.cost,
+            best_cost: rival_base,
         });
     } else if let Some(doubt) = unrefuted(&found, rivals.iter().copied()) {
         found.doubts.push(doubt);
@@ -361,69 +395,85 @@ fn search_headings(
 }
 
 /// The refinement may move the pose this far from the grid's optimum, metres and degrees, when
-/// it is run again to level the scans by the points ([`relevelled`]).
+/// it is run again to level the scans by the points ([`Relevel`]).
 const RELEVEL_MAX_TRANSLATION_M: f64 = 0.5;
-const RELEVEL_MAX_ROTATION_DEG: f64 = 15.0;
+const RELEVEL_MAX_ROTATION_DEG: f64 = 10.0;
 /// … and pair points this far apart, metres (half a degree of tilt is 26 cm at 30 m).
 const RELEVEL_MAX_CORRESPONDENCE_M: f64 = 0.5;
 /// The σ of roll and pitch of a query levelled by the points, degrees.
 const RELEVEL_SIGMA_DEG: f64 = 0.1;
 
-/// The pose found again with the query levelled by the points, when the refinement of `found`
-/// failed: the scans levelled by their surfaces are a fraction of a degree off each other
-/// (their floors are seldom flat and walls seldom plumb), which at a scan's range moves the
-/// grid's optimum some centimetres, and the refinement, which corrects the tilt, then moves
-/// further than it is trusted to move from the grid and is refused. Here it is run again from
-/// the grid's optimum and allowed [`RELEVEL_MAX_TRANSLATION_M`]; its rotation levels the query
-/// and the exact search runs again over the whole window at that attitude. Taken when its
-/// refinement now stays within the usual bounds of its grid optimum and eq. (1) is lower
-/// there than at the first answer. Returns the query's heading in the reference's levelled
-/// frame, and what the search found.
-fn relevelled(
-    reference_sdem: &Sdem,
-    reference_level: &Attitude,
-    query: &Scan,
-    found: &Localization,
-    options: &LocalizeOptions,
-) -> Option<(f64, Localization)> {
-    if !options.refine || !refinement_failed(found) {
-        return None;
-    }
-    let config = reference_sdem.config();
-    let query_attitude = |f: &Localization| {
-        let level_from_query =
-            reference_level.rotation() * f.reference_from_query.rotation.to_rotation_matrix();
-        Attitude::from_rotation(&level_from_query)
-    };
-    let at = |a: &Attitude| {
-        let a = a.with_sigma_deg(RELEVEL_SIGMA_DEG, HYPOTHESIS_HEADING_DEG / 3.0);
-        Sdem::from_points(query.points_in_sensor(), &a, config).ok()
-    };
-    // The grid's optimum again (a search of the steps around it), refined allowed further.
-    let relaxed = LocalizeOptions {
-        window: crate::search::SearchWindow::around(&found.grid_offset, [options.step_m; 3]),
-        refinement: relaxed_refinement(&options.refinement),
-        runner_up: false,
-        ..options.clone()
-    };
-    let first = localize(reference_sdem, &at(&query_attitude(found))?, &relaxed).ok()?;
-    first.refinement.as_ref()?;
-    let levelled = query_attitude(&first);
-    let query_sdem = at(&levelled)?;
-    // The search runs again only where eq. (1) at the refined pose already beats the first
-    // answer's grid optimum (on the `unlevelled` suite the refinement failed on 25 of 200
-    // pairs, all wrong ones, most of them rotations the scans favour over the truth).
-    let mut correlator =
-        crate::cost::Correlator::new(reference_sdem, &query_sdem, &options.cost).ok()?;
-    let refined_cost = correlator.evaluate(&first.offset, 0.0)?.cost;
-    if refined_cost >= found.cost {
-        return None;
-    }
-    let again = localize(reference_sdem, &query_sdem, options).ok()?;
-    (!refinement_failed(&again) && again.cost <= found.cost).then_some((levelled.yaw, again))
+/// What [`Relevel::run`] needs: the reference levelled by its surfaces, the query's levelling
+/// by its surfaces (the heading of none of the hypotheses), the options of the hypotheses' full
+/// search and the rotation prior.
+struct Relevel<'a> {
+    reference_sdem: &'a Sdem,
+    reference_level: &'a Attitude,
+    query_level: &'a Attitude,
+    query: &'a Scan,
+    options: &'a LocalizeOptions,
+    prior: &'a RotationPrior,
 }
 
-/// `refinement` allowed to pair points and move as far as [`relevelled`] allows.
+impl Relevel<'_> {
+    /// The pose found again with the query levelled by the points, when the refinement of
+    /// `found` failed. Two scans levelled each by its own surfaces can be degrees apart (real
+    /// floors are seldom flat, and two views see different parts of them: 0.6–6.8° where this
+    /// mended a re-view of a real scan), which at a scan's range moves the grid's optimum
+    /// centimetres to decimetres; the refinement, which corrects the tilt, then moves further
+    /// than it is trusted to move from the grid, or pairs too few points, and is refused. Here
+    /// it is run again from the grid's optimum allowed to pair and move further
+    /// ([`relaxed_refinement`]); its rotation levels the query, and the exact search runs
+    /// again over the whole window at that attitude where eq. (1) at the refined pose beats
+    /// the first answer's grid optimum. Taken when its own refinement stays within the usual
+    /// bounds, its cost is no higher than the first answer's and its heading within the
+    /// prior's. Returns the query's heading from `query_level` (as a hypothesis's heading is)
+    /// and what the search found; its doubts are its own.
+    fn run(&self, found: &Localization) -> Option<(f64, Localization)> {
+        let options = self.options;
+        if !options.refine || !refinement_failed(found) {
+            return None;
+        }
+        let config = self.reference_sdem.config();
+        let query_attitude = |f: &Localization| {
+            let level_from_query = self.reference_level.rotation()
+                * f.reference_from_query.rotation.to_rotation_matrix();
+            Attitude::from_rotation(&level_from_query)
+        };
+        let at = |a: &Attitude| {
+            let a = a.with_sigma_deg(RELEVEL_SIGMA_DEG, HYPOTHESIS_HEADING_DEG / 3.0);
+            Sdem::from_points(self.query.points_in_sensor(), &a, config).ok()
+        };
+        // The grid's optimum again (a search of the steps around it), refined allowed further.
+        let relaxed = LocalizeOptions {
+            window: crate::search::SearchWindow::around(&found.grid_offset, [options.step_m; 3]),
+            refinement: relaxed_refinement(&options.refinement),
+            runner_up: false,
+            ..options.clone()
+        };
+        let first = localize(self.reference_sdem, &at(&query_attitude(found))?, &relaxed).ok()?;
+        first.refinement.as_ref()?;
+        let levelled = query_attitude(&first);
+        let query_sdem = at(&levelled)?;
+        // The search runs again only where eq. (1) at the refined pose already beats the first
+        // answer's grid optimum (on the `unlevelled` suite the refinement failed on 25 of 200
+        // pairs, all wrong ones, most of them rotations the scans favour over the truth).
+        let mut correlator =
+            crate::cost::Correlator::new(self.reference_sdem, &query_sdem, &options.cost).ok()?;
+        if correlator.evaluate(&first.offset, 0.0)?.cost >= found.cost {
+            return None;
+        }
+        let again = localize(self.reference_sdem, &query_sdem, options).ok()?;
+        let turned = levelled.rotation() * self.query_level.rotation().inverse();
+        let heading = Attitude::from_rotation(&turned).yaw;
+        let within_prior = wrap_pi(heading + again.heading_correction).abs()
+            <= self.prior.heading_half_range + HYPOTHESIS_HEADING_DEG.to_radians();
+        (!refinement_failed(&again) && again.cost <= found.cost && within_prior)
+            .then_some((heading, again))
+    }
+}
+
+/// `refinement` allowed to pair points and move as far as [`Relevel`] allows.
 fn relaxed_refinement(refinement: &crate::refine::RefineConfig) -> crate::refine::RefineConfig {
     crate::refine::RefineConfig {
         max_translation_m: refinement.max_translation_m.max(RELEVEL_MAX_TRANSLATION_M),

@@ -433,32 +433,25 @@ pub(super) fn localize_tilted(
     prior: &RotationPrior,
 ) -> Result<Localization> {
     let start = std::time::Instant::now();
+    // The query is turned by its level and then by a hypothesis tilted up to the prior's.
+    let tilt = |a: Option<&Attitude>| a.map_or(0.0, super::tilt_of);
+    let grid = super::grid_for_tilt(
+        reference.sdem().config(),
+        tilt(reference_level).max(tilt(query_level) + prior.max_tilt),
+    );
+    let widened = &grid != reference.sdem().config();
+    let sdem_of = |scan, level| sdem_on(scan, level, &grid, widened);
     let (reference_sdem, reference_rotation, window) = match reference_level {
-        Some(a) => (
-            Cow::Owned(Sdem::from_points(
-                reference.points_in_sensor(),
-                a,
-                reference.sdem().config(),
-            )?),
-            a.rotation(),
-            options.window,
-        ),
+        Some(a) => (sdem_of(reference, Some(a))?, a.rotation(), options.window),
         None => (
-            Cow::Borrowed(reference.sdem()),
+            sdem_of(reference, None)?,
             Rotation3::identity(),
             upright_free(&options.window),
         ),
     };
     let (query_sdem, query_rotation) = match query_level {
-        Some(a) => (
-            Cow::Owned(Sdem::from_points(
-                query.points_in_sensor(),
-                a,
-                query.sdem().config(),
-            )?),
-            a.rotation(),
-        ),
-        None => (Cow::Borrowed(query.sdem()), Rotation3::identity()),
+        Some(a) => (sdem_of(query, Some(a))?, a.rotation()),
+        None => (sdem_of(query, None)?, Rotation3::identity()),
     };
     let hypotheses = rotation_hypotheses(
         &reference_sdem,
@@ -479,6 +472,24 @@ pub(super) fn localize_tilted(
         &hypotheses,
     )?;
     Ok(finish(found, start))
+}
+
+/// `scan`'s own S-DEM, or one levelled by `level` (as level without one) on `grid` where it is
+/// levelled or the grid is `widened`.
+fn sdem_on<'s>(
+    scan: &'s Scan,
+    level: Option<&Attitude>,
+    grid: &crate::sdem::SdemConfig,
+    widened: bool,
+) -> Result<Cow<'s, Sdem>> {
+    Ok(match level {
+        None if !widened => Cow::Borrowed(scan.sdem()),
+        _ => Cow::Owned(Sdem::from_points(
+            scan.points_in_sensor(),
+            level.unwrap_or(&Attitude::default()),
+            grid,
+        )?),
+    })
 }
 
 /// The result with the whole call's time.
@@ -517,7 +528,7 @@ fn verify(v: Verifying, hypotheses: &[RotationHypothesis]) -> Result<Localizatio
     let levelled = |rotation: &Rotation3<f64>| {
         let attitude = Attitude::from_rotation(&(rotation * query_level))
             .with_sigma_deg(FINAL_HEADING_DEG, FINAL_HEADING_DEG);
-        Sdem::from_points(query.points_in_sensor(), &attitude, query.sdem().config())
+        Sdem::from_points(query.points_in_sensor(), &attitude, reference_sdem.config())
     };
     let around_hypothesis = HeadingWindow {
         half_range_deg: HYPOTHESIS_HEADING_DEG,
