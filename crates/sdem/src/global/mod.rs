@@ -89,6 +89,10 @@ pub fn rotation_prior(
     }
 }
 
+/// When no heading matches at the levels of two scans levelled by their surfaces, the rotation
+/// is searched within this tilt of them, degrees.
+const FALLBACK_TILT_DEG: f64 = 8.0;
+
 /// At most this many heading hypotheses are searched.
 const MAX_HEADINGS: usize = 6;
 /// Each heading hypothesis is searched over ± this, degrees: the correlation's peaks lie
@@ -110,6 +114,8 @@ struct Levelled {
     cells: Vec<OrientedCell>,
     /// The reading, or the vertical of the surfaces (with the reading's heading).
     attitude: Option<Attitude>,
+    /// Whether the scan came with no attitude reading.
+    unread: bool,
 }
 
 /// The attitude that levels `scan`: its reading when that is certain enough to level the
@@ -127,6 +133,7 @@ fn levelled(scan: &Scan) -> Levelled {
             return Levelled {
                 cells,
                 attitude: Some(a),
+                unread: false,
             };
         }
     }
@@ -145,6 +152,7 @@ fn levelled(scan: &Scan) -> Levelled {
     });
     Levelled {
         cells,
+        unread: reading.is_none(),
         attitude: from_surfaces.or(reading),
     }
 }
@@ -170,9 +178,32 @@ pub fn localize_unlevelled(
     let mut found = if levelled_by_surfaces(&r) && levelled_by_surfaces(&q) {
         let (ra, qa) = (r.attitude.expect("levelled"), q.attitude.expect("levelled"));
         let grid = grid_for_tilt(reference.sdem().config(), tilt_of(&ra).max(tilt_of(&qa)));
-        search_headings(
+        match search_headings(
             reference, &r.cells, &ra, query, &q.cells, &qa, &grid, options, prior,
-        )?
+        ) {
+            // No heading matched at the surfaces' levelling: the levels may be degrees apart
+            // (a floor's σ says tenths), too far for any candidate to share enough cells. The
+            // rotation is searched over tilt and heading together, within
+            // [`FALLBACK_TILT_DEG`] of the two levels. Only for a scan with no reading: a
+            // reading bounds its level to its σ, and the loop's searches of places that do not
+            // match (most of a relocalization's) would each pay for the search over tilt.
+            Err(e) if e.is_no_match() && (r.unread || q.unread) => {
+                let near_levels = RotationPrior {
+                    max_tilt: FALLBACK_TILT_DEG.to_radians().min(prior.max_tilt),
+                    heading_half_range: prior.heading_half_range,
+                };
+                tilted::localize_tilted(
+                    reference,
+                    Some(&ra),
+                    query,
+                    Some(&qa),
+                    options,
+                    &near_levels,
+                )
+                .map_err(|_| e)?
+            }
+            other => other?,
+        }
     } else {
         let residual = RotationPrior {
             max_tilt: match (r.attitude, q.attitude) {
