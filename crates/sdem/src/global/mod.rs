@@ -24,6 +24,12 @@
 //!    nothing in their window can compete). The best comparison (eq. 1) wins; another heading
 //!    comparing within the ambiguity ratio is the doubt [`crate::Doubt::AnotherRotation`].
 //!
+//! 3. **Levelled again by the points** (`Relevel`): two real scans levelled each by its own
+//!    floor can be degrees apart. Where the 6-DoF refinement of the best hypothesis fails, it
+//!    is rerun allowed to move further, its rotation levels the query, and the exact search
+//!    runs again at that attitude. Where no hypothesis matches at all and a scan has no
+//!    reading, tilt and heading are searched together near the two levels (`tilted`).
+//!
 //! What is exact is the search within each hypothesis's window. The hypotheses themselves
 //! come from the surfaces and can miss: a result then has a poor cost and comes out with
 //! doubts (`few_inliers`, `runner_up`, …), never as a trusted wrong pose. A scan that shows no
@@ -184,9 +190,11 @@ pub fn localize_unlevelled(
             // No heading matched at the surfaces' levelling: the levels may be degrees apart
             // (a floor's σ says tenths), too far for any candidate to share enough cells. The
             // rotation is searched over tilt and heading together, within
-            // [`FALLBACK_TILT_DEG`] of the two levels. Only for a scan with no reading: a
-            // reading bounds its level to its σ, and the loop's searches of places that do not
-            // match (most of a relocalization's) would each pay for the search over tilt.
+            // [`FALLBACK_TILT_DEG`] of the two levels. Only where a scan has no reading: a
+            // reading bounds its level to its σ. The loop's searches of places give the place
+            // no reading where one of its nodes has none (a run without readings); there each
+            // place that does not match pays for this search too (about 250 ms a pair on the
+            // `unlevelled` suite).
             Err(e) if e.is_no_match() && (r.unread || q.unread) => {
                 let near_levels = RotationPrior {
                     max_tilt: FALLBACK_TILT_DEG.to_radians().min(prior.max_tilt),

@@ -1,5 +1,6 @@
 //! The rotation between two scans when one of them cannot be levelled from its own surfaces
-//! (no floor or ceiling in view) and has no reliable attitude reading.
+//! (no floor or ceiling in view) and has no reliable attitude reading, or when no heading
+//! matches at the levels the surfaces gave (searched then within a few degrees of them).
 //!
 //! The orientations of the surfaces a scan sees do not depend on where it was taken: a wall faces
 //! its way from any origin. Each scan's surface normals, weighted by the area they stand for,
@@ -411,7 +412,8 @@ const HYPOTHESIS_HEADING_DEG: f64 = 5.0;
 const FINAL_HEADING_DEG: f64 = 1.0;
 
 /// Localizes `query` against `reference` when a scan could be levelled neither by its reading
-/// nor by its surfaces: the rotation hypotheses of [`rotation_hypotheses`], each searched
+/// nor by its surfaces, or no heading matched at the levels found (`prior` then narrowed to a
+/// few degrees of tilt about them): the rotation hypotheses of [`rotation_hypotheses`], each searched
 /// exactly over the translation window and a few degrees of heading around it; the best
 /// comparison (eq. 1) wins and is searched again, levelled by its refined rotation, with the
 /// caller's options. A different rotation comparing within the ambiguity ratio is the doubt
