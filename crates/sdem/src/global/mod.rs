@@ -593,3 +593,46 @@ fn with_turned(hypotheses: Vec<(f64, f64)>, half_range: f64) -> Vec<(f64, f64)> 
     }
     all
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A scan's band of elevations (a LiDAR's, measured in its own frame with a 5° margin) is
+    /// widened by a levelled tilt beyond the margin, on both sides, to whole degrees and never
+    /// past the poles; within the margin, or on the whole sphere, the grid is the same.
+    #[test]
+    fn a_lidar_band_is_widened_by_a_tilt_beyond_its_margin() {
+        let band = SdemConfig {
+            elevation_min_deg: -30.0,
+            elevation_max_deg: 8.0,
+            ..SdemConfig::default()
+        };
+        assert_eq!(grid_for_tilt(&band, 4f64.to_radians()), band);
+        let widened = grid_for_tilt(&band, 20f64.to_radians());
+        assert_eq!(
+            (widened.elevation_min_deg, widened.elevation_max_deg),
+            (-45.0, 23.0)
+        );
+        assert_eq!(widened.resolution_deg, band.resolution_deg);
+        let far = grid_for_tilt(&band, 80f64.to_radians());
+        assert_eq!(
+            (far.elevation_min_deg, far.elevation_max_deg),
+            (-90.0, 83.0)
+        );
+        let sphere = SdemConfig::default();
+        assert_eq!(grid_for_tilt(&sphere, 40f64.to_radians()), sphere);
+    }
+
+    /// The tilt of an attitude is the angle its rotation turns the vertical by, whatever the
+    /// heading.
+    #[test]
+    fn the_tilt_of_an_attitude_ignores_its_heading() {
+        let level = Attitude::new(0.0, 0.0, 2.0);
+        assert!(tilt_of(&level) < 1e-12);
+        let rolled = Attitude::new(0.3, 0.0, 0.0);
+        assert!((tilt_of(&rolled) - 0.3).abs() < 1e-12);
+        let turned = Attitude::new(0.3, 0.0, 1.4);
+        assert!((tilt_of(&turned) - 0.3).abs() < 1e-12);
+    }
+}
