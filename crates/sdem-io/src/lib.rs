@@ -437,6 +437,18 @@ fn count_newlines(bytes: &[u8]) -> usize {
     bytes.iter().filter(|&&b| b == b'\n').count()
 }
 
+/// The line of `bytes` that starts at byte `start`, with its `\n` (to the end of `bytes` when
+/// there is none), and the offset just past it: a header's next line, read without decoding
+/// the binary data after the header.
+fn line_from(bytes: &[u8], start: usize) -> (&[u8], usize) {
+    let rest = bytes.get(start..).unwrap_or_default();
+    let len = rest
+        .iter()
+        .position(|&b| b == b'\n')
+        .map_or(rest.len(), |i| i + 1);
+    (rest.get(..len).unwrap_or_default(), start + len)
+}
+
 /// Numbered lines of a text: `(1-based line number, line without its line ending)`.
 fn numbered_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
     text.lines().enumerate().map(|(i, l)| (i + 1, l))

@@ -119,13 +119,7 @@ fn precheck_header(path: &Path, bytes: &[u8]) -> Result<HeaderLayout> {
                 ),
             ));
         }
-        let rest = bytes.get(start..).unwrap_or_default();
-        let end = start
-            + rest
-                .iter()
-                .position(|&b| b == b'\n')
-                .map_or(rest.len(), |i| i + 1);
-        let raw = bytes.get(start..end).unwrap_or_default();
+        let (raw, end) = crate::line_from(bytes, start);
         line_no += 1;
         let line = std::str::from_utf8(raw).map_err(|_| {
             Error::parse(

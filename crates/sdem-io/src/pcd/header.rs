@@ -66,13 +66,7 @@ pub(super) fn parse_header(path: &Path, bytes: &[u8]) -> Result<(PcdHeader, usiz
     let mut start = 0usize;
     let mut line_no = 0usize;
     while start < bytes.len() {
-        let rest = bytes.get(start..).unwrap_or_default();
-        let end = start
-            + rest
-                .iter()
-                .position(|&b| b == b'\n')
-                .map_or(rest.len(), |i| i + 1);
-        let raw = bytes.get(start..end).unwrap_or_default();
+        let (raw, end) = crate::line_from(bytes, start);
         line_no += 1;
         start = end;
         let line = std::str::from_utf8(raw).map_err(|_| {
