@@ -21,10 +21,11 @@
 //! errors (no pose), median time.
 
 use anyhow::{bail, Context, Result};
-use nalgebra::Point3;
 use sdem::geometry::{pose_error, Vec3};
-use sdem::{LocalizeOptions, Scan, SdemConfig, SearchWindow};
-use sdem_sim::reviews::{review_pairs, ModelConfig, ReviewConfig, ReviewScanner, SurfaceModel};
+use sdem::SearchWindow;
+use sdem_sim::reviews::{
+    localize_review, review_pairs, ModelConfig, ReviewConfig, ReviewScanner, SurfaceModel,
+};
 use std::path::Path;
 use std::time::Instant;
 
@@ -88,32 +89,8 @@ fn run_scan(path: &Path, views: usize, seed: u64, level_reference: bool) -> Resu
     let (mut right, mut wrong_trusted, mut wrong_flagged, mut errors) = (0, 0, 0, 0);
     let mut times = Vec::new();
     for review in review_pairs(&model, &config, seed, 0..views)? {
-        let as_points = |v: &[Vec3]| v.iter().map(|p| Point3::from(*p)).collect::<Vec<_>>();
-        let (reference, query) = (
-            as_points(&review.reference_points),
-            as_points(&review.query_points),
-        );
         let start = Instant::now();
-        let found = (|| -> sdem::Result<sdem::Localization> {
-            let grid = if spinning {
-                SdemConfig::for_scan(&reference)
-            } else {
-                SdemConfig::default()
-            };
-            let r = Scan::with_grid(&reference, None, &grid)?;
-            let q = Scan::with_grid(&query, None, &grid)?;
-            let defaults = if spinning {
-                LocalizeOptions::for_scan(r.sdem())
-            } else {
-                LocalizeOptions::default()
-            };
-            let options = LocalizeOptions {
-                window,
-                step_m,
-                ..defaults
-            };
-            sdem::localize(&r, &q, &options)
-        })();
+        let found = localize_review(&review, &config.scanner, false, window, step_m);
         let ms = start.elapsed().as_secs_f64() * 1e3;
         times.push(ms);
         let truth = format!(

@@ -151,8 +151,9 @@ fn the_covariance_covers_the_error_on_re_views_of_a_real_lidar_frame() {
 /// ±30° at any heading, seed 1) as pair `index`, localized with no attitude reading: the error
 /// (metres, radians) and what sdem found. `None` without the frame beside the repository.
 fn tilted_kitti_pair(index: usize) -> Option<(f64, f64, sdem::Localization)> {
-    use nalgebra::Point3;
-    use sdem_sim::reviews::{review_pairs, ModelConfig, ReviewConfig, ReviewScanner};
+    use sdem_sim::reviews::{
+        localize_review, review_pairs, ModelConfig, ReviewConfig, ReviewScanner,
+    };
     let Some(path) = kitti_frame() else {
         eprintln!(
             "skipped: no ../shared/data/kitti-00-first16/velodyne/000000.bin beside the repository"
@@ -169,23 +170,9 @@ fn tilted_kitti_pair(index: usize) -> Option<(f64, f64, sdem::Localization)> {
     let review = review_pairs(&model, &config, 1, index..index + 1)
         .unwrap()
         .remove(0);
-    let as_points = |v: &[sdem::geometry::Vec3]| -> Vec<Point3<f64>> {
-        v.iter().map(|p| Point3::from(*p)).collect()
-    };
-    let (reference, query) = (
-        as_points(&review.reference_points),
-        as_points(&review.query_points),
-    );
-    let grid = sdem::SdemConfig::for_scan(&reference);
-    let r = sdem::Scan::with_grid(&reference, None, &grid).unwrap();
-    let q = sdem::Scan::with_grid(&query, None, &grid).unwrap();
     let across = 0.7 * 2f64.sqrt() + 0.05;
-    let options = sdem::LocalizeOptions {
-        window: sdem::SearchWindow::around(&nalgebra::Vector3::zeros(), [across, across, 0.15]),
-        step_m: 0.05,
-        ..sdem::LocalizeOptions::for_scan(r.sdem())
-    };
-    let found = sdem::localize(&r, &q, &options).unwrap();
+    let window = sdem::SearchWindow::around(&nalgebra::Vector3::zeros(), [across, across, 0.15]);
+    let found = localize_review(&review, &config.scanner, false, window, 0.05).unwrap();
     let (t, d) = sdem::geometry::pose_error(&review.truth, &found.reference_from_query);
     Some((t, d, found))
 }

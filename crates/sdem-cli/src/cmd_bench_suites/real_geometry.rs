@@ -15,9 +15,8 @@ use super::{Common, SuiteArgs};
 use crate::bench_peers::{self, PeerResult, PeerSettings, Peers};
 use crate::output::{elapsed_ms, print_json};
 use anyhow::{bail, Context, Result};
-use nalgebra::Point3;
 use sdem::geometry::{pose_error, Vec3};
-use sdem::{LocalizeOptions, Scan, SdemConfig, SearchWindow};
+use sdem::{LocalizeOptions, SearchWindow};
 use sdem_sim::benchmark::{nees, share_below, summarize, Stats, CHI2_95_3, CHI2_95_6};
 use sdem_sim::reviews::{
     review_pairs, ModelConfig, Review, ReviewConfig, ReviewScanner, SurfaceModel,
@@ -305,7 +304,7 @@ fn run_scan(
         let reviews = review_pairs(&model, &config, common.seed, start..end)
             .with_context(|| format!("{}: cannot re-view", source.label))?;
         for review in &reviews {
-            let mut record = localize_review(&source.label, review, &options, spinning);
+            let mut record = localize_review(&source.label, review, &options, &config.scanner);
             if let Ok(peers) = peers {
                 gicp(peers, review, &settings, temp, &mut record)?;
             }
@@ -329,50 +328,25 @@ fn run_scan(
     Ok((report, records, settings))
 }
 
-/// sdem on one re-view through the root API, with the views' readings: tilting scans on the
-/// default grid and options, spinning ones on the grid and scale derived from the reference.
+/// sdem on one re-view through the root API, with the views' readings
+/// ([`sdem_sim::reviews::localize_review`]).
 fn localize_review(
     label: &str,
     review: &Review,
     options: &LocalizeOptions,
-    spinning: bool,
+    scanner: &ReviewScanner,
 ) -> ReviewRecord {
-    let points = |v: &[Vec3]| v.iter().map(|p| Point3::from(*p)).collect::<Vec<_>>();
-    let (reference, query) = (
-        points(&review.reference_points),
-        points(&review.query_points),
-    );
     let start = Instant::now();
-    let found = (|| -> sdem::Result<sdem::Localization> {
-        let grid = if spinning {
-            SdemConfig::for_scan(&reference)
-        } else {
-            SdemConfig::default()
-        };
-        let (r, q) = rayon::join(
-            || Scan::with_grid(&reference, Some(review.reference_attitude), &grid),
-            || Scan::with_grid(&query, Some(review.query_attitude), &grid),
-        );
-        let (r, q) = (r?, q?);
-        let options = if spinning {
-            LocalizeOptions {
-                window: options.window,
-                step_m: options.step_m,
-                ..LocalizeOptions::for_scan(r.sdem())
-            }
-        } else {
-            options.clone()
-        };
-        sdem::localize(&r, &q, &options)
-    })();
+    let found =
+        sdem_sim::reviews::localize_review(review, scanner, true, options.window, options.step_m);
     let time_ms = elapsed_ms(start);
     let mut record = ReviewRecord {
         scan: label.to_string(),
         index: review.index,
         truth_translation_m: review.truth.translation.vector.norm(),
         truth_rotation_deg: review.truth.rotation.angle().to_degrees(),
-        reference_points: reference.len(),
-        query_points: query.len(),
+        reference_points: review.reference_points.len(),
+        query_points: review.query_points.len(),
         time_ms,
         translation_error_mm: None,
         rotation_error_deg: None,

@@ -429,6 +429,49 @@ pub struct Review {
     pub world_from_reference: Pose,
 }
 
+/// sdem on a re-view through its root API ([`sdem::localize`]), the query against the
+/// reference over `window` at `step_m`, each view with its reading (`with_readings`) or none.
+/// A spinning scanner's views go on the grid and scale derived from the reference
+/// ([`sdem::SdemConfig::for_scan`], [`sdem::LocalizeOptions::for_scan`], the window and step
+/// kept), a tilting scanner's on the default grid and options.
+///
+/// # Errors
+/// As [`sdem::localize`].
+pub fn localize_review(
+    review: &Review,
+    scanner: &ReviewScanner,
+    with_readings: bool,
+    window: sdem::SearchWindow,
+    step_m: f64,
+) -> Result<sdem::Localization> {
+    let spinning = matches!(scanner, ReviewScanner::Spinning(_));
+    let grid = if spinning {
+        sdem::SdemConfig::for_scan(&review.reference_points)
+    } else {
+        sdem::SdemConfig::default()
+    };
+    let reading = |a: &Attitude| with_readings.then_some(*a);
+    let (reference, query) = rayon::join(
+        || {
+            let attitude = reading(&review.reference_attitude);
+            sdem::Scan::with_grid(&review.reference_points, attitude, &grid)
+        },
+        || sdem::Scan::with_grid(&review.query_points, reading(&review.query_attitude), &grid),
+    );
+    let (reference, query) = (reference?, query?);
+    let defaults = if spinning {
+        sdem::LocalizeOptions::for_scan(reference.sdem())
+    } else {
+        sdem::LocalizeOptions::default()
+    };
+    let options = sdem::LocalizeOptions {
+        window,
+        step_m,
+        ..defaults
+    };
+    sdem::localize(&reference, &query, &options)
+}
+
 /// Query poses drawn per pair before giving up on one with enough clearance.
 const MAX_QUERY_DRAWS: usize = 1000;
 
@@ -478,9 +521,19 @@ fn draw_review(
         let points = view(model, &config.scanner, world_from_reference, drop, &mut rng);
         (attitude, points)
     };
+    // The reference from the scan's own origin and axes. A turned one is drawn in the loop
+    // below instead; the draws of this one are taken all the same (its view is not cast), so
+    // that the pairs of every config stay the ones their seeds gave.
     let (mut world_from_reference, mut reference_attitude, mut reference_points) = {
-        let (a, p) = reference_view(&Pose::identity(), rng);
-        (Pose::identity(), a, p)
+        let attitude = reading(config, Attitude::default(), rng);
+        let seed: u64 = rng.random();
+        let points = if turned {
+            Vec::new()
+        } else {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            view(model, &config.scanner, &Pose::identity(), drop, &mut rng)
+        };
+        (Pose::identity(), attitude, points)
     };
     let tries = if turned {
         MAX_TURNED_VIEWS
