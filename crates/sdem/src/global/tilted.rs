@@ -441,8 +441,7 @@ pub(super) fn localize_tilted(
         reference.sdem().config(),
         tilt(reference_level).max(tilt(query_level) + prior.max_tilt),
     );
-    let widened = &grid != reference.sdem().config();
-    let sdem_of = |scan, level| sdem_on(scan, level, &grid, widened);
+    let sdem_of = |scan, level| sdem_on(scan, level, &grid);
     let (reference_sdem, reference_rotation, window) = match reference_level {
         Some(a) => (sdem_of(reference, Some(a))?, a.rotation(), options.window),
         None => (
@@ -477,15 +476,14 @@ pub(super) fn localize_tilted(
 }
 
 /// `scan`'s own S-DEM, or one levelled by `level` (as level without one) on `grid` where it is
-/// levelled or the grid is `widened`.
+/// levelled or `grid` is not the scan's own (widened).
 fn sdem_on<'s>(
     scan: &'s Scan,
     level: Option<&Attitude>,
     grid: &crate::sdem::SdemConfig,
-    widened: bool,
 ) -> Result<Cow<'s, Sdem>> {
     Ok(match level {
-        None if !widened => Cow::Borrowed(scan.sdem()),
+        None if grid == scan.sdem().config() => Cow::Borrowed(scan.sdem()),
         _ => Cow::Owned(Sdem::from_points(
             scan.points_in_sensor(),
             level.unwrap_or(&Attitude::default()),
