@@ -6,7 +6,7 @@
 //! the reference from the scan's origin, the query from a seeded origin within ±0.7 m (±0.1 m
 //! in height), about half its returns or more beside the reference's
 //! (`ReviewConfig::unlevelled`). Neither view's attitude is given to sdem; it levels both by
-//! their surfaces and finds the heading ([`sdem::localize`] through its global search). A pose
+//! their surfaces and finds the heading ([`sdem::localize()`] through its global search). A pose
 //! is right within 2 cm and 0.5°, as in `sdem bench --suite unlevelled`.
 //!
 //! ```sh

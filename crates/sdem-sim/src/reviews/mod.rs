@@ -429,14 +429,14 @@ pub struct Review {
     pub world_from_reference: Pose,
 }
 
-/// sdem on a re-view through its root API ([`sdem::localize`]), the query against the
+/// sdem on a re-view through its root API ([`sdem::localize()`]), the query against the
 /// reference over `window` at `step_m`, each view with its reading (`with_readings`) or none.
 /// A spinning scanner's views go on the grid and scale derived from the reference
 /// ([`sdem::SdemConfig::for_scan`], [`sdem::LocalizeOptions::for_scan`], the window and step
 /// kept), a tilting scanner's on the default grid and options.
 ///
 /// # Errors
-/// As [`sdem::localize`].
+/// As [`sdem::localize()`].
 pub fn localize_review(
     review: &Review,
     scanner: &ReviewScanner,
