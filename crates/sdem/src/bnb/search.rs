@@ -19,6 +19,9 @@ struct Shared {
     progress: Progress,
     /// Workers bounding a box's children at the moment (their children may still open boxes).
     busy: usize,
+    /// Workers waiting for boxes: a worker that puts boxes back wakes them only when there
+    /// are any (a notification is a system call even when no one waits).
+    waiting: usize,
 }
 
 /// The search: what it reads, the same for every worker.
@@ -179,6 +182,7 @@ impl<'a> BranchAndBound<'a> {
             queue,
             progress,
             busy: 0,
+            waiting: 0,
         });
         let wake = std::sync::Condvar::new();
         rayon::scope(|scope| {
@@ -215,12 +219,16 @@ impl<'a> BranchAndBound<'a> {
                 .is_some_and(|top| !state.progress.prunable(top.bound));
             if !open {
                 if state.busy == 0 {
-                    wake.notify_all();
+                    if state.waiting > 0 {
+                        wake.notify_all();
+                    }
                     return;
                 }
+                state.waiting += 1;
                 state = wake
                     .wait(state)
                     .unwrap_or_else(std::sync::PoisonError::into_inner);
+                state.waiting -= 1;
                 continue;
             }
             let parent = state.queue.pop().expect("peeked");
@@ -236,7 +244,9 @@ impl<'a> BranchAndBound<'a> {
             let open = state.progress.absorb(self.grid, &children, outcomes);
             state.queue.extend(open);
             state.busy -= 1;
-            wake.notify_all();
+            if state.waiting > 0 {
+                wake.notify_all();
+            }
         }
     }
 
