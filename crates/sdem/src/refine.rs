@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 pub mod discrepancy;
 mod normals;
 
-pub use normals::SurfaceNormals;
+pub use normals::{SurfaceNormals, BLEND_RADIUS_CELLS};
 
 /// Settings of the refinement.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -57,7 +57,18 @@ pub struct RefineConfig {
     /// KITTI frames 13 % of a 3,000-point sample paired, and it left 4–6 mm of error where every
     /// point leaves 0.6; see [`crate::localize::REFINE_POINTS`]).
     pub max_points: usize,
+    /// Once settled, a query point's residual is its distance from the reference's surface
+    /// blended over the reference points in the 3 × 3 cells around its pair's and within this
+    /// many cells' widths at its range (their planes averaged with weights `(1 − d² / R²)²` of
+    /// their distance `d` from it; see [`BLEND_RADIUS_CELLS`]), not from its nearest point's
+    /// plane alone; 0 keeps the nearest point's plane. At most 2: beyond, the 3 × 3 cells hold
+    /// too few of the points the radius reaches.
+    pub blend_radius_cells: f64,
 }
+
+/// The largest [`RefineConfig::blend_radius_cells`]: the blend reads the 3 × 3 cells around a
+/// pair's, which hold the samples up to about a cell's width from it.
+pub const MAX_BLEND_RADIUS_CELLS: f64 = 2.0;
 
 /// How the refinement pairs a query point with a reference point. Nearest is the default: on the
 /// 3DTK scans the projective pairing's refinement of the second scan failed (it fell back to a
@@ -94,6 +105,7 @@ impl Default for RefineConfig {
             association: Association::Nearest,
             converged_step: 1e-5,
             max_points: 0,
+            blend_radius_cells: normals::BLEND_RADIUS_CELLS,
         }
     }
 }
@@ -125,6 +137,13 @@ impl RefineConfig {
                     "refinement.{name} = {value} must be a positive number"
                 )));
             }
+        }
+        if !(0.0..=MAX_BLEND_RADIUS_CELLS).contains(&self.blend_radius_cells) {
+            return Err(Error::Invalid(format!(
+                "refinement.blend_radius_cells = {} must lie in 0..={MAX_BLEND_RADIUS_CELLS} \
+                 (0: the nearest point's plane alone; the default is {BLEND_RADIUS_CELLS})",
+                self.blend_radius_cells
+            )));
         }
         // Each normal fits (2r + 1)² cells: 100 took 3 s a scan, 1e9 never ended.
         if !(1..=MAX_NORMAL_RADIUS_CELLS).contains(&self.normal_radius_cells) {
@@ -347,6 +366,8 @@ struct Gate {
     min_m: f64,
     per_metre: f64,
     max_m: f64,
+    /// The blending radius per metre of range (0: the nearest point's plane alone).
+    blend_per_metre: f32,
 }
 
 impl Gate {
@@ -357,12 +378,14 @@ impl Gate {
                 min_m: SETTLED_GATE_MIN_M.min(max_m),
                 per_metre: SETTLED_GATE_CELLS * grid.resolution(),
                 max_m,
+                blend_per_metre: (config.blend_radius_cells * grid.resolution()) as f32,
             }
         } else {
             Self {
                 min_m: max_m,
                 per_metre: 0.0,
                 max_m,
+                blend_per_metre: 0.0,
             }
         }
     }
@@ -371,6 +394,30 @@ impl Gate {
     fn at(&self, x: [f32; 3]) -> f64 {
         let range = ((x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) as f64).sqrt();
         (self.per_metre * range).clamp(self.min_m, self.max_m)
+    }
+
+    /// The residual and normal of `x` paired with reference point `j` (normal `normal`, at
+    /// offset `d` from it): the blended surface's once settled, where it has one, else `j`'s
+    /// plane.
+    fn residual(
+        &self,
+        pairing: &Pairing,
+        x: [f32; 3],
+        j: u32,
+        d: [f32; 3],
+        normal: [f32; 3],
+    ) -> (f64, Vec3) {
+        if self.blend_per_metre > 0.0 {
+            let range = (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt();
+            let cell = pairing.reference.cells()[j as usize];
+            let grid = pairing.reference.grid();
+            let radius = self.blend_per_metre * range;
+            if let Some((r, n)) = pairing.normals.blended(grid, x, cell, radius) {
+                return (r as f64, Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64));
+            }
+        }
+        let n = Vec3::new(normal[0] as f64, normal[1] as f64, normal[2] as f64);
+        (n.x * d[0] as f64 + n.y * d[1] as f64 + n.z * d[2] as f64, n)
     }
 }
 
@@ -384,12 +431,19 @@ struct Pairing<'a> {
 impl Pairing<'_> {
     /// The normal equations of `points` (query, levelled) moved by `pose`; with `fresh` each is
     /// paired anew (`pairs[i]`: its reference point, `u32::MAX` for none), else with its last
-    /// pair. Residuals weigh by the Geman-McClure kernel at `scale`.
+    /// pair. Residuals weigh by the Geman-McClure kernel at `scale`. Where the gate blends the
+    /// surface (settled), each point's blended plane (`planes[i]`: a point on it, its normal)
+    /// is found with its pair and kept while the pair stays: settled, the estimate moves by
+    /// less than a millimetre a step until the pairs are found again, where the reference's
+    /// points lie centimetres apart, and across such a move the blend's plane is the surface
+    /// to first order.
+    #[allow(clippy::too_many_arguments)]
     fn accumulate(
         &self,
         (rotation, translation): &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>),
         points: &[[f32; 3]],
         pairs: &mut [u32],
+        planes: &mut [[f32; 6]],
         fresh: bool,
         scale: f64,
         gate: Gate,
@@ -455,7 +509,11 @@ impl Pairing<'_> {
                         .then(|| self.normals.point_of_cell[cell as usize])
                         .filter(|&j| j != u32::MAX),
                 };
-                pairs[i] = found.unwrap_or(u32::MAX);
+                let paired = found.unwrap_or(u32::MAX);
+                if paired != pairs[i] {
+                    planes[i] = [f32::NAN; 6];
+                }
+                pairs[i] = paired;
                 found
             } else {
                 (pairs[i] != u32::MAX).then_some(pairs[i])
@@ -472,8 +530,25 @@ impl Pairing<'_> {
             if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > max_distance * max_distance {
                 continue;
             }
-            let normal = Vec3::new(normal[0] as f64, normal[1] as f64, normal[2] as f64);
-            let r = normal.x * d[0] as f64 + normal.y * d[1] as f64 + normal.z * d[2] as f64;
+            let (r, normal) = if gate.blend_per_metre > 0.0 {
+                let plane = &mut planes[i];
+                if plane[0].is_nan() {
+                    let (r, n) = gate.residual(self, x, j, d, normal);
+                    let foot = [
+                        x[0] - (r * n.x) as f32,
+                        x[1] - (r * n.y) as f32,
+                        x[2] - (r * n.z) as f32,
+                    ];
+                    let (nx, ny, nz) = (n.x as f32, n.y as f32, n.z as f32);
+                    *plane = [foot[0], foot[1], foot[2], nx, ny, nz];
+                }
+                let n = [plane[3], plane[4], plane[5]];
+                let r =
+                    n[0] * (x[0] - plane[0]) + n[1] * (x[1] - plane[1]) + n[2] * (x[2] - plane[2]);
+                (r as f64, Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64))
+            } else {
+                gate.residual(self, x, j, d, normal)
+            };
             let y = rotated[i];
             let jr = Vec3::new(y[0] as f64, y[1] as f64, y[2] as f64).cross(&normal);
             let jac = [normal.x, normal.y, normal.z, jr.x, jr.y, jr.z];
@@ -538,8 +613,7 @@ impl Pairing<'_> {
         if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > max_distance * max_distance {
             return None;
         }
-        let normal = Vec3::new(normal[0] as f64, normal[1] as f64, normal[2] as f64);
-        let r = normal.x * d[0] as f64 + normal.y * d[1] as f64 + normal.z * d[2] as f64;
+        let (r, normal) = gate.residual(self, [x.x, x.y, x.z], j, d, normal);
         let jr = Vec3::new(y.x as f64, y.y as f64, y.z as f64).cross(&normal);
         Some((r, [normal.x, normal.y, normal.z, jr.x, jr.y, jr.z]))
     }
@@ -650,6 +724,7 @@ pub(crate) fn refine_from(
     // Each query point's reference point (`u32::MAX`: none), kept between iterations while
     // the estimate moves little (see [`REASSOCIATE_STEP`]).
     let mut pairs = vec![u32::MAX; query_points.len()];
+    let mut planes = vec![[f32::NAN; 6]; query_points.len()];
     let mut associate = true;
     let mut settled = settled;
     // The estimates at which the pairs were found afresh once settled (see `returned_to`).
@@ -668,7 +743,10 @@ pub(crate) fn refine_from(
         let chunks: Vec<NormalEquations> = query_points
             .par_chunks(CHUNK)
             .zip(pairs.par_chunks_mut(CHUNK))
-            .map(|(points, pairs)| pairing.accumulate(&pose, points, pairs, fresh, scale, gate))
+            .zip(planes.par_chunks_mut(CHUNK))
+            .map(|((points, pairs), planes)| {
+                pairing.accumulate(&pose, points, pairs, planes, fresh, scale, gate)
+            })
             .collect();
         let normal_equations =
             (chunks.into_iter()).fold(NormalEquations::default(), NormalEquations::merged);
@@ -708,6 +786,7 @@ pub(crate) fn refine_from(
             sampling = false;
             query_points = all;
             pairs = vec![u32::MAX; all.len()];
+            planes = vec![[f32::NAN; 6]; all.len()];
             associate = true;
         } else if !settled && step < SETTLED_STEP {
             // The gate narrows (see `Gate`): paired afresh under it before converging.
@@ -930,6 +1009,21 @@ mod tests {
         };
         let e = none.validate().unwrap_err().to_string();
         assert!(e.contains("max_iterations = 0"), "{e}");
+        for bad in [-0.5, 2.5, f64::NAN, f64::INFINITY] {
+            let config = RefineConfig {
+                blend_radius_cells: bad,
+                ..Default::default()
+            };
+            let e = config.validate().unwrap_err().to_string();
+            assert!(e.contains("blend_radius_cells"), "{e}");
+        }
+        for fine in [0.0, 1.0, 2.0] {
+            let config = RefineConfig {
+                blend_radius_cells: fine,
+                ..Default::default()
+            };
+            config.validate().unwrap();
+        }
         RefineConfig::default().validate().unwrap();
     }
 }
