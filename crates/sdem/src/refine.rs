@@ -566,21 +566,24 @@ impl Pairing<'_> {
 impl Pairing<'_> {
     /// Kish's design effect ([`design_effect`]) of the inlying residuals (robust weight at
     /// least ½) of `points` moved by `pose` against their `pairs`, grouped in patches of
-    /// [`CORRELATION_PATCH_CELLS`]² reference cells.
+    /// [`CORRELATION_PATCH_CELLS`]² reference cells. Where the gate blends the surface, each
+    /// residual is taken from the point's kept blended plane (`planes`), as the last
+    /// iteration took it.
     fn design_effect(
         &self,
         pose: &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>),
         points: &[[f32; 3]],
-        pairs: &[u32],
+        (pairs, planes): (&[u32], &[[f32; 6]]),
         scale: f64,
         gate: Gate,
     ) -> f64 {
         let n_az = self.reference.grid().azimuth_cells() as u64;
         let block = CORRELATION_PATCH_CELLS;
         let cells = self.reference.cells();
-        let mut residuals: Vec<(u64, f64)> = (points.par_iter().zip(pairs.par_iter()))
-            .filter_map(|(q, &j)| {
-                let (r, _) = self.residual(pose, q, j, gate)?;
+        let mut residuals: Vec<(u64, f64)> = (points.par_iter())
+            .zip(pairs.par_iter().zip(planes.par_iter()))
+            .filter_map(|(q, (&j, plane))| {
+                let (r, _) = self.residual(pose, q, j, gate, Some(plane))?;
                 let c = cells[j as usize] as u64;
                 let patch = (c / n_az / block) * (n_az / block + 1) + (c % n_az) / block;
                 (robust_weight(r, scale) >= 0.5).then_some((patch, r))
@@ -590,13 +593,15 @@ impl Pairing<'_> {
     }
 
     /// The point-to-plane residual and its Jacobian of query point `q` moved by `pose` against
-    /// reference point `j` (`None`: unpaired, no normal, or beyond the correspondence distance).
+    /// reference point `j` (`None`: unpaired, no normal, or beyond the correspondence distance),
+    /// from the point's kept blended plane `kept` where the gate blends and it has one.
     fn residual(
         &self,
         (rotation, translation): &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>),
         q: &[f32; 3],
         j: u32,
         gate: Gate,
+        kept: Option<&[f32; 6]>,
     ) -> Option<(f64, [f64; 6])> {
         if j == u32::MAX {
             return None;
@@ -613,7 +618,14 @@ impl Pairing<'_> {
         if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > max_distance * max_distance {
             return None;
         }
-        let (r, normal) = gate.residual(self, [x.x, x.y, x.z], j, d, normal);
+        let (r, normal) = match kept.filter(|p| gate.blend_per_metre > 0.0 && !p[0].is_nan()) {
+            Some(p) => {
+                let n = [p[3], p[4], p[5]];
+                let r = n[0] * (x.x - p[0]) + n[1] * (x.y - p[1]) + n[2] * (x.z - p[2]);
+                (r as f64, Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64))
+            }
+            None => gate.residual(self, [x.x, x.y, x.z], j, d, normal),
+        };
         let jr = Vec3::new(y.x as f64, y.y as f64, y.z as f64).cross(&normal);
         Some((r, [normal.x, normal.y, normal.z, jr.x, jr.y, jr.z]))
     }
@@ -812,7 +824,7 @@ pub(crate) fn refine_from(
     let pose = (rotation.matrix().cast::<f32>(), translation.cast::<f32>());
     let scale = annealed_scale(config, iterations, settled);
     let gate = Gate::new(config, reference.grid(), settled);
-    let deff = pairing.design_effect(&pose, query_points, &pairs, scale, gate);
+    let deff = pairing.design_effect(&pose, query_points, (&pairs, &planes), scale, gate);
     Ok(Refinement {
         reference_level_from_query_level: Isometry3::from_parts(
             Translation3::from(translation),
