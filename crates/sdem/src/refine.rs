@@ -57,12 +57,14 @@ pub struct RefineConfig {
     /// KITTI frames 13 % of a 3,000-point sample paired, and it left 4–6 mm of error where every
     /// point leaves 0.6; see [`crate::localize::REFINE_POINTS`]).
     pub max_points: usize,
-    /// Once settled, a query point's residual is its distance from the reference's surface
-    /// blended over the reference points in the 3 × 3 cells around its pair's and within this
-    /// many cells' widths at its range (their planes averaged with weights `(1 − d² / R²)²` of
-    /// their distance `d` from it; see [`BLEND_RADIUS_CELLS`]), not from its nearest point's
-    /// plane alone; 0 keeps the nearest point's plane. At most 2: beyond, the 3 × 3 cells hold
-    /// too few of the points the radius reaches.
+    /// With a radius above 0, once settled, a query point's residual is its distance from the
+    /// reference's surface blended over the reference points in the 3 × 3 cells around its
+    /// pair's and within this many cells' widths at its range (their planes averaged with
+    /// weights `(1 − d² / R²)²` of their distance `d` from it; [`BLEND_RADIUS_CELLS`] is the
+    /// radius measured best), not from its nearest point's plane alone. 0 (the default) keeps
+    /// the nearest point's plane: the blend is more accurate on pairs of real scans but changed
+    /// the loop's course on hard routes (see [`BLEND_RADIUS_CELLS`]). At most 2: beyond, the
+    /// 3 × 3 cells hold too few of the points the radius reaches.
     pub blend_radius_cells: f64,
 }
 
@@ -105,7 +107,7 @@ impl Default for RefineConfig {
             association: Association::Nearest,
             converged_step: 1e-5,
             max_points: 0,
-            blend_radius_cells: normals::BLEND_RADIUS_CELLS,
+            blend_radius_cells: 0.0,
         }
     }
 }

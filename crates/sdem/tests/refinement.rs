@@ -60,3 +60,61 @@ fn a_refinement_started_on_a_sample_ends_on_every_point() {
         dr.to_degrees()
     );
 }
+
+/// The blended surface (`blend_radius_cells`, an option) refines a noisy pair to the truth as
+/// the nearest planes do, to a different pose (it is not the nearest planes' residual under
+/// another name), and 0 is the default.
+#[test]
+fn the_blended_surface_refines_to_the_truth() {
+    assert_eq!(
+        LocalizeOptions::default().refinement.blend_radius_cells,
+        0.0
+    );
+    let scene = sim::paper_room();
+    let truth = pose_from_parts(
+        Vec3::new(0.17, 0.09, 0.01),
+        Attitude::from_degrees(-1.0, 1.5, 3.0),
+    );
+    let noisy = |world_from_sensor: &Pose, seed: u64| {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let sweep = sim::scan(
+            &scene,
+            &SensorConfig::default(),
+            world_from_sensor,
+            0.005,
+            &mut rng,
+        );
+        Sdem::from_points(
+            &sweep.points_in_sensor(),
+            &sweep.mean_attitude(),
+            &SdemConfig::default(),
+        )
+        .unwrap()
+    };
+    let reference = noisy(&Pose::identity(), 21);
+    let query = noisy(&truth, 22);
+    let options = |blend| {
+        let mut o = LocalizeOptions {
+            window: SearchWindow::around(&truth.translation.vector, [0.06, 0.06, 0.04]),
+            heading: HeadingWindow {
+                half_range_deg: 2.0,
+                step_deg: None,
+            },
+            ..Default::default()
+        };
+        o.refinement.blend_radius_cells = blend;
+        o
+    };
+    let nearest = localize(&reference, &query, &options(0.0)).unwrap();
+    let blended = localize(&reference, &query, &options(1.5)).unwrap();
+    for found in [&nearest, &blended] {
+        let (dt, dr) = pose_error(&truth, &found.reference_from_query);
+        assert!(
+            dt < 0.003 && dr.to_degrees() < 0.1,
+            "{dt} m, {} deg off",
+            dr.to_degrees()
+        );
+    }
+    let (dt, _) = pose_error(&nearest.reference_from_query, &blended.reference_from_query);
+    assert!(dt > 1e-7, "the blend changed nothing ({dt} m)");
+}
