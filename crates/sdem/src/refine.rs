@@ -143,7 +143,8 @@ impl RefineConfig {
         if !(0.0..=MAX_BLEND_RADIUS_CELLS).contains(&self.blend_radius_cells) {
             return Err(Error::Invalid(format!(
                 "refinement.blend_radius_cells = {} must lie in 0..={MAX_BLEND_RADIUS_CELLS} \
-                 (0: the nearest point's plane alone; the default is {BLEND_RADIUS_CELLS})",
+                 (0, the default: the nearest point's plane alone; {BLEND_RADIUS_CELLS} measured \
+                 best)",
                 self.blend_radius_cells
             )));
         }
