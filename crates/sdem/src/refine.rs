@@ -537,18 +537,9 @@ impl Pairing<'_> {
                 let plane = &mut planes[i];
                 if plane[0].is_nan() {
                     let (r, n) = gate.residual(self, x, j, d, normal);
-                    let foot = [
-                        x[0] - (r * n.x) as f32,
-                        x[1] - (r * n.y) as f32,
-                        x[2] - (r * n.z) as f32,
-                    ];
-                    let (nx, ny, nz) = (n.x as f32, n.y as f32, n.z as f32);
-                    *plane = [foot[0], foot[1], foot[2], nx, ny, nz];
+                    *plane = kept_plane(x, r, &n);
                 }
-                let n = [plane[3], plane[4], plane[5]];
-                let r =
-                    n[0] * (x[0] - plane[0]) + n[1] * (x[1] - plane[1]) + n[2] * (x[2] - plane[2]);
-                (r as f64, Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64))
+                from_kept_plane(plane, x)
             } else {
                 gate.residual(self, x, j, d, normal)
             };
@@ -621,17 +612,34 @@ impl Pairing<'_> {
         if (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64 > max_distance * max_distance {
             return None;
         }
+        let x = [x.x, x.y, x.z];
         let (r, normal) = match kept.filter(|p| gate.blend_per_metre > 0.0 && !p[0].is_nan()) {
-            Some(p) => {
-                let n = [p[3], p[4], p[5]];
-                let r = n[0] * (x.x - p[0]) + n[1] * (x.y - p[1]) + n[2] * (x.z - p[2]);
-                (r as f64, Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64))
-            }
-            None => gate.residual(self, [x.x, x.y, x.z], j, d, normal),
+            Some(plane) => from_kept_plane(plane, x),
+            None => gate.residual(self, x, j, d, normal),
         };
         let jr = Vec3::new(y.x as f64, y.y as f64, y.z as f64).cross(&normal);
         Some((r, [normal.x, normal.y, normal.z, jr.x, jr.y, jr.z]))
     }
+}
+
+/// The plane a point at `x` with residual `r` along the unit normal `n` is kept against
+/// ([`Pairing::accumulate`]): its foot `x − r n` and `n`, in `f32`.
+fn kept_plane(x: [f32; 3], r: f64, n: &Vec3) -> [f32; 6] {
+    [
+        x[0] - (r * n.x) as f32,
+        x[1] - (r * n.y) as f32,
+        x[2] - (r * n.z) as f32,
+        n.x as f32,
+        n.y as f32,
+        n.z as f32,
+    ]
+}
+
+/// The residual of a point at `x` against a kept plane ([`kept_plane`]), and the plane's normal.
+fn from_kept_plane(plane: &[f32; 6], x: [f32; 3]) -> (f64, Vec3) {
+    let n = [plane[3], plane[4], plane[5]];
+    let r = n[0] * (x[0] - plane[0]) + n[1] * (x[1] - plane[1]) + n[2] * (x[2] - plane[2]);
+    (r as f64, Vec3::new(n[0] as f64, n[1] as f64, n[2] as f64))
 }
 
 /// The side, in reference cells, of the patches whose residuals [`design_effect`] compares.
@@ -941,104 +949,4 @@ fn check_plausible(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The closed-form normal agrees with nalgebra's iterative eigen-decomposition on random
-    /// patches: flat ones (the normal to 1e-9), and it refuses the lines and blobs nalgebra's
-    /// eigenvalues call not a surface.
-    #[test]
-    fn plane_normal_matches_the_iterative_eigenvectors() {
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
-        let (mut flat, mut refused) = (0, 0);
-        for _ in 0..2000 {
-            let rotation = Rotation3::new(Vec3::new(
-                rng.random_range(-3.0..3.0),
-                rng.random_range(-3.0..3.0),
-                rng.random_range(-3.0..3.0),
-            ));
-            let scale: f64 = 10f64.powf(rng.random_range(-6.0..0.0));
-            let mut l = [
-                scale * rng.random_range(0.0..0.3),
-                scale * rng.random_range(0.1..1.0),
-                scale * rng.random_range(0.1..1.0),
-            ];
-            l.sort_by(f64::total_cmp);
-            let cov = rotation.matrix()
-                * Matrix3::from_diagonal(&Vec3::new(l[0], l[1], l[2]))
-                * rotation.matrix().transpose();
-            let eigen = cov.symmetric_eigen();
-            let mut order = [0usize, 1, 2];
-            order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
-            let (l0, l1) = (eigen.eigenvalues[order[0]], eigen.eigenvalues[order[1]]);
-            let surface = l1 > 0.0 && l0 <= 0.25 * l1;
-            // Too close to the threshold to tell apart by rounding: skipped.
-            if (l0 / l1 - 0.25).abs() < 1e-9 {
-                continue;
-            }
-            match plane_normal(&cov, 0.0) {
-                Some(n) => {
-                    assert!(surface, "{l:?}: a normal where nalgebra sees no surface");
-                    let expected = eigen.eigenvectors.column(order[0]);
-                    assert!((n.dot(&expected).abs() - 1.0).abs() < 1e-9, "{l:?}");
-                    flat += 1;
-                }
-                None => {
-                    assert!(!surface, "{l:?}: no normal where nalgebra sees a surface");
-                    refused += 1;
-                }
-            }
-        }
-        assert!(
-            flat > 500 && refused > 500,
-            "{flat} flat, {refused} refused"
-        );
-    }
-
-    #[test]
-    fn bad_settings_are_refused_by_name() {
-        for name in [
-            "kernel_scale_m",
-            "max_correspondence_m",
-            "max_rotation_deg",
-            "max_translation_m",
-            "converged_step",
-        ] {
-            for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-                let mut config = RefineConfig::default();
-                match name {
-                    "kernel_scale_m" => config.kernel_scale_m = bad,
-                    "max_correspondence_m" => config.max_correspondence_m = bad,
-                    "max_rotation_deg" => config.max_rotation_deg = bad,
-                    "converged_step" => config.converged_step = bad,
-                    _ => config.max_translation_m = bad,
-                }
-                let e = config.validate().unwrap_err().to_string();
-                assert!(e.contains(name), "{e}");
-            }
-        }
-        let none = RefineConfig {
-            max_iterations: 0,
-            ..Default::default()
-        };
-        let e = none.validate().unwrap_err().to_string();
-        assert!(e.contains("max_iterations = 0"), "{e}");
-        for bad in [-0.5, 2.5, f64::NAN, f64::INFINITY] {
-            let config = RefineConfig {
-                blend_radius_cells: bad,
-                ..Default::default()
-            };
-            let e = config.validate().unwrap_err().to_string();
-            assert!(e.contains("blend_radius_cells"), "{e}");
-        }
-        for fine in [0.0, 1.0, 2.0] {
-            let config = RefineConfig {
-                blend_radius_cells: fine,
-                ..Default::default()
-            };
-            config.validate().unwrap();
-        }
-        RefineConfig::default().validate().unwrap();
-    }
-}
+mod tests;
