@@ -8,17 +8,30 @@ use sdem::sdem::{Sdem, SdemConfig};
 use sdem::sensor::SensorConfig;
 use sdem_sim::sim;
 
-fn sdem_at(scene: &sim::Scene, world_from_sensor: &Pose, seed: u64) -> Sdem {
+/// The scene scanned from `world_from_sensor` with `range_noise_m` of noise.
+fn sdem_at(scene: &sim::Scene, world_from_sensor: &Pose, range_noise_m: f64, seed: u64) -> Sdem {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let sweep = sim::scan(
         scene,
         &SensorConfig::default(),
         world_from_sensor,
-        0.0,
+        range_noise_m,
         &mut rng,
     );
     let grid = SdemConfig::default();
     Sdem::from_points(&sweep.points_in_sensor(), &sweep.mean_attitude(), &grid).unwrap()
+}
+
+/// A small window (±6 cm, ±4 cm high, ±2° of heading) about the true offset.
+fn near(truth: &Pose) -> LocalizeOptions {
+    LocalizeOptions {
+        window: SearchWindow::around(&truth.translation.vector, [0.06, 0.06, 0.04]),
+        heading: HeadingWindow {
+            half_range_deg: 2.0,
+            step_deg: None,
+        },
+        ..Default::default()
+    }
 }
 
 /// An even sample of 300 points takes the first strides, every point the rest: the estimate
@@ -30,18 +43,11 @@ fn a_refinement_started_on_a_sample_ends_on_every_point() {
         Vec3::new(0.21, -0.13, 0.02),
         Attitude::from_degrees(1.0, -2.0, 4.0),
     );
-    let reference = sdem_at(&scene, &Pose::identity(), 11);
-    let query = sdem_at(&scene, &truth, 12);
+    let reference = sdem_at(&scene, &Pose::identity(), 0.0, 11);
+    let query = sdem_at(&scene, &truth, 0.0, 12);
     assert!(query.surface_points().len() > 3000);
     let options = |max_points| {
-        let mut o = LocalizeOptions {
-            window: SearchWindow::around(&truth.translation.vector, [0.06, 0.06, 0.04]),
-            heading: HeadingWindow {
-                half_range_deg: 2.0,
-                step_deg: None,
-            },
-            ..Default::default()
-        };
+        let mut o = near(&truth);
         o.refinement.max_points = max_points;
         o
     };
@@ -75,33 +81,10 @@ fn the_blended_surface_refines_to_the_truth() {
         Vec3::new(0.17, 0.09, 0.01),
         Attitude::from_degrees(-1.0, 1.5, 3.0),
     );
-    let noisy = |world_from_sensor: &Pose, seed: u64| {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let sweep = sim::scan(
-            &scene,
-            &SensorConfig::default(),
-            world_from_sensor,
-            0.005,
-            &mut rng,
-        );
-        Sdem::from_points(
-            &sweep.points_in_sensor(),
-            &sweep.mean_attitude(),
-            &SdemConfig::default(),
-        )
-        .unwrap()
-    };
-    let reference = noisy(&Pose::identity(), 21);
-    let query = noisy(&truth, 22);
+    let reference = sdem_at(&scene, &Pose::identity(), 0.005, 21);
+    let query = sdem_at(&scene, &truth, 0.005, 22);
     let options = |blend| {
-        let mut o = LocalizeOptions {
-            window: SearchWindow::around(&truth.translation.vector, [0.06, 0.06, 0.04]),
-            heading: HeadingWindow {
-                half_range_deg: 2.0,
-                step_deg: None,
-            },
-            ..Default::default()
-        };
+        let mut o = near(&truth);
         o.refinement.blend_radius_cells = blend;
         o
     };
