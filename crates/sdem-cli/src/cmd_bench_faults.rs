@@ -197,7 +197,9 @@ fn describe(faults: &[Fault], config: &FaultConfig) -> String {
 /// A short name for a kind of doubt about a match, for the false alarms' tally.
 fn reason_kind(doubt: &Doubt) -> &'static str {
     match doubt {
-        Doubt::RunnerUp { .. } | Doubt::AnotherRotation { .. } => "runner-up close",
+        Doubt::RunnerUp { .. } | Doubt::AnotherRotation { .. } | Doubt::SeenThrough { .. } => {
+            "runner-up close"
+        }
         Doubt::RefinementFailed { .. } => "refinement failed",
         Doubt::FlatCovariance { .. } | Doubt::FlatCost { .. } | Doubt::Unconstrained { .. } => {
             "flat cost"

@@ -391,7 +391,7 @@ impl Localization {
     /// ``overlap_fraction``, ``inlier_fraction``, ``refined_inlier_fraction``, ``runner_up_cost``,
     /// ``runner_up_cost_at_least``, ``covariance`` (on the levelled reference's axes),
     /// ``weakest_direction``, ``weakest_sigma_m``, ``strongest_sigma_m``, ``flat_direction``,
-    /// ``ambiguous``, and the search's ``cost``, ``rms_m``, ``overlap``, ``runner_up``,
+    /// ``seen_through_fraction``, ``ambiguous``, and the search's ``cost``, ``rms_m``, ``overlap``, ``runner_up``,
     /// ``candidates_total``, ``candidates_evaluated``, ``nodes_bounded``, ``on_window_edge``,
     /// ``heading_correction_deg`` and ``refinement`` (``outcome``, ``iterations``,
     /// ``converged``, ``rms_m``). A new dict at each access.
@@ -441,6 +441,8 @@ impl Localization {
 ///   ``best_cost``).
 /// - ``unrefuted_rotation``: another rotation agrees as well where the scans overlap, but
 ///   overlaps less (``angle_deg``, ``overlap_fraction``, ``best_overlap_fraction``).
+/// - ``seen_through``: a cheaper pose puts returns where the other scan saw through; the pose
+///   is the best that does not (``distance_m``, ``cost``, ``seen_through_fraction``).
 /// - ``taken_from_prediction``: along a free direction the position is the prediction's
 ///   (``direction``, ``shift_m``).
 /// - ``prior_conflict``: the scans alone fit a place far from the pose much better; the

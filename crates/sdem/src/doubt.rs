@@ -107,6 +107,18 @@ pub enum Doubt {
         /// The same share at the optimum.
         best_overlap_fraction: f64,
     },
+    /// Eq. (1)'s lowest cost lies at another pose, where one scan's returns lie in space the
+    /// other scan's beams passed through ([`crate::free_space`]): a wrong basin of a scene that
+    /// repeats itself (a corridor's far wall drawn across the corridor). The pose returned is
+    /// the best candidate that does not contradict the scans so; eq. (1) alone prefers the other.
+    SeenThrough {
+        /// How far the cheaper candidate lies from the pose returned, metres.
+        distance_m: f64,
+        /// Its cost (eq. 1) on the grid it was found on, m².
+        cost: f64,
+        /// The share of its compared returns that the other scan saw through.
+        seen_through_fraction: f64,
+    },
     /// The scans alone fit a place far from the pose found much better than the pose: the
     /// prediction in the cost (odometry, `--prior`) held the pose away from what the scans say.
     PriorConflict {
@@ -164,6 +176,7 @@ impl Doubt {
             Doubt::AttitudeCorrected { .. } => "attitude_corrected",
             Doubt::AnotherRotation { .. } => "another_rotation",
             Doubt::UnrefutedRotation { .. } => "unrefuted_rotation",
+            Doubt::SeenThrough { .. } => "seen_through",
             Doubt::TakenFromPrediction { .. } => "taken_from_prediction",
             Doubt::PriorConflict { .. } => "prior_conflict",
         }
@@ -275,6 +288,18 @@ impl fmt::Display for Doubt {
                  end)",
                 overlap_fraction * 100.0,
                 best_overlap_fraction * 100.0
+            ),
+            Doubt::SeenThrough {
+                distance_m,
+                cost,
+                seen_through_fraction,
+            } => write!(
+                f,
+                "a candidate {:.0} cm away costs less ({cost:.3e} m²), but {:.0} % of the \
+                 returns it compares lie where the other scan saw through: the pose is the best \
+                 candidate that does not contradict the scans so",
+                distance_m * 100.0,
+                seen_through_fraction * 100.0
             ),
             Doubt::PriorConflict {
                 distance_m,
@@ -404,6 +429,15 @@ mod tests {
                 false,
             ),
             (
+                Doubt::SeenThrough {
+                    distance_m: 1.2,
+                    cost: 1.5e-3,
+                    seen_through_fraction: 0.2,
+                },
+                "seen_through",
+                true,
+            ),
+            (
                 Doubt::PriorConflict {
                     distance_m: 0.34,
                     cost: 4.5e-4,
@@ -431,6 +465,7 @@ mod tests {
                 | Doubt::Unconstrained { .. }
                 | Doubt::AnotherRotation { .. }
                 | Doubt::UnrefutedRotation { .. }
+                | Doubt::SeenThrough { .. }
                 | Doubt::PriorConflict { .. } => 3,
                 Doubt::FlatCost { .. } => 4,
             };

@@ -65,6 +65,7 @@ pub mod bnb;
 pub mod cost;
 pub mod doubt;
 pub mod error;
+pub mod free_space;
 pub mod geometry;
 pub mod global;
 pub mod index;

@@ -101,6 +101,8 @@ struct PairRecord {
     /// `None` where the scans share too few cells at that pose to compare.
     cost_at_estimate: Option<f64>,
     cost_at_truth: Option<f64>,
+    /// [`sdem::localize::Diagnostics::seen_through_fraction`] at the estimate.
+    seen_through_fraction: Option<f64>,
 }
 
 impl PairRecord {
@@ -647,6 +649,7 @@ fn localize_case(
         error: None,
         cost_at_estimate: None,
         cost_at_truth: None,
+        seen_through_fraction: None,
     };
     match result {
         Ok((reference, query, found)) => {
@@ -666,6 +669,7 @@ fn localize_case(
             record.correct = t <= success.0 && r <= success.1;
             record.trusted = found.trusted;
             record.doubts = found.doubts.iter().map(|d| d.kind()).collect();
+            record.seen_through_fraction = Some(found.diagnostics.seen_through_fraction);
         }
         Err(e) => record.error = Some(e.to_string()),
     }

@@ -70,6 +70,8 @@ struct ReviewRecord {
     /// NEES of sdem's covariance over the six axes and over the translation.
     nees: Option<f64>,
     nees_translation: Option<f64>,
+    /// [`sdem::localize::Diagnostics::seen_through_fraction`] at sdem's pose.
+    seen_through_fraction: Option<f64>,
     gicp_translation_error_mm: Option<f64>,
     gicp_rotation_error_deg: Option<f64>,
     gicp_error: Option<String>,
@@ -355,6 +357,7 @@ fn localize_review(
         error: None,
         nees: None,
         nees_translation: None,
+        seen_through_fraction: None,
         gicp_translation_error_mm: None,
         gicp_rotation_error_deg: None,
         gicp_error: None,
@@ -372,6 +375,7 @@ fn localize_review(
                 .and_then(|c| nees(&review.truth, &found.reference_from_query, c));
             record.nees = consistency.map(|c| c.0);
             record.nees_translation = consistency.map(|c| c.1);
+            record.seen_through_fraction = Some(found.diagnostics.seen_through_fraction);
         }
         Err(e) => record.error = Some(e.to_string()),
     }

@@ -34,6 +34,7 @@ DoubtKind = Literal[
     "attitude_corrected",
     "another_rotation",
     "unrefuted_rotation",
+    "seen_through",
     "taken_from_prediction",
     "prior_conflict",
 ]

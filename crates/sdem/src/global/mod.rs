@@ -372,6 +372,14 @@ fn search_headings(
             }
         }
     }
+    // A hypothesis whose optimum the other scan saw through loses to one it did not see
+    // through ([`crate::free_space`]; the same rule as a runner-up's in one search).
+    if let Some((heading, again)) = not_seen_through(&found, &others, |h| {
+        turned(h).and_then(|q| localize(&reference_sdem, &q, &full))
+    }) {
+        others.push((best_heading, std::mem::replace(&mut found, again)));
+        best_heading = heading;
+    }
     // Rivals were searched at the surfaces' levelling: they are judged against the best cost
     // found there, not against the cost of a search levelled again by the points.
     let rival_base = found.cost;
@@ -431,6 +439,39 @@ fn search_headings(
     found.diagnostics.ambiguous |= found.doubts.iter().any(Doubt::is_other_rotation);
     found.trusted = found.doubts.is_empty();
     Ok(found)
+}
+
+/// Among the other hypotheses' optima (heading, match), the cheapest whose returns the other
+/// scan saw through far less than `found`'s, searched in full by `search` at its heading,
+/// when `found`'s are seen through by [`crate::localize::SEEN_THROUGH_TO_RECHECK`] or more and
+/// the full search keeps the difference; with [`Doubt::SeenThrough`] naming `found`.
+fn not_seen_through(
+    found: &Localization,
+    others: &[(f64, Localization)],
+    search: impl Fn(f64) -> Result<Localization>,
+) -> Option<(f64, Localization)> {
+    let seen_through = found.diagnostics.seen_through_fraction;
+    if seen_through < crate::localize::SEEN_THROUGH_TO_RECHECK {
+        return None;
+    }
+    let better = |f: &Localization| {
+        crate::localize::seen_through_less(f.diagnostics.seen_through_fraction, seen_through)
+    };
+    let &(heading, _) = (others.iter())
+        .filter(|(_, f)| better(f))
+        .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))?;
+    let mut again = search(heading).ok()?;
+    if !better(&again) {
+        return None;
+    }
+    again.doubts.push(Doubt::SeenThrough {
+        distance_m: (found.offset - again.offset).norm(),
+        cost: found.cost,
+        seen_through_fraction: seen_through,
+    });
+    again.diagnostics.ambiguous = true;
+    again.trusted = false;
+    Some((heading, again))
 }
 
 /// The refinement may move the pose this far from the grid's optimum, metres and degrees, when

@@ -141,6 +141,7 @@ pub(super) fn diagnose(
         weakest_support,
         strongest_sigma_m: weakest.map(|w| w.2),
         flat_direction: flat,
+        seen_through_fraction: 0.0,
         ambiguous: doubts.iter().any(Doubt::is_ambiguity),
     };
     (diagnostics, doubts)

@@ -11,8 +11,8 @@ use crate::doubt::Doubt;
 use crate::error::{Error, Result};
 use crate::geometry::{pose_from_parts, Attitude, AttitudeSigma, Pose, Vec3};
 use crate::localize::{
-    localize, CostConfig, Diagnostics, Localization, LocalizeOptions, OffsetPrior,
-    RefinementSummary, SearchWindow,
+    localize, seen_through_less, CostConfig, Diagnostics, Localization, LocalizeOptions,
+    OffsetPrior, RefinementSummary, SearchWindow,
 };
 use crate::map::{world_from_query, Descriptor, Map};
 use crate::sdem::Sdem;
@@ -272,10 +272,16 @@ impl MapSearch<'_> {
                             - matched.world_from_sensor.translation.vector)
                             .norm();
                         if apart > peak {
-                            if r.cost < matched.cost {
+                            if better_match(&r, &matched) {
                                 std::mem::swap(&mut matched, &mut r);
                             }
-                            if r.cost < ratio * matched.cost {
+                            if r.cost < matched.cost {
+                                matched.doubts.push(Doubt::SeenThrough {
+                                    distance_m: apart,
+                                    cost: r.cost,
+                                    seen_through_fraction: r.diagnostics.seen_through_fraction,
+                                });
+                            } else if r.cost < ratio * matched.cost {
                                 matched.doubts.push(Doubt::RunnerUp {
                                     distance_m: apart,
                                     cost: r.cost,
@@ -768,13 +774,30 @@ pub(super) fn same_nodes(a: &[(usize, usize)], b: &[(usize, usize)]) -> bool {
     ids(a) == ids(b)
 }
 
-/// Keeps `matched` (of `prediction`) in `best` when it costs less.
+/// Whether `a` is a better match than `b`: the one whose returns the other scans saw through
+/// far less ([`crate::localize::seen_through_less`]: a basin whose surfaces stand where the
+/// map's beams passed is no place the scan was taken); else the cheaper.
+pub(super) fn better_match(a: &Matched, b: &Matched) -> bool {
+    let (a_through, b_through) = (
+        a.diagnostics.seen_through_fraction,
+        b.diagnostics.seen_through_fraction,
+    );
+    if seen_through_less(a_through, b_through) {
+        true
+    } else if seen_through_less(b_through, a_through) {
+        false
+    } else {
+        a.cost < b.cost
+    }
+}
+
+/// Keeps `matched` (of `prediction`) in `best` when it is the better match ([`better_match`]).
 pub(super) fn keep_best(
     best: &mut Option<(Matched, Prediction)>,
     matched: Matched,
     prediction: &Prediction,
 ) {
-    if best.as_ref().is_none_or(|(b, _)| matched.cost < b.cost) {
+    if best.as_ref().is_none_or(|(b, _)| better_match(&matched, b)) {
         *best = Some((matched, prediction.clone()));
     }
 }

@@ -275,7 +275,8 @@ impl Slam {
     /// A place for a lost stop's segment to start from, never a match: `prediction`'s window
     /// against the nodes of `segment` that see most of the scan, with the runner-up search and
     /// only the configured floor of inliers. `Some` when the match found there doubts only how
-    /// little it shares.
+    /// little it shares (a cheaper place whose surfaces the map saw through is no rival:
+    /// [`Doubt::SeenThrough`]).
     fn try_guess(
         &self,
         scan: &ScanInput,
@@ -286,7 +287,10 @@ impl Slam {
         let start = Instant::now();
         let query = self.query_sdem(scan, &prediction.attitude)?;
         let references = self.segment_references(&query, prediction, segment, last);
-        let unique = |m: &Matched| (m.doubts.iter()).all(|d| matches!(d, Doubt::FewInliers { .. }));
+        let unique = |m: &Matched| {
+            (m.doubts.iter())
+                .all(|d| matches!(d, Doubt::FewInliers { .. } | Doubt::SeenThrough { .. }))
+        };
         let found = self.search_recorded(
             scan,
             prediction,
