@@ -52,7 +52,7 @@ use crate::scan::input::Scan;
 use crate::sdem::{Sdem, SdemConfig, SCAN_ELEVATION_MARGIN_DEG};
 use crate::search::matched_heading_step;
 use nalgebra::Rotation3;
-use std::f64::consts::PI;
+use std::f64::consts::{FRAC_PI_2, PI};
 
 /// The largest tilt from level a scan without an attitude reading may have, radians: roll and
 /// pitch each within ±30° (a robot lying on rubble; hand-held and vehicle scanners are well
@@ -373,10 +373,32 @@ fn search_headings(
         }
     }
     // A hypothesis whose optimum the other scan saw through loses to one it did not see
-    // through ([`crate::free_space`]; the same rule as a runner-up's in one search).
-    if let Some((heading, again)) = not_seen_through(&found, &others, |h| {
-        turned(h).and_then(|q| localize(&reference_sdem, &q, &full))
-    }) {
+    // through ([`crate::free_space`]; the same rule as a runner-up's in one search). Where none
+    // does, the optimum's quarter and half turns are screened too: a hall or a ditch looks
+    // alike turned so, and the surfaces' correlation may not have proposed the true one.
+    let search_full = |h: f64| turned(h).and_then(|q| localize(&reference_sdem, &q, &full));
+    let mut swapped = not_seen_through(&found, &others, search_full);
+    if swapped.is_none()
+        && found.diagnostics.seen_through_fraction >= crate::localize::SEEN_THROUGH_TO_RECHECK
+    {
+        let found_heading = wrap_pi(best_heading + found.heading_correction);
+        let cap = options.ambiguous_cost_ratio * found.cost;
+        for turn in [FRAC_PI_2, -FRAC_PI_2, PI] {
+            let h = wrap_pi(found_heading + turn);
+            let near_one = (others.iter())
+                .any(|(g, _)| wrap_pi(g - h).abs() <= 2.0 * HYPOTHESIS_HEADING_DEG.to_radians());
+            if h.abs() > prior.heading_half_range || near_one {
+                continue;
+            }
+            if let Ok(Some(f)) =
+                turned(h).and_then(|q| localize_below(&reference_sdem, &q, &screening, cap))
+            {
+                others.push((h, f));
+            }
+        }
+        swapped = not_seen_through(&found, &others, search_full);
+    }
+    if let Some((heading, again)) = swapped {
         others.push((best_heading, std::mem::replace(&mut found, again)));
         best_heading = heading;
     }
