@@ -155,7 +155,7 @@ mod tests {
     use crate::sdem::SdemConfig;
 
     /// A box room's walls, floor and ceiling seen from `origin`: x in 0..6, y in −1.5..1.5,
-    /// z in −0.5..2 (metres), sampled every 2 cm.
+    /// z in −0.5..2 (metres), sampled every 5 cm.
     fn room(origin: Vec3) -> Vec<Vec3> {
         let mut points = Vec::new();
         let step = 0.05;
@@ -202,6 +202,42 @@ mod tests {
         // the reference saw across.
         let short = free_space(&reference, &query, &shifted(0.2));
         assert!(short.fraction() > 0.05, "{short:?}");
+    }
+
+    #[test]
+    fn scans_tilted_and_turned_are_compared_in_their_levelled_frames() {
+        // The same room seen by two sensors tilted and turned differently, each S-DEM levelled
+        // by its attitude: the true pose between the sensor frames sees nothing through, a
+        // pose 80 cm short does.
+        let sensor = |origin: Vec3, attitude: &Attitude| {
+            let sensor_from_world = attitude.rotation().inverse();
+            let points: Vec<Vec3> = (room(origin).iter())
+                .map(|p| sensor_from_world * p)
+                .collect();
+            let world_from_sensor = Pose::from_parts(
+                nalgebra::Translation3::from(origin),
+                nalgebra::UnitQuaternion::from_rotation_matrix(&attitude.rotation()),
+            );
+            (
+                Sdem::from_points(&points, attitude, &SdemConfig::default()).unwrap(),
+                world_from_sensor,
+            )
+        };
+        let (reference, world_from_reference) = sensor(
+            Vec3::new(1.5, 0.0, 0.5),
+            &Attitude::from_degrees(8.0, -5.0, 30.0),
+        );
+        let (query, world_from_query) = sensor(
+            Vec3::new(2.5, 0.0, 0.5),
+            &Attitude::from_degrees(-6.0, 10.0, -40.0),
+        );
+        let truth = world_from_reference.inverse() * world_from_query;
+        let at_truth = free_space(&reference, &query, &truth);
+        assert!(at_truth.compared > 1000, "{at_truth:?}");
+        assert!(at_truth.fraction() < 0.005, "{at_truth:?}");
+        let short =
+            world_from_reference.inverse() * Pose::translation(-0.8, 0.0, 0.0) * world_from_query;
+        assert!(free_space(&reference, &query, &short).fraction() > 0.05);
     }
 
     #[test]

@@ -272,7 +272,7 @@ pub(crate) fn localize_below(
     cap: f64,
 ) -> Result<Option<Localization>> {
     let start = std::time::Instant::now();
-    let Some(found) = search_below(reference, query, config, cap)? else {
+    let Some(found) = search_below(reference, query, config, cap, &config.window)? else {
         return Ok(None);
     };
     let mut found = not_seen_through(reference, query, config, found);
@@ -280,7 +280,7 @@ pub(crate) fn localize_below(
     Ok(Some(found))
 }
 
-/// A match's returns seen through by more than this share ([`crate::free_space`]) send the
+/// A match's returns seen through by this share or more ([`crate::free_space`]) send the
 /// search to its runner-up (in [`localize`]). At right poses of simulated pairs the share
 /// is 0.1 % at most with clean scans, up to 4 % with dust, 7 % with a person walking by and 18 %
 /// with rubble moved between the scans; at the wrong basins eq. (1) preferred on the
@@ -344,18 +344,15 @@ fn not_seen_through(
         runner_up: false,
         ..config.clone()
     };
-    let Ok(Some(mut again)) = search_below(reference, query, &options, f64::INFINITY) else {
+    // On the small window's edge is a doubt only where that edge is the caller's (the heading
+    // window is the caller's own).
+    let Ok(Some(mut again)) =
+        search_below(reference, query, &options, f64::INFINITY, &config.window)
+    else {
         return found;
     };
     if !better(again.diagnostics.seen_through_fraction) {
         return found;
-    }
-    // On the small window's edge is a doubt only where that edge is the caller's.
-    let edge_is_callers = (0..3)
-        .any(|a| window.min[a] <= config.window.min[a] || window.max[a] >= config.window.max[a]);
-    if !edge_is_callers && again.on_window_edge {
-        again.on_window_edge = false;
-        again.doubts.retain(|d| !matches!(d, Doubt::OnWindowEdge));
     }
     again.doubts.push(Doubt::SeenThrough {
         distance_m: (found.offset - again.offset).norm(),
@@ -372,12 +369,15 @@ fn not_seen_through(
     again
 }
 
-/// [`localize_below`] without the check of what the scans saw through.
+/// [`localize_below`] without the check of what the scans saw through. An optimum on the
+/// search window's edge is one only where the refined pose lies on the edge of `edges`: the
+/// caller's window, which holds the search's.
 fn search_below(
     reference: &Sdem,
     query: &Sdem,
     config: &LocalizeOptions,
     cap: f64,
+    edges: &SearchWindow,
 ) -> Result<Option<Localization>> {
     let start = std::time::Instant::now();
     let (reference_attitude, query_attitude) = (reference.attitude(), query.attitude());
@@ -489,7 +489,7 @@ fn search_below(
         .is_some()
         .then_some((offset, heading_correction));
     let on_window_edge = grid.on_edge(grid_index, full_turn)
-        && stays_on_edge(&grid, grid_index, full_turn, &config.window, refined_pose);
+        && stays_on_edge(&grid, grid_index, full_turn, edges, refined_pose);
     if on_window_edge {
         doubts.push(Doubt::OnWindowEdge);
     }

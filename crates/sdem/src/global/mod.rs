@@ -413,9 +413,19 @@ fn search_headings(
         options: &full,
         prior,
     };
+    // What the scans saw through still refutes the cheaper rotation after a re-levelling, whose
+    // doubts are its own.
+    let refuted = (found.doubts.iter())
+        .find(|d| matches!(d, Doubt::SeenThrough { .. }))
+        .cloned();
     if let Some((heading, again)) = relevel.run(&found) {
         others.push((best_heading, std::mem::replace(&mut found, again)));
         best_heading = heading;
+        if let Some(doubt) = refuted {
+            if !(found.doubts.iter()).any(|d| matches!(d, Doubt::SeenThrough { .. })) {
+                found.doubts.push(doubt);
+            }
+        }
     }
     let found_heading = wrap_pi(best_heading + found.heading_correction);
     // A scanner that sees part of the way round, turned round, sees what the other did not:
@@ -458,7 +468,7 @@ fn search_headings(
     } else if let Some(doubt) = unrefuted(&found, rivals.iter().copied()) {
         found.doubts.push(doubt);
     }
-    found.diagnostics.ambiguous |= found.doubts.iter().any(Doubt::is_other_rotation);
+    found.diagnostics.ambiguous |= found.doubts.iter().any(Doubt::is_ambiguity);
     found.trusted = found.doubts.is_empty();
     Ok(found)
 }
