@@ -18,8 +18,8 @@
 //! nothing within range, or been dropped); the cells around it make an edge of a surface,
 //! sampled a cell further by one scan than by the other, no contradiction.
 
-use crate::geometry::Pose;
-use crate::sdem::{wrap_column, Sdem};
+use crate::geometry::{pose_from_parts, Pose, Vec3};
+use crate::sdem::Sdem;
 
 /// A return lies in space the other scan saw through when it is nearer than every return of
 /// the other scan's cell and the cells around it by this much, metres, …
@@ -73,12 +73,7 @@ impl std::ops::Add for FreeSpace {
 /// the reference's S-DEM, and the reference's in the query's.
 pub fn free_space(reference: &Sdem, query: &Sdem, reference_from_query: &Pose) -> FreeSpace {
     // Each S-DEM's points lie in its levelled frame: the sensor frame turned by its attitude.
-    let level = |s: &Sdem| {
-        Pose::from_parts(
-            nalgebra::Translation3::identity(),
-            nalgebra::UnitQuaternion::from_rotation_matrix(&s.attitude().rotation()),
-        )
-    };
+    let level = |s: &Sdem| pose_from_parts(Vec3::zeros(), *s.attitude());
     let reference_level_from_query_level =
         level(reference) * reference_from_query * level(query).inverse();
     let (a, b) = rayon::join(
@@ -97,33 +92,22 @@ pub fn free_space(reference: &Sdem, query: &Sdem, reference_from_query: &Pose) -
 /// [`free_space`] one way: `other`'s boundary points, moved by `into`, looked up in `sdem`.
 fn seen_through(sdem: &Sdem, other: &Sdem, into: &Pose) -> FreeSpace {
     let grid = sdem.grid();
-    let (columns, rows) = (grid.azimuth_cells() as i32, grid.elevation_cells() as i32);
-    let full_circle = grid.is_full_circle();
     let ranges = sdem.ranges();
-    // The nearest return of a cell and the eight around it (∞ where none has one).
+    // The nearest return of a cell and the eight around it (∞ where none has one; NaN, an
+    // unknown cell, never compares less).
     let nearest_around = |cell: u32| {
-        let (column, row) = (
-            (cell % columns as u32) as i32,
-            (cell / columns as u32) as i32,
-        );
-        let mut nearest = f32::INFINITY;
-        for r in (row - 1).max(0)..=(row + 1).min(rows - 1) {
-            for c in column - 1..=column + 1 {
-                let c = if full_circle {
-                    wrap_column(c, columns)
-                } else if (0..columns).contains(&c) {
-                    c
-                } else {
-                    continue;
-                };
-                let range = ranges[(r * columns + c) as usize];
-                // NaN (unknown) never compares less.
-                if range < nearest {
-                    nearest = range;
-                }
-            }
-        }
-        nearest
+        (grid.cells_around(cell as usize).into_iter().flatten())
+            .map(|c| ranges[c])
+            .fold(
+                f32::INFINITY,
+                |nearest, range| {
+                    if range < nearest {
+                        range
+                    } else {
+                        nearest
+                    }
+                },
+            )
     };
     let rotation = into.rotation.to_rotation_matrix();
     let (rotation, translation) = (rotation.matrix().cast::<f32>(), into.translation.vector);
@@ -151,7 +135,7 @@ fn seen_through(sdem: &Sdem, other: &Sdem, into: &Pose) -> FreeSpace {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{Attitude, Vec3};
+    use crate::geometry::Attitude;
     use crate::sdem::SdemConfig;
 
     /// A box room's walls, floor and ceiling seen from `origin`: x in 0..6, y in −1.5..1.5,
@@ -214,10 +198,7 @@ mod tests {
             let points: Vec<Vec3> = (room(origin).iter())
                 .map(|p| sensor_from_world * p)
                 .collect();
-            let world_from_sensor = Pose::from_parts(
-                nalgebra::Translation3::from(origin),
-                nalgebra::UnitQuaternion::from_rotation_matrix(&attitude.rotation()),
-            );
+            let world_from_sensor = pose_from_parts(origin, *attitude);
             (
                 Sdem::from_points(&points, attitude, &SdemConfig::default()).unwrap(),
                 world_from_sensor,

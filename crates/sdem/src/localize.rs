@@ -354,19 +354,26 @@ fn not_seen_through(
     if !better(again.diagnostics.seen_through_fraction) {
         return found;
     }
-    again.doubts.push(Doubt::SeenThrough {
-        distance_m: (found.offset - again.offset).norm(),
-        cost: found.cost,
-        seen_through_fraction: seen_through,
-    });
+    prefer_to_seen_through(&mut again, &found);
     again.diagnostics.runner_up_cost = Some(found.cost);
     again.diagnostics.runner_up_cost_at_least = Some(found.cost);
     again.diagnostics.runner_up_offset = Some(found.grid_offset.into());
     again.diagnostics.runner_up_heading_deg = Some(found.grid_heading.to_degrees());
     again.runner_up = Some(found.cost);
-    again.diagnostics.ambiguous = true;
-    again.trusted = false;
     again
+}
+
+/// Marks `found` as taken instead of the cheaper `seen_through`, whose returns the other scan
+/// saw through far more ([`seen_through_less`]): [`Doubt::SeenThrough`] naming it, so neither
+/// trusted nor unambiguous.
+pub(crate) fn prefer_to_seen_through(found: &mut Localization, seen_through: &Localization) {
+    found.doubts.push(Doubt::SeenThrough {
+        distance_m: (seen_through.offset - found.offset).norm(),
+        cost: seen_through.cost,
+        seen_through_fraction: seen_through.diagnostics.seen_through_fraction,
+    });
+    found.diagnostics.ambiguous = true;
+    found.trusted = false;
 }
 
 /// [`localize_below`] without the check of what the scans saw through. An optimum on the
@@ -467,7 +474,7 @@ fn search_below(
         };
         scored.map_or(f64::INFINITY, |c| c.cost)
     };
-    let (diagnostics, mut doubts) = diagnose(
+    let (mut diagnostics, mut doubts) = diagnose(
         config,
         best.compared,
         &best.at_best,
@@ -497,7 +504,6 @@ fn search_below(
         .covariance
         .map(|c| in_query_frame(&Matrix6::from_fn(|i, j| c[i][j]), &level_from_query));
     let reference_from_query = level_from_reference.inverse() * level_from_query;
-    let mut diagnostics = diagnostics;
     diagnostics.seen_through_fraction =
         crate::free_space::free_space(reference, query, &reference_from_query).fraction();
     Ok(Some(Localization {

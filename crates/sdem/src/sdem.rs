@@ -354,6 +354,30 @@ impl GridSpec {
         self.full_circle
     }
 
+    /// `cell` and the eight cells around it, row by row from the lowest elevation, each row's
+    /// columns from the lowest azimuth (wrapped on a full circle); `None` past the first or last
+    /// row, or past a partial grid's first or last column.
+    #[inline]
+    pub fn cells_around(&self, cell: usize) -> [Option<usize>; 9] {
+        let n_az = self.azimuth_cells as i32;
+        let n_el = self.elevation_cells as i32;
+        let (row, column) = (cell as i32 / n_az, cell as i32 % n_az);
+        let columns = [column - 1, column, column + 1].map(|a| {
+            if (0..n_az).contains(&a) {
+                Some(a)
+            } else if self.full_circle {
+                Some(wrap_column(a, n_az))
+            } else {
+                None
+            }
+        });
+        std::array::from_fn(|i| {
+            let e = row - 1 + (i / 3) as i32;
+            let a = columns[i % 3]?;
+            (0..n_el).contains(&e).then_some((e * n_az + a) as usize)
+        })
+    }
+
     /// Cell size, radians.
     pub fn resolution(&self) -> f64 {
         self.resolution as f64

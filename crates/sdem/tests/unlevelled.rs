@@ -3,9 +3,9 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 use sdem::geometry::{pose_error, Pose};
-use sdem::{Attitude, Doubt, LocalizeOptions, Scan, SearchWindow};
+use sdem::{Attitude, Doubt, Localization, LocalizeOptions, Scan, SearchWindow};
 use sdem_sim::benchmark::{bench_pairs, BenchPair, PairConfig};
-use sdem_sim::suites::{SuiteConfig, SuiteGenerator, SuiteScene};
+use sdem_sim::suites::{SuiteConfig, SuiteGenerator, SuitePair, SuiteScene};
 
 fn points(v: &[sdem::geometry::Vec3]) -> Vec<Point3<f64>> {
     v.iter().map(|p| Point3::from(*p)).collect()
@@ -115,6 +115,26 @@ fn a_floor_alone_without_attitude_is_never_a_confident_pose() {
     }
 }
 
+/// Pair `index` of `suite` (the `unlevelled` suite), drawn in `scene`, localized without
+/// attitude over the suite's window at the bench's step.
+fn localized_without_attitude(
+    suite: &SuiteGenerator,
+    index: usize,
+    scene: SuiteScene,
+) -> (SuitePair, Localization) {
+    let options = LocalizeOptions {
+        window: suite.config().search_window(),
+        step_m: sdem_sim::benchmark::PAIRS_STEP_M,
+        ..Default::default()
+    };
+    let pair = suite.pairs(index..index + 1).unwrap().remove(0);
+    assert_eq!(pair.scene, scene, "pair {index}");
+    let reference = Scan::from_points(&points(&pair.reference_points), None).unwrap();
+    let query = Scan::from_points(&points(&pair.query_points), None).unwrap();
+    let found = sdem::localize(&reference, &query, &options).unwrap();
+    (pair, found)
+}
+
 #[test]
 fn a_corridor_seen_turned_round_leaves_the_heading_undecided() {
     // Two corridor pairs of the `unlevelled` suite (seed 1), both without attitude, each query
@@ -123,17 +143,8 @@ fn a_corridor_seen_turned_round_leaves_the_heading_undecided() {
     // pair 190 the mirrored one (a half turn off, eq. 1 lower there than at the truth). Where
     // the two headings overlap, both agree: the scans cannot decide, and both say so.
     let suite = SuiteGenerator::new(1, SuiteConfig::unlevelled()).unwrap();
-    let options = LocalizeOptions {
-        window: SuiteConfig::unlevelled().search_window(),
-        step_m: sdem_sim::benchmark::PAIRS_STEP_M,
-        ..Default::default()
-    };
     for (index, right) in [(94, true), (190, false)] {
-        let pair = &suite.pairs(index..index + 1).unwrap()[0];
-        assert_eq!(pair.scene, SuiteScene::Corridor);
-        let reference = Scan::from_points(&points(&pair.reference_points), None).unwrap();
-        let query = Scan::from_points(&points(&pair.query_points), None).unwrap();
-        let found = sdem::localize(&reference, &query, &options).unwrap();
+        let (pair, found) = localized_without_attitude(&suite, index, SuiteScene::Corridor);
         assert_eq!(
             is_right(&pair.truth, &found.reference_from_query),
             right,
@@ -159,26 +170,17 @@ fn a_rotation_whose_walls_the_other_scan_saw_through_loses_to_one_that_contradic
     // other rotation hypothesis wins. In pair 71, a hall too, the surfaces' hypotheses found
     // no pose near the truth: the seen-through optimum's quarter turn, screened for it, wins. In
     // the ditch of pair 125 the lowest cost at the true rotation lies 20 cm off, where its
-    // runner-up is the truth: the search's own runner-up wins. At each cheaper pose 7–35 % of the returns compared stand in space the other scan's
-    // beams crossed; at the truth none do: it is the answer, with the cheaper pose as its
-    // doubt.
+    // runner-up is the truth: the search's own runner-up wins. At each cheaper pose 7–35 % of
+    // the returns compared stand in space the other scan's beams crossed; at the truth none
+    // do: it is the answer, with the cheaper pose as its doubt.
     let suite = SuiteGenerator::new(1, SuiteConfig::unlevelled()).unwrap();
-    let options = LocalizeOptions {
-        window: SuiteConfig::unlevelled().search_window(),
-        step_m: sdem_sim::benchmark::PAIRS_STEP_M,
-        ..Default::default()
-    };
     for (index, scene) in [
         (7, SuiteScene::Hall),
         (71, SuiteScene::Hall),
         (107, SuiteScene::Hall),
         (125, SuiteScene::Ditch),
     ] {
-        let pair = &suite.pairs(index..index + 1).unwrap()[0];
-        assert_eq!(pair.scene, scene);
-        let reference = Scan::from_points(&points(&pair.reference_points), None).unwrap();
-        let query = Scan::from_points(&points(&pair.query_points), None).unwrap();
-        let found = sdem::localize(&reference, &query, &options).unwrap();
+        let (pair, found) = localized_without_attitude(&suite, index, scene);
         assert!(
             is_right(&pair.truth, &found.reference_from_query),
             "pair {index}: {:?}",

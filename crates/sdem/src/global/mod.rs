@@ -377,10 +377,12 @@ fn search_headings(
     // does, the optimum's quarter and half turns are screened too: a hall or a ditch looks
     // alike turned so, and the surfaces' correlation may not have proposed the true one.
     let search_full = |h: f64| turned(h).and_then(|q| localize(&reference_sdem, &q, &full));
-    let mut swapped = not_seen_through(&found, &others, search_full);
-    if swapped.is_none()
-        && found.diagnostics.seen_through_fraction >= crate::localize::SEEN_THROUGH_TO_RECHECK
-    {
+    let seen_through =
+        found.diagnostics.seen_through_fraction >= crate::localize::SEEN_THROUGH_TO_RECHECK;
+    let mut swapped = seen_through
+        .then(|| not_seen_through(&found, &others, search_full))
+        .flatten();
+    if seen_through && swapped.is_none() {
         let found_heading = wrap_pi(best_heading + found.heading_correction);
         let cap = options.ambiguous_cost_ratio * found.cost;
         for turn in [FRAC_PI_2, -FRAC_PI_2, PI] {
@@ -474,20 +476,20 @@ fn search_headings(
 }
 
 /// Among the other hypotheses' optima (heading, match), the cheapest whose returns the other
-/// scan saw through far less than `found`'s, searched in full by `search` at its heading,
-/// when `found`'s are seen through by [`crate::localize::SEEN_THROUGH_TO_RECHECK`] or more and
-/// the full search keeps the difference; with [`Doubt::SeenThrough`] naming `found`.
+/// scan saw through far less than `found`'s (seen through by
+/// [`crate::localize::SEEN_THROUGH_TO_RECHECK`] or more: the caller's check), searched in full
+/// by `search` at its heading, when the full search keeps the difference; with
+/// [`Doubt::SeenThrough`] naming `found`.
 fn not_seen_through(
     found: &Localization,
     others: &[(f64, Localization)],
     search: impl Fn(f64) -> Result<Localization>,
 ) -> Option<(f64, Localization)> {
-    let seen_through = found.diagnostics.seen_through_fraction;
-    if seen_through < crate::localize::SEEN_THROUGH_TO_RECHECK {
-        return None;
-    }
     let better = |f: &Localization| {
-        crate::localize::seen_through_less(f.diagnostics.seen_through_fraction, seen_through)
+        crate::localize::seen_through_less(
+            f.diagnostics.seen_through_fraction,
+            found.diagnostics.seen_through_fraction,
+        )
     };
     let &(heading, _) = (others.iter())
         .filter(|(_, f)| better(f))
@@ -496,13 +498,7 @@ fn not_seen_through(
     if !better(&again) {
         return None;
     }
-    again.doubts.push(Doubt::SeenThrough {
-        distance_m: (found.offset - again.offset).norm(),
-        cost: found.cost,
-        seen_through_fraction: seen_through,
-    });
-    again.diagnostics.ambiguous = true;
-    again.trusted = false;
+    crate::localize::prefer_to_seen_through(&mut again, found);
     Some((heading, again))
 }
 

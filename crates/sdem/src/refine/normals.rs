@@ -239,39 +239,22 @@ impl SurfaceNormals {
         cell: u32,
         radius: f32,
     ) -> Option<(f32, [f32; 3])> {
-        let n_az = grid.azimuth_cells() as i32;
-        let n_el = grid.elevation_cells() as i32;
-        let (row, column) = (cell as i32 / n_az, cell as i32 % n_az);
-        // The three columns, wrapped once here on a full circle; `None` past a partial grid's
-        // edge.
-        let columns = [column - 1, column, column + 1].map(|a| {
-            if (0..n_az).contains(&a) {
-                Some(a as usize)
-            } else if grid.is_full_circle() {
-                Some(wrap_column(a, n_az) as usize)
-            } else {
-                None
-            }
-        });
         let inverse = 1.0 / (radius * radius);
         let (mut weights, mut distance) = (0f32, 0f32);
         let mut normal = [0f32; 3];
-        for e in (row - 1).max(0)..=(row + 1).min(n_el - 1) {
-            let base = (e * n_az) as usize;
-            for a in columns.into_iter().flatten() {
-                let s = &self.surface_of_cell[base + a];
-                let d = [x[0] - s[0], x[1] - s[1], x[2] - s[2]];
-                let t = 1.0 - (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * inverse;
-                // NaN: no point with a normal in the cell.
-                if t.is_nan() || t <= 0.0 {
-                    continue;
-                }
-                let w = t * t;
-                weights += w;
-                distance += w * (s[3] * d[0] + s[4] * d[1] + s[5] * d[2]);
-                for k in 0..3 {
-                    normal[k] += w * s[3 + k];
-                }
+        for c in grid.cells_around(cell as usize).into_iter().flatten() {
+            let s = &self.surface_of_cell[c];
+            let d = [x[0] - s[0], x[1] - s[1], x[2] - s[2]];
+            let t = 1.0 - (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) * inverse;
+            // NaN: no point with a normal in the cell.
+            if t.is_nan() || t <= 0.0 {
+                continue;
+            }
+            let w = t * t;
+            weights += w;
+            distance += w * (s[3] * d[0] + s[4] * d[1] + s[5] * d[2]);
+            for k in 0..3 {
+                normal[k] += w * s[3 + k];
             }
         }
         let length = (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]).sqrt();

@@ -284,3 +284,51 @@ fn grids_beyond_the_cell_limit_are_refused_with_the_finest_that_fits() {
         super::MAX_CELLS
     );
 }
+
+#[test]
+fn the_cells_around_a_cell_wrap_on_a_full_circle_and_stop_at_a_partial_grids_edges() {
+    use super::{GridSpec, SdemConfig};
+    let full = GridSpec::new(&SdemConfig::default()).unwrap();
+    let n = full.azimuth_cells();
+    // Row 1, column 0: the column before is the last one; rows 0–2 all there.
+    let around = full.cells_around(n);
+    assert_eq!(
+        around,
+        [
+            Some(n - 1),
+            Some(0),
+            Some(1),
+            Some(2 * n - 1),
+            Some(n),
+            Some(n + 1),
+            Some(3 * n - 1),
+            Some(2 * n),
+            Some(2 * n + 1),
+        ]
+    );
+    // The first row has none below it.
+    assert!(full.cells_around(5)[..3].iter().all(Option::is_none));
+    let half = GridSpec::new(&SdemConfig {
+        azimuth_min_deg: -90.0,
+        azimuth_max_deg: 90.0,
+        ..SdemConfig::default()
+    })
+    .unwrap();
+    let m = half.azimuth_cells();
+    let last_row_last_column = half.len() - 1;
+    let around = half.cells_around(last_row_last_column);
+    assert_eq!(
+        around,
+        [
+            Some(last_row_last_column - m - 1),
+            Some(last_row_last_column - m),
+            None,
+            Some(last_row_last_column - 1),
+            Some(last_row_last_column),
+            None,
+            None,
+            None,
+            None,
+        ]
+    );
+}
