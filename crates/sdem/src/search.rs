@@ -206,9 +206,9 @@ pub struct CandidateGrid {
     pub step: f64,
     pub counts: [usize; 4],
     pub yaws: Vec<f64>,
-    /// Candidates whose translation lies within this ball (centre, radius in metres) are left
-    /// out of every search: the runner-up search excludes the peak's neighbourhood.
-    pub exclude: Option<(Vec3, f64)>,
+    /// Candidates whose translation lies within any of these balls (centre, radius in metres)
+    /// are left out of every search: the runner-up search excludes the peak's neighbourhood.
+    pub exclude: Vec<(Vec3, f64)>,
 }
 
 /// Integer coordinates of a candidate: x, y, z, heading.
@@ -230,26 +230,28 @@ impl CandidateGrid {
             step,
             counts,
             yaws: if yaws.is_empty() { vec![0.0] } else { yaws },
-            exclude: None,
+            exclude: Vec::new(),
         })
     }
 
     /// True when the candidate is left out (see [`Self::exclude`]).
     pub fn excluded(&self, idx: Index) -> bool {
         self.exclude
-            .is_some_and(|(c, r)| (self.offset(idx) - c).norm() <= r)
+            .iter()
+            .any(|(c, r)| (self.offset(idx) - c).norm() <= *r)
     }
 
-    /// True when every candidate of the box `lo..=hi` is left out.
+    /// True when every candidate of the box `lo..=hi` lies within one of the excluded balls
+    /// (a box the balls cover only together is kept: its candidates are left out one by one).
     pub fn box_excluded(&self, lo: Index, hi: Index) -> bool {
-        self.exclude.is_some_and(|(c, r)| {
+        self.exclude.iter().any(|(c, r)| {
             let (a, b) = (self.offset(lo) - c, self.offset(hi) - c);
             let far = Vec3::new(
                 a.x.abs().max(b.x.abs()),
                 a.y.abs().max(b.y.abs()),
                 a.z.abs().max(b.z.abs()),
             );
-            far.norm() <= r
+            far.norm() <= *r
         })
     }
 

@@ -219,15 +219,48 @@ fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
         let (best, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(ratio));
         let (best_cost, best_flat) = best.unwrap();
         let mut outside = grid.clone();
-        outside.exclude = Some((grid.offset(grid.index(best_flat)), 0.03));
+        outside.exclude = vec![(grid.offset(grid.index(best_flat)), 0.03)];
         let cap = ratio * best_cost;
-        let (second, _) = runner_up(&prepared, &outside, cap, reserve.unwrap());
+        let (second, _) = runner_up(&prepared, &outside, cap, &reserve.unwrap());
         let oracle = oracle_below(&costs, &outside, cap);
         assert_eq!(second, oracle, "ratio {ratio}");
         found += oracle.is_some() as usize;
     }
     // Not vacuous: the higher caps do hold candidates.
     assert!(found >= 2, "only {found} of the caps held a runner-up");
+}
+
+/// One reserve serves several searches, each leaving out a ball more (the optimum's, then
+/// each answer's): every answer is the exhaustive search's below the cap outside all the balls.
+#[test]
+fn the_reserve_serves_searches_leaving_out_more_and_more() {
+    let truth = Vec3::new(0.12, -0.08, 0.03);
+    let (r, q) = coarse_pair(4, truth, 2.0);
+    let cost = CostConfig::default();
+    let window = SearchWindow::around(&truth, [0.12, 0.12, 0.04]);
+    let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
+    let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
+    let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
+    let prepared = Prepared::new(&correlator);
+    let costs = costs_of(&mut correlator, &grid);
+    let ratio = 5.0;
+    let (best, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(ratio));
+    let (best_cost, best_flat) = best.unwrap();
+    let reserve = reserve.unwrap();
+    let cap = ratio * best_cost;
+    let mut outside = grid.clone();
+    outside.exclude = vec![(grid.offset(grid.index(best_flat)), 0.03)];
+    let mut answers = 0;
+    for round in 0..5 {
+        let (found, _) = runner_up(&prepared, &outside, cap, &reserve);
+        let oracle = oracle_below(&costs, &outside, cap);
+        assert_eq!(found, oracle, "round {round}");
+        let Some((_, flat)) = found else { break };
+        answers += 1;
+        outside.exclude.push((grid.offset(grid.index(flat)), 0.03));
+    }
+    // Not vacuous: several balls were left out in turn.
+    assert!(answers >= 3, "only {answers} answers below the cap");
 }
 
 /// The workers share one queue and finish in any order: the minimum and the runner-up are
@@ -246,7 +279,7 @@ fn the_answers_do_not_depend_on_the_workers() {
     let costs = costs_of(&mut correlator, &grid);
     let best = oracle_below(&costs, &grid, f64::INFINITY).unwrap();
     let mut outside = grid.clone();
-    outside.exclude = Some((grid.offset(grid.index(best.1)), 0.03));
+    outside.exclude = vec![(grid.offset(grid.index(best.1)), 0.03)];
     let cap = 1.5 * best.0;
     let second = oracle_below(&costs, &outside, cap);
     assert!(
@@ -260,7 +293,7 @@ fn the_answers_do_not_depend_on_the_workers() {
             .unwrap();
         let (found, found_second) = pool.install(|| {
             let (found, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(1.5));
-            let (found_second, _) = runner_up(&prepared, &outside, cap, reserve.unwrap());
+            let (found_second, _) = runner_up(&prepared, &outside, cap, &reserve.unwrap());
             (found, found_second)
         });
         assert_eq!(found, Some(best), "{threads} workers");

@@ -135,6 +135,41 @@ fn localized_without_attitude(
     (pair, found)
 }
 
+/// Pair `index` localized without attitude comes back right, untrusted, with the doubt
+/// `seen_through` naming a cheaper pose more than `min_distance_m` away whose returns the other
+/// scan saw through by over 5 %, where the pose returned puts under 1 % so.
+fn right_with_the_seen_through_pose_as_doubt(
+    suite: &SuiteGenerator,
+    index: usize,
+    scene: SuiteScene,
+    min_distance_m: f64,
+) {
+    let (pair, found) = localized_without_attitude(suite, index, scene);
+    assert!(
+        is_right(&pair.truth, &found.reference_from_query),
+        "pair {index}: {:?}",
+        pose_error(&pair.truth, &found.reference_from_query)
+    );
+    let (distance, seen_through) = (found.doubts.iter())
+        .find_map(|d| match d {
+            Doubt::SeenThrough {
+                distance_m,
+                seen_through_fraction,
+                ..
+            } => Some((*distance_m, *seen_through_fraction)),
+            _ => None,
+        })
+        .unwrap_or_else(|| panic!("pair {index}: {:?}", found.doubts));
+    assert!(distance > min_distance_m, "pair {index}: {distance} m");
+    assert!(seen_through > 0.05, "pair {index}: {seen_through}");
+    assert!(
+        found.diagnostics.seen_through_fraction < 0.01,
+        "pair {index}: {}",
+        found.diagnostics.seen_through_fraction
+    );
+    assert!(!found.trusted);
+}
+
 #[test]
 fn a_corridor_seen_turned_round_leaves_the_heading_undecided() {
     // Two corridor pairs of the `unlevelled` suite (seed 1), both without attitude, each query
@@ -180,26 +215,21 @@ fn a_rotation_whose_walls_the_other_scan_saw_through_loses_to_one_that_contradic
         (107, SuiteScene::Hall),
         (125, SuiteScene::Ditch),
     ] {
-        let (pair, found) = localized_without_attitude(&suite, index, scene);
-        assert!(
-            is_right(&pair.truth, &found.reference_from_query),
-            "pair {index}: {:?}",
-            pose_error(&pair.truth, &found.reference_from_query)
-        );
-        let (distance, seen_through) = (found.doubts.iter())
-            .find_map(|d| match d {
-                Doubt::SeenThrough {
-                    distance_m,
-                    seen_through_fraction,
-                    ..
-                } => Some((*distance_m, *seen_through_fraction)),
-                _ => None,
-            })
-            .unwrap_or_else(|| panic!("pair {index}: {:?}", found.doubts));
-        assert!(distance > 0.1, "pair {index}: {distance} m");
-        assert!(seen_through > 0.05, "pair {index}: {seen_through}");
-        assert!(found.diagnostics.seen_through_fraction < 0.01);
-        assert!(!found.trusted);
+        right_with_the_seen_through_pose_as_doubt(&suite, index, scene, 0.1);
+    }
+}
+
+#[test]
+fn a_seen_through_basin_is_left_for_the_next_one_that_is_not() {
+    // Two pairs of the `unlevelled` suite (seed 1), without attitude, where eq. (1) is lowest at
+    // a wrong place 57–89 cm from the truth whose returns the other scan saw through, and the
+    // runner-up (the best candidate just outside 10 cm of it) lies in the same basin, seen
+    // through as well. Leaving out 10 cm around each such candidate in turn, the search reaches
+    // the truth as the second (rubble, pair 64) or third (hall, pair 83) candidate: it is the
+    // answer, with the cheaper place as its doubt.
+    let suite = SuiteGenerator::new(1, SuiteConfig::unlevelled()).unwrap();
+    for (index, scene) in [(64, SuiteScene::RubbleVoid), (83, SuiteScene::Hall)] {
+        right_with_the_seen_through_pose_as_doubt(&suite, index, scene, 0.3);
     }
 }
 

@@ -83,6 +83,7 @@ pub(super) fn with_margin(limit: f64) -> f64 {
 const SPLIT_TIE: f64 = 0.99;
 
 /// A box waiting in the queue, ordered by bound, then by the estimated cost at its centre.
+#[derive(Clone)]
 pub(super) struct Pending {
     pub(super) bound: f64,
     pub(super) estimate: f64,
@@ -127,8 +128,8 @@ pub(super) enum Outcome {
     Closed,
 }
 
-/// What a search set aside for a second one with a higher cap (the runner-up, see
-/// [`runner_up`]): every box it dropped and every candidate it scored or cut short whose bound
+/// What a search set aside for later ones with a higher cap (the runner-up and the candidates
+/// of other basins after it, see [`runner_up`]): every box it dropped and every candidate it scored or cut short whose bound
 /// or cost lay within `ratio` × the best of the moment. With it, the second search starts where
 /// the first stopped instead of bounding the whole window again.
 ///

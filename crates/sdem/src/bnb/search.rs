@@ -107,7 +107,7 @@ impl<'a> BranchAndBound<'a> {
 
     /// A search for the best candidate below the cap among what `reserve` holds (the grid may
     /// now leave out candidates the first search had).
-    pub(super) fn run_from(&self, reserve: Reserve) -> (Option<Scored>, BranchAndBoundStats) {
+    pub(super) fn run_from(&self, reserve: &Reserve) -> (Option<Scored>, BranchAndBoundStats) {
         let mut progress = Progress::new(self.cap, None);
         let cap = self.cap;
         let leaves: Vec<Node> = reserve
@@ -131,10 +131,11 @@ impl<'a> BranchAndBound<'a> {
         }
         let boxes: Vec<Pending> = reserve
             .boxes
-            .into_iter()
+            .iter()
             .filter(|p| {
                 !progress.prunable(p.bound) && !self.grid.box_excluded(p.node.lo, p.node.hi)
             })
+            .cloned()
             .collect();
         // A box whose bound the first search cut short (its estimate is then ∞) holds only a
         // partial sum: bounded again against this search's limit, most drop out. (Rare: with a

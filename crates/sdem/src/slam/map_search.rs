@@ -246,8 +246,9 @@ impl MapSearch<'_> {
         search_yaw: Option<f64>,
     ) -> Result<Matched> {
         let mut matched = self.fine_at(scan, prediction, &coarse, &coarse.world_from_sensor)?;
-        // A coarse search that took its runner-up for what the scans saw through names the
-        // cheaper optimum as its runner-up: both basins are searched finely alike.
+        // A coarse search that took its runner-up (or another basin's candidate) for what the
+        // scans saw through names the cheaper optimum as its runner-up: both basins are
+        // searched finely alike.
         let rival = (coarse.doubts.iter())
             .find(|d| matches!(d, Doubt::RunnerUp { .. } | Doubt::SeenThrough { .. }));
         let d = &coarse.diagnostics;
