@@ -164,6 +164,18 @@ pub struct Args {
     /// place that scores almost as well then raises no `runner_up` doubt).
     #[arg(long)]
     no_runner_up: bool,
+    /// The least share of the query's compared cells a candidate must share with the
+    /// reference to count (`CostConfig::min_overlap_fraction`), from 0 to 1; at least 100 cells
+    /// all the same. Lower it for scans that see little in common (a long step, a half-blocked
+    /// scanner): a match that shares little still comes with its doubts [default: 0.2; with
+    /// --map: the map's own].
+    #[arg(
+        long,
+        value_name = "FRACTION",
+        allow_hyphen_values = true,
+        value_parser = overlap_fraction
+    )]
+    min_overlap: Option<f64>,
     /// S-DEM cell size, degrees (with --map: the map's own).
     #[arg(
         long,
@@ -186,6 +198,15 @@ pub struct Args {
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
+}
+
+/// A clap value parser for `--min-overlap`: a share from 0 to 1.
+fn overlap_fraction(text: &str) -> Result<f64, String> {
+    crate::parse::number_in(
+        text,
+        0.0..=1.0,
+        "a share of the compared cells from 0 to 1 (0.2: a fifth)",
+    )
 }
 
 /// The `--search` values.
@@ -482,9 +503,13 @@ fn run_map(args: &Args, map: &std::path::Path) -> Result<Outcome> {
             "--map needs the scan to relocalize: --map DIR SCAN (or --scan SCAN)",
         ));
     };
-    let saved = crate::output::load_saved_map(&folder)?;
+    let mut saved = crate::output::load_saved_map(&folder)?;
     let points = sdem_io::read_points(scan)?;
-    // The map's own search settings (its config.toml), not this command's --step.
+    // The map's own search settings (its config.toml), not this command's --step; the least
+    // overlap may be lowered (or raised) for this scan.
+    if let Some(fraction) = args.min_overlap {
+        saved.config.localize.cost.min_overlap_fraction = fraction;
+    }
     let found = saved.relocalize(&points, attitude, near, None);
     let found = match found {
         Err(sdem::Error::NotFound { tried }) => bail!(
@@ -710,6 +735,7 @@ fn localize_config(
         cost: CostConfig {
             model,
             prior: args.prior,
+            min_overlap_fraction: (args.min_overlap).unwrap_or(base.cost.min_overlap_fraction),
             ..base.cost.clone()
         },
         runner_up: !args.no_runner_up,

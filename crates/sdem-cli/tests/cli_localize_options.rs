@@ -31,6 +31,8 @@ fn localize_numbers_out_of_range_are_usage_errors_naming_flag_and_range() {
         ("--prior", "0.1,0.2,0,0", "positive"),
         ("--prior", "0.1,0.2,0,-1", "positive"),
         ("--attitude-sigma-deg", "0,3", "σ"),
+        ("--min-overlap", "1.5", "from 0 to 1"),
+        ("--min-overlap", "-0.1", "from 0 to 1"),
     ] {
         let args = [&pair[..], &[flag, value]].concat();
         let e = usage_error(dir.path(), &args, &[flag, range]);
@@ -211,4 +213,38 @@ fn a_prior_that_overrules_the_scans_is_doubtful() {
         &[&pair[..], &["--prior", "0.337,0,0,0.001"]].concat(),
     );
     assert_eq!(right.code, Some(0), "{}\n{}", right.stdout, right.stderr);
+}
+
+/// `--min-overlap` is the floor on the share of the query's compared cells a candidate must
+/// share: raised to 99 %, only candidates sharing that much count, and the pose found among
+/// them (away from the truth, which shares less) comes back doubtful; at the default the same
+/// pair is trusted with less in common.
+#[test]
+fn the_least_overlap_can_be_set_and_the_search_obeys_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("ds");
+    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
+    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let pair = [
+        "localize",
+        s(&ds),
+        "--reference",
+        "0",
+        "--query",
+        "1",
+        "--json",
+    ];
+    let overlap = |args: &[&str]| {
+        let out = run(dir.path(), args);
+        let v: serde_json::Value = serde_json::from_str(&out.stdout)
+            .unwrap_or_else(|e| panic!("{e}: {}\n{}", out.stdout, out.stderr));
+        let fraction = v["diagnostics"]["overlap_fraction"].as_f64().unwrap();
+        (out.code, fraction)
+    };
+    let (code, default) = overlap(&pair);
+    assert_eq!(code, Some(0));
+    assert!(default < 0.99, "{default}");
+    let (code, raised) = overlap(&[&pair[..], &["--min-overlap", "0.99"]].concat());
+    assert!(raised >= 0.99, "{raised}");
+    assert_eq!(code, Some(3));
 }
