@@ -66,6 +66,25 @@ fn a_step_beyond_the_window_is_found_again_in_a_wider_one() {
     assert_eq!(slam.segments().len(), 1);
 }
 
+/// The first three stops of the route bench's `long-steps` of `seed`, mapped without
+/// odometry: the third opens a new segment, and every stop lies within 2 cm of the truth in the
+/// first stop's frame (the map's heading is its compass reading's). Their reports.
+fn long_steps_third_stop_opens_its_segment_at_the_truth(seed: u64) -> Vec<StepReport> {
+    let drawn = route(RouteKind::LongSteps, seed, &RouteConfig::default()).unwrap();
+    let stops = &drawn.run.stops[..3];
+    let mut slam = Slam::new(SlamOptions::default()).unwrap();
+    let reports: Vec<StepReport> = (stops.iter().enumerate())
+        .map(|(i, stop)| add(&mut slam, stop, i))
+        .collect();
+    assert_eq!(reports[2].status, StepStatus::NewSegment, "seed {seed}");
+    let map_from_truth = slam.poses()[0] * stops[0].world_from_sensor.inverse();
+    for (i, (pose, stop)) in slam.poses().iter().zip(stops).enumerate() {
+        let e = error_m(pose, &(map_from_truth * stop.world_from_sensor));
+        assert!(e < 0.02, "seed {seed}, stop {i}: {e} m off");
+    }
+    reports
+}
+
 #[test]
 fn a_long_step_is_not_placed_where_the_map_saw_through_its_walls() {
     // The route bench's `long-steps`, seed 5, without odometry: the third stop, 1.73 m on and
@@ -74,13 +93,7 @@ fn a_long_step_is_not_placed_where_the_map_saw_through_its_walls() {
     // the returns it compares lie in space the other scan's beams passed through; at the truth
     // none do. Too little is shared to trust the match, so the stop opens a segment, placed at
     // the match that contradicts nothing.
-    let drawn = route(RouteKind::LongSteps, 5, &RouteConfig::default()).unwrap();
-    let stops = &drawn.run.stops[..3];
-    let mut slam = Slam::new(SlamOptions::default()).unwrap();
-    let reports: Vec<StepReport> = (stops.iter().enumerate())
-        .map(|(i, stop)| add(&mut slam, stop, i))
-        .collect();
-    assert_eq!(reports[2].status, StepStatus::NewSegment);
+    let reports = long_steps_third_stop_opens_its_segment_at_the_truth(5);
     let refuted = (reports[2].attempts.iter())
         .flat_map(|a| &a.doubts)
         .find_map(|d| match d {
@@ -93,12 +106,6 @@ fn a_long_step_is_not_placed_where_the_map_saw_through_its_walls() {
         })
         .unwrap_or_else(|| panic!("{:#?}", reports[2].attempts));
     assert!(refuted.0 > 0.05 && refuted.1 > 1.0, "{refuted:?}");
-    // Stops in the first stop's frame: the map's heading is its compass reading's.
-    let map_from_truth = slam.poses()[0] * stops[0].world_from_sensor.inverse();
-    for (i, (pose, stop)) in slam.poses().iter().zip(stops).enumerate() {
-        let e = error_m(pose, &(map_from_truth * stop.world_from_sensor));
-        assert!(e < 0.02, "stop {i}: {e} m off");
-    }
 }
 
 #[test]
@@ -109,18 +116,7 @@ fn a_long_step_is_not_placed_in_a_wide_basin_the_map_saw_through() {
     // stops' beams crossed. The wrong basin is wider than the runner-up's 10 cm: looking only
     // at the runner-up, the stop was placed 1.0 m short. Looking at the next candidates beyond
     // each seen-through one's 10 cm, the stop opens its segment at the truth.
-    let drawn = route(RouteKind::LongSteps, 6, &RouteConfig::default()).unwrap();
-    let stops = &drawn.run.stops[..3];
-    let mut slam = Slam::new(SlamOptions::default()).unwrap();
-    let reports: Vec<StepReport> = (stops.iter().enumerate())
-        .map(|(i, stop)| add(&mut slam, stop, i))
-        .collect();
-    assert_eq!(reports[2].status, StepStatus::NewSegment);
-    let map_from_truth = slam.poses()[0] * stops[0].world_from_sensor.inverse();
-    for (i, (pose, stop)) in slam.poses().iter().zip(stops).enumerate() {
-        let e = error_m(pose, &(map_from_truth * stop.world_from_sensor));
-        assert!(e < 0.02, "stop {i}: {e} m off");
-    }
+    long_steps_third_stop_opens_its_segment_at_the_truth(6);
 }
 
 #[test]
