@@ -446,7 +446,12 @@ fn search_below(
         Translation3::from(offset),
         rotation * rotation_only(query_attitude).rotation,
     );
-    let runner_up = if config.runner_up {
+    let reference_from_query = level_from_reference.inverse() * level_from_query;
+    let seen_through =
+        crate::free_space::free_space(reference, query, &reference_from_query).fraction();
+    // The runner-up; and where the other scan saw through the optimum's returns, the first of
+    // the candidates of other basins it saw through far less.
+    let (runner_up, less_seen_through) = if config.runner_up {
         let search = RunnerUpSearch {
             grid: &grid,
             correlator: &correlator,
@@ -454,9 +459,21 @@ fn search_below(
             reserve: reserve.as_ref(),
             full_turn,
         };
-        search.run(grid_offset, cost, config)
+        let runner_up = search.run(grid_offset, cost, config);
+        let less_seen_through = (seen_through >= SEEN_THROUGH_TO_RECHECK)
+            .then(|| {
+                search.less_seen_through(
+                    reference,
+                    query,
+                    (grid_offset, cost, seen_through),
+                    runner_up,
+                    config,
+                )
+            })
+            .flatten();
+        (runner_up, less_seen_through)
     } else {
-        None
+        (None, None)
     };
     // Eq. (1) about the grid optimum (`false`: at its heading, the query levelled by its
     // reading) or about the refined pose (`true`: turned by the refined rotation, its tilt as
@@ -505,28 +522,7 @@ fn search_below(
     let covariance = diagnostics
         .covariance
         .map(|c| in_query_frame(&Matrix6::from_fn(|i, j| c[i][j]), &level_from_query));
-    let reference_from_query = level_from_reference.inverse() * level_from_query;
-    diagnostics.seen_through_fraction =
-        crate::free_space::free_space(reference, query, &reference_from_query).fraction();
-    let seen_through = diagnostics.seen_through_fraction;
-    let less_seen_through = (config.runner_up && seen_through >= SEEN_THROUGH_TO_RECHECK)
-        .then(|| {
-            let search = RunnerUpSearch {
-                grid: &grid,
-                correlator: &correlator,
-                prepared: prepared.as_ref(),
-                reserve: reserve.as_ref(),
-                full_turn,
-            };
-            search.less_seen_through(
-                reference,
-                query,
-                (grid_offset, cost, seen_through),
-                runner_up,
-                config,
-            )
-        })
-        .flatten();
+    diagnostics.seen_through_fraction = seen_through;
     let found = Localization {
         reference_from_query,
         covariance,
@@ -794,11 +790,17 @@ impl RunnerUpSearch<'_, '_> {
         cost: f64,
         config: &LocalizeOptions,
     ) -> Option<(f64, Vec3, f64)> {
-        let mut outside = self.grid.clone();
-        outside.exclude = vec![(grid_offset, config.peak_radius_m)];
         // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
         // the exact search cheap.
+        let outside = self.outside_peak(grid_offset, config);
         self.best_outside(&outside, config.ambiguous_cost_ratio * cost, config)
+    }
+
+    /// The grid without the peak radius around `grid_offset` (the optimum's neighbourhood).
+    fn outside_peak(&self, grid_offset: Vec3, config: &LocalizeOptions) -> CandidateGrid {
+        let mut outside = self.grid.clone();
+        outside.exclude = vec![(grid_offset, config.peak_radius_m)];
+        outside
     }
 
     /// The best candidate of `outside` costing at most `cap`: its cost, offset and heading.
@@ -836,8 +838,7 @@ impl RunnerUpSearch<'_, '_> {
         runner_up: Option<(f64, Vec3, f64)>,
         config: &LocalizeOptions,
     ) -> Option<Vec3> {
-        let mut outside = self.grid.clone();
-        outside.exclude = vec![(grid_offset, config.peak_radius_m)];
+        let mut outside = self.outside_peak(grid_offset, config);
         let cap = config.ambiguous_cost_ratio * cost;
         let mut next = runner_up;
         for looked_at in 1..=SEEN_THROUGH_BASINS {
