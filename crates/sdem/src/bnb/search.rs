@@ -110,23 +110,26 @@ impl<'a> BranchAndBound<'a> {
     pub(super) fn run_from(&self, reserve: &Reserve) -> (Option<Scored>, BranchAndBoundStats) {
         let mut progress = Progress::new(self.cap, None);
         let cap = self.cap;
-        let leaves: Vec<Node> = reserve
+        // The candidates, lowest bound first: their bounds are their costs where the first
+        // search scored them, and nearly so where it cut their sums short, so the best comes
+        // first and every candidate after it whose bound lies above it is left unscored.
+        let mut leaves: Vec<(f64, usize, Node)> = reserve
             .leaves
             .iter()
             .filter(|(node, lb)| *lb <= with_margin(cap) && !self.grid.excluded(node.lo))
-            .map(|(node, _)| *node)
+            .map(|&(node, lb)| (lb, self.grid.flat(node.lo), node))
             .collect();
-        let scored: Vec<Option<Scored>> = leaves
-            .par_iter()
-            .map_init(
-                || self.correlator(),
-                |correlator, node| self.score_leaf(correlator, node, cap),
-            )
-            .collect();
-        progress.stats.leaves_evaluated += leaves.len();
-        for s in scored.into_iter().flatten() {
-            if progress.best.is_none_or(|b| better(&s, &b)) {
-                progress.best = Some(s);
+        leaves.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut correlator = self.correlator();
+        for (lb, _, node) in leaves {
+            if progress.prunable(lb) {
+                break;
+            }
+            progress.stats.leaves_evaluated += 1;
+            if let Some(s) = self.score_leaf(&mut correlator, &node, progress.limit()) {
+                if progress.best.is_none_or(|b| better(&s, &b)) {
+                    progress.best = Some(s);
+                }
             }
         }
         let boxes: Vec<Pending> = reserve
