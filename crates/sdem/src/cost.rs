@@ -437,6 +437,9 @@ fn search_indices(query: &Sdem, voxel_m: f64) -> Vec<u32> {
 /// Points per block of a capped evaluation: the sum is checked against the cap after each.
 const BLOCK: usize = 512;
 
+/// Points per chunk of [`Correlator::ordered_lower_bound`]: its sum is checked after each.
+const ORDERED_CHUNK: usize = 64;
+
 /// A fixed permutation of `0..n` that spreads neighbours apart: `i ↦ i · s mod n` with a stride
 /// `s` near `n / φ` coprime to `n` (every index once).
 #[doc(hidden)]
@@ -492,6 +495,8 @@ pub struct Correlator<'a> {
     zbuffer: Vec<f32>,
     /// The query's boundary points, one coordinate per array (projective model).
     query_xyz: [Vec<f32>; 3],
+    /// Where each of [`Self::search_points`] lies in `query_xyz`.
+    slot_of_point: Vec<u32>,
     /// Scratch: moved points, their cells and ranges.
     moved: [Vec<f32>; 3],
     cells: Vec<u32>,
@@ -531,8 +536,13 @@ impl<'a> Correlator<'a> {
         // and a capped evaluation can stop early (see `evaluate_capped`).
         let order = scrambled_order(n);
         let column = |k: usize| -> Vec<f32> { order.iter().map(|&i| points[i][k]).collect() };
+        let mut slot_of_point = vec![0u32; n];
+        for (slot, &i) in order.iter().enumerate() {
+            slot_of_point[i] = slot as u32;
+        }
         Ok(Self {
             query_xyz: [column(0), column(1), column(2)],
+            slot_of_point,
             moved: [vec![0.0; n], vec![0.0; n], vec![0.0; n]],
             cells: vec![0; n],
             ranges: vec![0.0; n],
@@ -760,6 +770,103 @@ impl<'a> Correlator<'a> {
             }),
             None => Capped::NoOverlap,
         }
+    }
+
+    /// A lower bound on eq. (1) at `(offset, yaw)` from the points in a given order: `saturated`
+    /// points whose term is known to be `τ²` there (counted, not scored), then the points
+    /// `order` names (indices into [`Self::search_points`]), summed until the sum passes `cap`
+    /// (a mean cost, m²). The mean reached is returned: above `cap` when cut short, else the
+    /// full cost in this order (equal to [`Self::evaluate`]'s up to rounding, when `saturated`
+    /// and `order` cover every point; the overlap is not counted). The exact search scores a
+    /// candidate this way first, its points in the order its box's bound found their terms
+    /// largest (see `bnb::PointHint`): most candidates it scores lie above the best so far,
+    /// and in that order their sums pass it after fewer points.
+    #[doc(hidden)]
+    pub fn ordered_lower_bound(
+        &mut self,
+        offset: &Vec3,
+        yaw: f64,
+        saturated: u32,
+        order: &[u32],
+        cap: f64,
+    ) -> f64 {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has just been found to support AVX2.
+            return unsafe { self.ordered_lower_bound_avx2(offset, yaw, saturated, order, cap) };
+        }
+        self.ordered_lower_bound_any(offset, yaw, saturated, order, cap)
+    }
+
+    /// [`Self::ordered_lower_bound`] with AVX2 instructions.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn ordered_lower_bound_avx2(
+        &mut self,
+        offset: &Vec3,
+        yaw: f64,
+        saturated: u32,
+        order: &[u32],
+        cap: f64,
+    ) -> f64 {
+        self.ordered_lower_bound_any(offset, yaw, saturated, order, cap)
+    }
+
+    /// [`Self::ordered_lower_bound`]'s body, inlined into each of its builds.
+    #[inline(always)]
+    fn ordered_lower_bound_any(
+        &mut self,
+        offset: &Vec3,
+        yaw: f64,
+        saturated: u32,
+        order: &[u32],
+        cap: f64,
+    ) -> f64 {
+        let prior = self.prior_cost(offset);
+        let n = self.query_xyz[0].len();
+        let mean = |sum: f64| sum / n as f64 + prior;
+        let cap_sum = (cap - prior) * n as f64;
+        let truncation_sq = self.truncation_sq;
+        let mut sum = truncation_sq as f64 * saturated as f64;
+        if sum > cap_sum {
+            return mean(sum);
+        }
+        let grid = self.reference.grid();
+        let surfaces = self.reference.surfaces();
+        let t = offset.cast::<f32>();
+        let m = yaw_matrix(yaw);
+        let [qx, qy, qz] = &self.query_xyz;
+        let [mx, my, mz] = &mut self.moved;
+        for chunk in order.chunks(ORDERED_CHUNK) {
+            let len = chunk.len();
+            for (i, &p) in chunk.iter().enumerate() {
+                let k = self.slot_of_point[p as usize] as usize;
+                let (x, y, z) = (qx[k], qy[k], qz[k]);
+                mx[i] = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
+                my[i] = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
+                mz[i] = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
+            }
+            grid.cells_of_any(
+                &mx[..len],
+                &my[..len],
+                &mz[..len],
+                &mut self.cells[..len],
+                &mut self.ranges[..len],
+            );
+            for i in 0..len {
+                let cell = self.cells[i];
+                let term = if cell == u32::MAX {
+                    None
+                } else {
+                    surfaces.squared_distance(cell as usize, [mx[i], my[i], mz[i]], self.ranges[i])
+                };
+                sum += term.map_or(truncation_sq, |e2| e2.min(truncation_sq)) as f64;
+            }
+            if sum > cap_sum {
+                break;
+            }
+        }
+        mean(sum)
     }
 
     fn evaluate_virtual(&mut self, offset: &Vec3, rotation: &Matrix3<f32>) -> Option<Correlation> {

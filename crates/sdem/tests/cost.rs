@@ -81,3 +81,53 @@ fn search_points_keep_the_first_nearest_point_of_each_cube() {
         }
     }
 }
+
+/// The sum in a given order, which the exact search takes first for a candidate of a box it
+/// has bounded: over every point, in any order, it is eq. (1) up to rounding; cut short at a
+/// cap it stays at or below the cost and passes the cap; points counted as saturated add
+/// `τ²` each.
+#[test]
+fn an_ordered_sum_is_the_cost_in_another_order() {
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let (reference, query) = sdem_sim::benchmark::paper_pair().unwrap();
+    let config = CostConfig::default();
+    let mut correlator = Correlator::new(&reference, &query, &config).unwrap();
+    let n = correlator.search_points().len() as u32;
+    let tau_sq = correlator.truncation_sq() as f64;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let mut checked = 0;
+    for (x, y, yaw) in [
+        (0.0, 0.0, 0.0),
+        (0.12, 0.05, 0.02),
+        (-0.3, 0.2, -0.1),
+        (0.4, -0.1, 0.15),
+    ] {
+        let offset = Vec3::new(x, y, 0.0);
+        let Some(cost) = correlator.evaluate(&offset, yaw).map(|c| c.cost) else {
+            continue;
+        };
+        let mut order: Vec<u32> = (0..n).collect();
+        order.shuffle(&mut rng);
+        let full = correlator.ordered_lower_bound(&offset, yaw, 0, &order, f64::INFINITY);
+        assert!((full - cost).abs() <= 1e-9 * cost, "{full} against {cost}");
+        let cap = 0.5 * cost;
+        let cut = correlator.ordered_lower_bound(&offset, yaw, 0, &order, cap);
+        assert!(
+            cut > cap && cut <= cost * (1.0 + 1e-9),
+            "{cut}: cap {cap}, cost {cost}"
+        );
+        let (saturated, rest) = order.split_at(100);
+        let with_saturated = correlator.ordered_lower_bound(&offset, yaw, 100, rest, f64::INFINITY);
+        let of_rest = correlator.ordered_lower_bound(&offset, yaw, 0, rest, f64::INFINITY);
+        assert!(
+            (with_saturated - of_rest - 100.0 * tau_sq / n as f64).abs() <= 1e-9 * cost,
+            "{with_saturated} against {of_rest} + 100 τ²"
+        );
+        let of_saturated =
+            correlator.ordered_lower_bound(&offset, yaw, 0, saturated, f64::INFINITY);
+        assert!((of_saturated + of_rest - cost).abs() <= 1e-9 * cost);
+        checked += 1;
+    }
+    assert!(checked >= 3, "{checked} candidates with overlap");
+}

@@ -334,12 +334,43 @@ impl<'a> BranchAndBound<'a> {
 
     /// Scores one candidate against the limit.
     fn try_leaf(&self, correlator: &mut Correlator, node: &Node, limit: f64) -> Outcome {
+        self.try_leaf_hinted(correlator, node, limit, limit, None)
+    }
+
+    /// Scores one candidate against the limit, first from what its box's bound learned
+    /// (`hint`): its saturated points counted, the others largest term first, summed up to
+    /// `cut` (the limit, or with a reserve its ratio × the limit). A candidate whose sum passes
+    /// the limit so is dropped, or set aside with that sum as its bound; only one that stays
+    /// below is scored in the cost's own order, whose sum is the exact cost. On the unlevelled
+    /// suite's quick pairs the candidates above the limit had summed 97 % of their points in
+    /// the cost's order before their sums passed it.
+    fn try_leaf_hinted(
+        &self,
+        correlator: &mut Correlator,
+        node: &Node,
+        limit: f64,
+        cut: f64,
+        hint: Option<&PointHint>,
+    ) -> Outcome {
         let idx = node.lo;
         if self.grid.excluded(idx) {
             return Outcome::Closed;
         }
+        let (offset, yaw) = (self.grid.offset(idx), self.grid.yaw(idx));
+        if let Some(hint) = hint {
+            let reached = correlator.ordered_lower_bound(
+                &offset,
+                yaw,
+                hint.saturated,
+                &hint.order,
+                with_margin(cut),
+            );
+            if reached > with_margin(limit) {
+                return Outcome::LeafAbove(*node, reached);
+            }
+        }
         let cap = with_margin(limit);
-        match correlator.evaluate_within(&self.grid.offset(idx), self.grid.yaw(idx), cap) {
+        match correlator.evaluate_within(&offset, yaw, cap) {
             Capped::Scored(c) if c.cost <= self.cap => Outcome::Leaf((c.cost, self.grid.flat(idx))),
             Capped::Scored(c) => Outcome::LeafAbove(*node, c.cost),
             Capped::Above(partial) => Outcome::LeafAbove(*node, partial),
@@ -371,7 +402,7 @@ impl<'a> BranchAndBound<'a> {
     ) -> Outcome {
         if child.is_leaf() {
             let correlator = correlator.get_or_insert_with(|| self.correlator());
-            return self.try_leaf(correlator, child, limit);
+            return self.try_leaf_hinted(correlator, child, limit, cut, hint);
         }
         let (bound, estimate, hint) = self.bound_below(child, cut, hint);
         let pending = Pending {
