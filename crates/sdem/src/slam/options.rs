@@ -269,8 +269,13 @@ impl SlamOptions {
     ///   the scan's own angular sampling ([`SdemConfig::for_scan`]), the search's step,
     ///   truncation and refinement from its ranges ([`LocalizeOptions::for_scan`]), loop
     ///   closure and the fused map on that step (voxels as large as the step, rays up to
-    ///   20 m); the windows and the recovery stay the defaults (a vehicle's motion is
-    ///   predicted by its last one);
+    ///   20 m); a match without a prior (a loop closure, a relocalization, a second run's
+    ///   first scan) needs as many of its cells matching as tracking takes at once
+    ///   ([`Self::min_tracking_inlier_fraction`], 50 %), not the tilting laser's 60 %: a
+    ///   LiDAR on a moving vehicle always sees new ground ahead and sparse far returns, and
+    ///   KITTI's frames match 56–58 % of their cells even against the frame before, so a
+    ///   second run into their map was never placed; the windows and the recovery stay the
+    ///   defaults (a vehicle's motion is predicted by its last one);
     /// * **any other scanner**: [`SlamOptions::default`], the tilting laser's.
     ///
     /// # Example
@@ -320,6 +325,8 @@ impl SlamOptions {
                     default.loop_closure.window_half_m[1].max(3.0 * step),
                     default.loop_closure.window_half_m[2].max(step),
                 ],
+                // See above: what tracking takes at once.
+                min_inlier_fraction: default.min_tracking_inlier_fraction,
                 ..default.loop_closure.clone()
             },
             voxel: VoxelConfig {
