@@ -10,6 +10,10 @@ use crate::sdem::Sdem;
 use crate::search::{better, CandidateGrid, Scored};
 use rayon::prelude::*;
 
+/// [`BranchAndBound::run_from`] scores the reserve's candidates this many per worker at a time,
+/// each batch against the best found before it.
+const RESERVE_BATCH_PER_WORKER: usize = 4;
+
 /// The least candidates in a grid for [`BranchAndBound::polish`] to descend from the dive's.
 const POLISHED_GRID: usize = 4096;
 
@@ -120,13 +124,26 @@ impl<'a> BranchAndBound<'a> {
             .map(|&(node, lb)| (lb, self.grid.flat(node.lo), node))
             .collect();
         leaves.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let mut correlator = self.correlator();
-        for (lb, _, node) in leaves {
-            if progress.prunable(lb) {
+        // A few per worker at a time, each against the best found before them.
+        let batch = RESERVE_BATCH_PER_WORKER * rayon::current_num_threads().max(1);
+        for chunk in leaves.chunks(batch) {
+            let limit = progress.limit();
+            let open: Vec<Node> = (chunk.iter())
+                .take_while(|(lb, _, _)| !progress.prunable(*lb))
+                .map(|&(_, _, node)| node)
+                .collect();
+            if open.is_empty() {
                 break;
             }
-            progress.stats.leaves_evaluated += 1;
-            if let Some(s) = self.score_leaf(&mut correlator, &node, progress.limit()) {
+            progress.stats.leaves_evaluated += open.len();
+            let scored: Vec<Option<Scored>> = open
+                .par_iter()
+                .map_init(
+                    || self.correlator(),
+                    |correlator, node| self.score_leaf(correlator, node, limit),
+                )
+                .collect();
+            for s in scored.into_iter().flatten() {
                 if progress.best.is_none_or(|b| better(&s, &b)) {
                     progress.best = Some(s);
                 }

@@ -270,11 +270,11 @@ impl SlamOptions {
     ///   truncation and refinement from its ranges ([`LocalizeOptions::for_scan`]), loop
     ///   closure and the fused map on that step (voxels as large as the step, rays up to
     ///   20 m); a match without a prior (a loop closure, a relocalization, a second run's
-    ///   first scan) needs as many of its cells matching as tracking takes at once
+    ///   first scan) needs the share of cells matching that tracking takes at once by default
     ///   ([`Self::min_tracking_inlier_fraction`], 50 %), not the tilting laser's 60 %: a
-    ///   LiDAR on a moving vehicle always sees new ground ahead and sparse far returns, and
-    ///   KITTI's frames match 56–58 % of their cells even against the frame before, so a
-    ///   second run into their map was never placed; the windows and the recovery stay the
+    ///   LiDAR on a moving vehicle always sees new ground ahead and sparse far returns (KITTI's
+    ///   tracked frames match 56–58 % of their cells at the grid's best candidate against the
+    ///   frame before), and a second run into their map was never placed; the windows and the recovery stay the
     ///   defaults (a vehicle's motion is predicted by its last one);
     /// * **any other scanner**: [`SlamOptions::default`], the tilting laser's.
     ///
