@@ -326,9 +326,10 @@ fn real_scans_are_relocalized_in_the_map_made_from_them() {
 /// A second run of real LiDAR frames into the map of the first: KITTI frames 6–11 into the
 /// map of frames 0–5 (no attitude, no odometry). Its first frame, 0.8 m past the map's last
 /// node, is relocalized and the run goes on in the first run's frame: each frame within 1 cm
-/// of where one run over frames 0–11 puts it. With the tilting laser's gate for a match
-/// without a prior (60 % of the cells matching) its first frame opened a segment that nothing
-/// joined: KITTI's frames match 56–58 % of their cells even with the frame before.
+/// of where one run over frames 0–11 puts it; frame 11 alone is not found in the first map.
+/// With the tilting laser's gate for a match without a prior (60 % of the cells matching) the
+/// first frame opened a segment that nothing joined: KITTI's tracked frames match 56–58 % of
+/// their cells at the grid's best candidate, even against the frame before.
 #[test]
 fn a_second_run_of_real_lidar_frames_is_placed_in_the_first_runs_frame() {
     let Some(source) = shared_data("kitti-00-first16") else {
@@ -384,4 +385,12 @@ fn a_second_run_of_real_lidar_frames_is_placed_in_the_first_runs_frame() {
             i + 6
         );
     }
+    // The lower gate finds no place for a frame the first run never came near (frame 11, 3.2 m
+    // past its last node): not found, rather than placed wrongly.
+    let far = dir.path().join("second/scans/000005.bin");
+    let stderr = fails(
+        dir.path(),
+        &["localize", "--map", "first-map", far.to_str().unwrap()],
+    );
+    assert!(stderr.contains("not found in the map"), "{stderr}");
 }
