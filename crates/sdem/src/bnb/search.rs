@@ -172,7 +172,7 @@ impl<'a> BranchAndBound<'a> {
                     bound,
                     estimate,
                     node: p.node,
-                    hint: hint.map(std::sync::Arc::new).or(p.hint),
+                    hint: hint.map(std::sync::Arc::new),
                 }
             })
             .collect();
