@@ -437,6 +437,19 @@ fn search_indices(query: &Sdem, voxel_m: f64) -> Vec<u32> {
 /// Points per block of a capped evaluation: the sum is checked against the cap after each.
 const BLOCK: usize = 512;
 
+/// A query point `q` moved by a candidate: `rotation * q + t`, written out so that every
+/// evaluation of a candidate moves its points with the same operations in the same order (the
+/// exact search's lower bounds of a candidate must not exceed its cost by a rounding).
+#[inline(always)]
+fn moved(rotation: &Matrix3<f32>, t: &nalgebra::Vector3<f32>, [x, y, z]: [f32; 3]) -> [f32; 3] {
+    let m = rotation;
+    [
+        m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x,
+        m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y,
+        m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z,
+    ]
+}
+
 /// Points per chunk of [`Correlator::ordered_lower_bound`]: its sum is checked after each.
 const ORDERED_CHUNK: usize = 64;
 
@@ -732,13 +745,9 @@ impl<'a> Correlator<'a> {
         let mut acc = CostSum::new(self.truncation_sq);
         for start in (0..n).step_by(BLOCK) {
             let end = (start + BLOCK).min(n);
-            // Written as plain loops over arrays so the compiler vectorizes them; the same
-            // arithmetic as `rotation * q + t`.
+            // Written as plain loops over arrays so the compiler vectorizes them.
             for i in start..end {
-                let (x, y, z) = (qx[i], qy[i], qz[i]);
-                mx[i] = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
-                my[i] = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
-                mz[i] = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
+                [mx[i], my[i], mz[i]] = moved(m, &t, [qx[i], qy[i], qz[i]]);
             }
             grid.cells_of_any(
                 &mx[start..end],
@@ -841,10 +850,7 @@ impl<'a> Correlator<'a> {
             let len = chunk.len();
             for (i, &p) in chunk.iter().enumerate() {
                 let k = self.slot_of_point[p as usize] as usize;
-                let (x, y, z) = (qx[k], qy[k], qz[k]);
-                mx[i] = m[(0, 0)] * x + m[(0, 1)] * y + m[(0, 2)] * z + t.x;
-                my[i] = m[(1, 0)] * x + m[(1, 1)] * y + m[(1, 2)] * z + t.y;
-                mz[i] = m[(2, 0)] * x + m[(2, 1)] * y + m[(2, 2)] * z + t.z;
+                [mx[i], my[i], mz[i]] = moved(&m, &t, [qx[k], qy[k], qz[k]]);
             }
             grid.cells_of_any(
                 &mx[..len],

@@ -439,14 +439,7 @@ fn search_below(
         let (_, _, yaw) = rotation.euler_angles();
         yaw
     };
-    // The levelled frames are the sensor frames rotated by their attitude readings, both with
-    // the reference sensor's origin: the search found `(rotation, offset)` between them.
-    let level_from_reference = rotation_only(reference_attitude);
-    let level_from_query = Isometry3::from_parts(
-        Translation3::from(offset),
-        rotation * rotation_only(query_attitude).rotation,
-    );
-    let reference_from_query = level_from_reference.inverse() * level_from_query;
+    let (level_from_query, reference_from_query) = query_poses(reference, query, offset, rotation);
     let seen_through =
         crate::free_space::free_space(reference, query, &reference_from_query).fraction();
     // The runner-up; and where the other scan saw through the optimum's returns, the first of
@@ -843,7 +836,8 @@ impl RunnerUpSearch<'_, '_> {
         let mut next = runner_up;
         for looked_at in 1..=SEEN_THROUGH_BASINS {
             let (_, offset, heading) = next?;
-            let pose = grid_pose(reference, query, offset, heading);
+            let turn = UnitQuaternion::from_axis_angle(&Vec3::z_axis(), heading);
+            let (_, pose) = query_poses(reference, query, offset, turn);
             let share = crate::free_space::free_space(reference, query, &pose).fraction();
             if seen_through_less(share, seen_through) {
                 return Some(offset);
@@ -858,15 +852,21 @@ impl RunnerUpSearch<'_, '_> {
     }
 }
 
-/// The query sensor's pose in the reference sensor's frame at a grid candidate: `offset` on the
-/// levelled axes, the query levelled by its reading and turned by `heading` (radians).
-fn grid_pose(reference: &Sdem, query: &Sdem, offset: Vec3, heading: f64) -> Pose {
+/// The query sensor's pose at `(rotation, offset)` between the levelled frames (the sensor
+/// frames rotated by their attitude readings, both with the reference sensor's origin: what
+/// the search finds), in the reference's levelled frame and in the reference sensor's frame.
+fn query_poses(
+    reference: &Sdem,
+    query: &Sdem,
+    offset: Vec3,
+    rotation: UnitQuaternion<f64>,
+) -> (Pose, Pose) {
     let level_from_query = Isometry3::from_parts(
         Translation3::from(offset),
-        UnitQuaternion::from_axis_angle(&Vec3::z_axis(), heading)
-            * rotation_only(query.attitude()).rotation,
+        rotation * rotation_only(query.attitude()).rotation,
     );
-    rotation_only(reference.attitude()).inverse() * level_from_query
+    let reference_from_query = rotation_only(reference.attitude()).inverse() * level_from_query;
+    (level_from_query, reference_from_query)
 }
 
 /// Runs the configured search over the evaluator's grid.
