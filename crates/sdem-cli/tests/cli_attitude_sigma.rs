@@ -176,7 +176,7 @@ fn a_tight_roll_pitch_sigma_makes_the_tilt_a_doubt() {
     args.extend_from_slice(&["--attitude-sigma-deg", "0.001,3.5"]);
     let r = run(dir.path(), &args);
     assert_eq!(r.code, Some(3), "{}{}", r.stdout, r.stderr);
-    let result: Value = serde_json::from_str(&r.stdout).unwrap();
+    let result = r.json();
     assert!(
         doubt_kinds(&result).contains(&"attitude_corrected".to_string()),
         "{result}"

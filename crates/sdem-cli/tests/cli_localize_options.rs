@@ -236,8 +236,7 @@ fn the_least_overlap_can_be_set_and_the_search_obeys_it() {
     ];
     let overlap = |args: &[&str]| {
         let out = run(dir.path(), args);
-        let v: serde_json::Value = serde_json::from_str(&out.stdout)
-            .unwrap_or_else(|e| panic!("{e}: {}\n{}", out.stdout, out.stderr));
+        let v = out.json();
         let fraction = v["diagnostics"]["overlap_fraction"].as_f64().unwrap();
         (out.code, fraction)
     };

@@ -789,7 +789,7 @@ fn localize_with_doubts_exits_3_and_says_why() {
 
     let r = localize_0_1(dir.path(), &ds, &[&narrow[..], &["--json"]].concat());
     assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
-    let doubtful: Value = serde_json::from_str(&r.stdout).unwrap();
+    let doubtful = r.json();
     assert_eq!(doubtful["trusted"], false, "{doubtful}");
     let kinds = doubt_kinds(&doubtful);
     assert!(kinds.contains(&"on_window_edge".to_string()), "{kinds:?}");
@@ -821,7 +821,7 @@ fn localize_with_doubts_exits_3_and_says_why() {
         &[&narrow[..], &["--json", "--accept-doubtful"]].concat(),
     );
     assert_eq!(r.code, Some(0), "{}", r.stderr);
-    let accepted: Value = serde_json::from_str(&r.stdout).unwrap();
+    let accepted = r.json();
     assert_eq!(accepted["trusted"], false, "{accepted}");
     // The same doubts (their figures' last digits move with the parallel sums' order).
     assert_eq!(doubt_kinds(&accepted), doubt_kinds(&doubtful));
@@ -837,7 +837,7 @@ fn localize_with_doubts_exits_3_and_says_why() {
     // The default window holds the truth: trusted, no doubt, status 0.
     let r = localize_0_1(dir.path(), &ds, &["--json"]);
     assert_eq!(r.code, Some(0), "{}", r.stderr);
-    let trusted: Value = serde_json::from_str(&r.stdout).unwrap();
+    let trusted = r.json();
     assert_eq!(trusted["trusted"], true, "{trusted}");
     assert!(doubt_kinds(&trusted).is_empty(), "{trusted}");
     assert!(num(&trusted, "error_m") < 0.01, "{trusted}");

@@ -136,8 +136,7 @@ fn slam_maps_a_simulated_run_and_writes_every_output() {
         let args = localize_scan_2(&[&["--attitude", &attitude_row, "--json"], more].concat());
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let r = run(dir.path(), &args);
-        let found: Value = serde_json::from_str(&r.stdout)
-            .unwrap_or_else(|e| panic!("{args:?}: {e}\n{}\n{}", r.stdout, r.stderr));
+        let found = r.json();
         let pose = &found["world_from_sensor"];
         let off = ["x", "y", "z"]
             .iter()
@@ -477,7 +476,7 @@ fn slam_marks_doubtful_steps_and_exits_3() {
         &["slam", "data", "--out", "out", "--no-pictures", "--json"],
     );
     assert_eq!(r.code, Some(3), "{}\n{}", r.stdout, r.stderr);
-    let summary: Value = serde_json::from_str(&r.stdout).unwrap();
+    let summary = r.json();
     assert_eq!(summary["trusted"], false, "{summary}");
     assert_eq!(summary["doubtful_scans"], Value::from(vec![2]), "{summary}");
     let report: Value =

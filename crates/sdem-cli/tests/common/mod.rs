@@ -36,6 +36,21 @@ pub struct Run {
     pub stderr: String,
 }
 
+impl Run {
+    /// Its stdout as one JSON object, whatever its exit status (a result with doubts exits 3
+    /// and still prints it; [`run_json`] demands 0).
+    pub fn json(&self) -> Value {
+        let value: Value = serde_json::from_str(&self.stdout).unwrap_or_else(|e| {
+            panic!(
+                "stdout is not exactly one JSON value ({e}):\n{}\n{}",
+                self.stdout, self.stderr
+            )
+        });
+        assert!(value.is_object(), "not an object: {value}");
+        value
+    }
+}
+
 pub fn run(dir: &Path, args: &[&str]) -> Run {
     let out = sdem(dir).args(args).output().expect("cannot run sdem");
     Run {
