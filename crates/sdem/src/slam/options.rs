@@ -274,8 +274,8 @@ impl SlamOptions {
     ///   ([`Self::min_tracking_inlier_fraction`], 50 %), not the tilting laser's 60 %: a
     ///   LiDAR on a moving vehicle always sees new ground ahead and sparse far returns (KITTI's
     ///   tracked frames match 56–58 % of their cells at the grid's best candidate against the
-    ///   frame before), and a second run into their map was never placed; the windows and the recovery stay the
-    ///   defaults (a vehicle's motion is predicted by its last one);
+    ///   frame before), and a second run into their map was never placed; the windows and the
+    ///   recovery stay the defaults (a vehicle's motion is predicted by its last one);
     /// * **any other scanner**: [`SlamOptions::default`], the tilting laser's.
     ///
     /// # Example
