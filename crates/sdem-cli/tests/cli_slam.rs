@@ -617,3 +617,46 @@ fn slam_matches_the_sdem_to_the_sensor_step() {
     );
     assert_eq!(resolution("mine"), 2.0);
 }
+
+/// The three 3DTK scans beside the repository (a nodding SICK, stops 1.6 and 1.8 m apart,
+/// indoors; their `.pose` readings as odometry and attitude) are mapped in one segment, every
+/// step trusted, within 3 cm of slam6D's frames (a reference, not truth: 1.25 cm ATE measured).
+/// The third scan opened a segment of its own, flagged `on_window_edge`, while its match lay
+/// inside every window searched: the wide search's coarse pass searched a candidate of another
+/// basin in a small window around it, and an unrefined optimum on that small window's edge was
+/// taken for one on the caller's. Skipped, saying so, where the shared data is absent.
+#[test]
+fn the_3dtk_stop_and_go_scans_are_mapped_in_one_segment() {
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/3dtk-dat");
+    if !source.is_dir() {
+        eprintln!("skipped: no ../shared/data/3dtk-dat beside the repository");
+        return;
+    }
+    let dir = TempDir::new().unwrap();
+    run_ok(
+        dir.path(),
+        &["import", source.to_str().unwrap(), "--out", "data"],
+    );
+    run_ok(
+        dir.path(),
+        &[
+            "slam",
+            "data",
+            "--out",
+            "map",
+            "--no-pictures",
+            "--compare",
+            "data/poses_slam6d.txt",
+        ],
+    );
+    let text = std::fs::read_to_string(dir.path().join("map/report.json")).unwrap();
+    let report: Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(report["segments"].as_array().unwrap().len(), 1, "{report}");
+    assert_eq!(report["doubtful_steps"], 0, "{report}");
+    let statuses: Vec<&str> = (report["steps"].as_array().unwrap().iter())
+        .map(|s| s["status"].as_str().unwrap())
+        .collect();
+    assert!(!statuses.contains(&"new_segment"), "statuses {statuses:?}");
+    let ate = report["compare"]["ate_rmse_m"].as_f64().unwrap();
+    assert!(ate < 0.03, "ATE {ate} m against slam6D's frames");
+}
