@@ -620,11 +620,12 @@ fn slam_matches_the_sdem_to_the_sensor_step() {
 
 /// The three 3DTK scans beside the repository (a nodding SICK, stops 1.6 and 1.8 m apart,
 /// indoors; their `.pose` readings as odometry and attitude) are mapped in one segment, every
-/// step trusted, within 3 cm of slam6D's frames (a reference, not truth: 1.25 cm ATE measured).
-/// The third scan opened a segment of its own, flagged `on_window_edge`, while its match lay
-/// inside every window searched: the wide search's coarse pass searched a candidate of another
-/// basin in a small window around it, and an unrefined optimum on that small window's edge was
-/// taken for one on the caller's. Skipped, saying so, where the shared data is absent.
+/// step trusted, exit 0. slam6D's frames are a reference, not truth: each scan within 10 cm of
+/// them unaligned (measured 2.35 and 6.25 cm) and 3 cm after alignment (1.25 cm). The third
+/// scan's match lay inside every window searched, but an unrefined optimum on the edge of a
+/// small window searched around a candidate of another basin was taken for one on the window's
+/// edge, and the scan opened a segment of its own (exit 3). Skipped, saying so, where the shared
+/// data is absent.
 #[test]
 fn the_3dtk_stop_and_go_scans_are_mapped_in_one_segment() {
     let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/3dtk-dat");
@@ -637,7 +638,7 @@ fn the_3dtk_stop_and_go_scans_are_mapped_in_one_segment() {
         dir.path(),
         &["import", source.to_str().unwrap(), "--out", "data"],
     );
-    run_ok(
+    let mapped = run(
         dir.path(),
         &[
             "slam",
@@ -651,12 +652,22 @@ fn the_3dtk_stop_and_go_scans_are_mapped_in_one_segment() {
     );
     let text = std::fs::read_to_string(dir.path().join("map/report.json")).unwrap();
     let report: Value = serde_json::from_str(&text).unwrap();
-    assert_eq!(report["segments"].as_array().unwrap().len(), 1, "{report}");
-    assert_eq!(report["doubtful_steps"], 0, "{report}");
     let statuses: Vec<&str> = (report["steps"].as_array().unwrap().iter())
         .map(|s| s["status"].as_str().unwrap())
         .collect();
-    assert!(!statuses.contains(&"new_segment"), "statuses {statuses:?}");
+    assert_eq!(
+        report["segments"].as_array().unwrap().len(),
+        1,
+        "statuses {statuses:?}"
+    );
+    assert_eq!(report["doubtful_steps"], 0, "statuses {statuses:?}");
+    assert_eq!(mapped.code, Some(0), "{}", mapped.stderr);
     let ate = report["compare"]["ate_rmse_m"].as_f64().unwrap();
     assert!(ate < 0.03, "ATE {ate} m against slam6D's frames");
+    let mapped = kitti(&dir.path().join("map/poses.txt"));
+    let slam6d = kitti(&dir.path().join("data/poses_slam6d.txt"));
+    for (i, (a, b)) in mapped.iter().zip(&slam6d).enumerate() {
+        let d = ((a[3] - b[3]).powi(2) + (a[7] - b[7]).powi(2) + (a[11] - b[11]).powi(2)).sqrt();
+        assert!(d < 0.1, "scan {i}: {d} m from slam6D's frame");
+    }
 }

@@ -72,13 +72,13 @@ pub enum Doubt {
     },
     /// The optimum lies on the search window's edge: the true pose may lie outside the window.
     OnWindowEdge,
-    /// The match tilted one scan against the other by more than the attitude readings allow
-    /// (three standard deviations of their roll and pitch): a gyro reading, or the match, is
-    /// wrong.
+    /// The match tilted one scan against the other by more than their levels allow (three
+    /// standard deviations of their roll and pitch, read by a gyro or, without one, found from
+    /// the scan's surfaces): a level, or the match, is wrong.
     AttitudeCorrected {
         /// The tilt between the two levelled frames that the match found, degrees.
         tilt_deg: f64,
-        /// What the readings allow, degrees.
+        /// What the levels allow, degrees.
         three_sigma_deg: f64,
     },
     /// The attitude was unknown, and a rotation other than the one returned, found from the
@@ -264,8 +264,8 @@ impl fmt::Display for Doubt {
             } => write!(
                 f,
                 "the match tilts the scans {tilt_deg:.2}° against each other, beyond the \
-                 {three_sigma_deg:.2}° their roll and pitch readings allow: a reading or the \
-                 match is wrong"
+                 {three_sigma_deg:.2}° their levels allow (roll and pitch, read or found from \
+                 the surfaces): a level or the match is wrong"
             ),
             Doubt::AnotherRotation {
                 angle_deg,

@@ -71,7 +71,9 @@ pub struct Localization {
     pub candidates_evaluated: usize,
     /// Boxes of candidates bounded (branch-and-bound only).
     pub nodes_bounded: usize,
-    /// True when the grid optimum lies on the window's boundary (the true minimum may be outside).
+    /// True when the optimum lies on the caller's window's edge, so that the true minimum may lie
+    /// outside it: the refined pose within half a step of that edge, or without a refinement the
+    /// grid optimum within a step of it.
     pub on_window_edge: bool,
     /// How the estimate was refined below the grid.
     pub refined: RefineOutcome,
@@ -379,8 +381,8 @@ struct Searched {
 }
 
 /// [`localize_below`] without the check of what the scans saw through. An optimum on the
-/// search window's edge is one only where the refined pose lies on the edge of `edges`: the
-/// caller's window, which holds the search's.
+/// search window's edge is one only where it lies on the edge of `edges`, the caller's window,
+/// which holds the search's (see [`stays_on_edge`]).
 fn search_below(
     reference: &Sdem,
     query: &Sdem,
@@ -508,13 +510,7 @@ fn search_below(
         .is_some()
         .then_some((offset, heading_correction));
     let on_window_edge = grid.on_edge(grid_index, full_turn)
-        && stays_on_edge(
-            &grid,
-            grid_index,
-            full_turn,
-            (&config.window, edges),
-            refined_pose,
-        );
+        && stays_on_edge(&grid, grid_index, full_turn, edges, refined_pose);
     if on_window_edge {
         doubts.push(Doubt::OnWindowEdge);
     }
@@ -550,17 +546,15 @@ fn search_below(
     }))
 }
 
-/// Whether a grid optimum on the window's edge (`idx`) is one in truth. `(searched, edges)`:
-/// the window the grid covers, and the caller's, which holds it (a search around a candidate
-/// of another basin covers a small window inside the caller's).
+/// Whether a grid optimum on the searched grid's edge (`idx`) lies on the edge of `edges`, the
+/// caller's window, which holds the searched one (a search around a candidate of another basin
+/// covers a small window inside it).
 ///
-/// Without a refinement (`refined: None`), when the edge it lies on is the caller's: the
-/// searched window reaches the caller's edge on that side (a heading edge always: the searched
-/// headings are the caller's). An optimum on the small window's edge inside the caller's
-/// window is a neighbour of the candidate searched around, not a pose the window cut off: a
-/// wide search's coarse pass (unrefined) found a right match on real scans (3DTK, 1.8 m apart)
-/// and called it on the window's edge for the edge of such a small window, which kept the stop
-/// from the map.
+/// Without a refinement (`refined: None`), where the caller's window holds no candidate a step
+/// beyond it on that side (a heading edge always: the searched headings are the caller's). An
+/// optimum on a small window's edge well inside the caller's is a neighbour of the candidate
+/// searched around, not a pose the window cut off. Where the searched window is the caller's,
+/// every edge counts.
 ///
 /// With a refinement (its offset and heading correction), when the refined pose lies within
 /// half a step (at most [`EDGE_MARGIN_M`]) of the caller's edge it was found on, or beyond. A
@@ -571,7 +565,7 @@ fn stays_on_edge(
     grid: &CandidateGrid,
     idx: Index,
     full_turn: bool,
-    (searched, edges): (&SearchWindow, &SearchWindow),
+    edges: &SearchWindow,
     refined: Option<(Vec3, f64)>,
 ) -> bool {
     (0..4).any(|a| {
@@ -580,9 +574,12 @@ fn stays_on_edge(
             return false;
         }
         let Some((offset, heading)) = refined else {
-            return a == 3
-                || (low_edge && searched.min[a] <= edges.min[a])
-                || (high_edge && searched.max[a] >= edges.max[a]);
+            if a == 3 {
+                return true;
+            }
+            let at = grid.offset(idx)[a];
+            return (low_edge && at - grid.step < edges.min[a] - 1e-9)
+                || (high_edge && at + grid.step > edges.max[a] + 1e-9);
         };
         let (value, lo, hi, half) = if a < 3 {
             (
@@ -988,8 +985,9 @@ mod tests {
     use super::*;
 
     /// An unrefined optimum on the edge of a small window searched inside the caller's (around
-    /// a candidate of another basin) is on the caller's edge only where the small window
-    /// reaches it; a heading edge is always the caller's, and a full turn has none.
+    /// a candidate of another basin) is on the caller's edge only where the caller's window
+    /// holds no candidate a step beyond it; a heading edge is always the caller's, and a full
+    /// turn has none. Where the searched window is the caller's, every edge counts.
     #[test]
     fn an_unrefined_optimum_is_on_the_edge_only_where_the_edge_is_the_callers() {
         let caller = SearchWindow {
@@ -997,8 +995,18 @@ mod tests {
             max: [0.6, 0.6, 0.3],
         };
         let yaws = vec![-0.02, 0.0, 0.02];
-        let inside = SearchWindow::around(&Vec3::new(0.1, -0.2, 0.0), [0.05; 3]);
-        let grid = CandidateGrid::new(&inside, 0.05, yaws.clone()).unwrap();
+        let small = |centre: Vec3| {
+            let around = SearchWindow::around(&centre, [0.05; 3]);
+            let window = SearchWindow {
+                min: std::array::from_fn(|a| around.min[a].max(caller.min[a])),
+                max: std::array::from_fn(|a| around.max[a].min(caller.max[a])),
+            };
+            (
+                CandidateGrid::new(&window, 0.05, yaws.clone()).unwrap(),
+                window,
+            )
+        };
+        let (grid, inside) = small(Vec3::new(0.1, -0.2, 0.0));
         assert_eq!(grid.counts, [3, 3, 3, 3]);
         let edges = [
             [0, 1, 1, 1],
@@ -1009,54 +1017,24 @@ mod tests {
             [1, 1, 2, 1],
         ];
         for idx in edges {
-            assert!(!stays_on_edge(&grid, idx, false, (&inside, &caller), None));
+            assert!(!stays_on_edge(&grid, idx, false, &caller, None), "{idx:?}");
             // The same window searched as the caller's own: its edges are the caller's.
-            assert!(stays_on_edge(&grid, idx, false, (&inside, &inside), None));
+            assert!(stays_on_edge(&grid, idx, false, &inside, None), "{idx:?}");
         }
-        assert!(!stays_on_edge(
-            &grid,
-            [1, 1, 1, 1],
-            false,
-            (&inside, &inside),
-            None
-        ));
-        assert!(stays_on_edge(
-            &grid,
-            [1, 1, 1, 0],
-            false,
-            (&inside, &caller),
-            None
-        ));
-        assert!(!stays_on_edge(
-            &grid,
-            [1, 1, 1, 0],
-            true,
-            (&inside, &caller),
-            None
-        ));
-        // Clipped at the caller's highest x (as `not_seen_through` clips it): that side is
-        // the caller's edge, the lowest x is not.
-        let around = SearchWindow::around(&Vec3::new(0.58, 0.0, 0.0), [0.05; 3]);
-        let clipped = SearchWindow {
-            min: std::array::from_fn(|a| around.min[a].max(caller.min[a])),
-            max: std::array::from_fn(|a| around.max[a].min(caller.max[a])),
-        };
-        let grid = CandidateGrid::new(&clipped, 0.05, yaws).unwrap();
+        assert!(!stays_on_edge(&grid, [1, 1, 1, 1], false, &inside, None));
+        assert!(stays_on_edge(&grid, [1, 1, 1, 0], false, &caller, None));
+        assert!(!stays_on_edge(&grid, [1, 1, 1, 0], true, &caller, None));
+        // Clipped at the caller's highest x: that side is the caller's edge, the lowest is not.
+        let (grid, _) = small(Vec3::new(0.58, 0.0, 0.0));
         let last = grid.counts[0] - 1;
         assert!(last >= 1, "{:?}", grid.counts);
-        assert!(stays_on_edge(
-            &grid,
-            [last, 1, 1, 1],
-            false,
-            (&clipped, &caller),
-            None
-        ));
-        assert!(!stays_on_edge(
-            &grid,
-            [0, 1, 1, 1],
-            false,
-            (&clipped, &caller),
-            None
-        ));
+        assert!(stays_on_edge(&grid, [last, 1, 1, 1], false, &caller, None));
+        assert!(!stays_on_edge(&grid, [0, 1, 1, 1], false, &caller, None));
+        // Not clipped, its lowest candidate the caller's first (the window's bound a rounding
+        // inside the caller's): on the caller's edge. One step further in: not.
+        let (grid, _) = small(Vec3::new(-0.55 + 1e-12, 0.0, 0.0));
+        assert!(stays_on_edge(&grid, [0, 1, 1, 1], false, &caller, None));
+        let (grid, _) = small(Vec3::new(-0.5, 0.0, 0.0));
+        assert!(!stays_on_edge(&grid, [0, 1, 1, 1], false, &caller, None));
     }
 }
