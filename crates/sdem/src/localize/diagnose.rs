@@ -90,6 +90,7 @@ pub(super) fn diagnose(
             &mut weakest,
             &mut flat,
             &mut doubts,
+            false,
         );
     }
     let flat_found = doubts[before..]
@@ -108,6 +109,7 @@ pub(super) fn diagnose(
             &mut weakest,
             &mut flat,
             &mut doubts,
+            refinement.is_some(),
         );
     }
     // Too little in common, or the points did not confirm the grid's answer: on the fault
@@ -186,7 +188,11 @@ fn covariance_shape(
 /// The cost's own shape: how much it rises half the peak radius away from the optimum, along
 /// the principal directions `eigen` (the axes without them). Flat along one direction and steep
 /// along another is a corridor: a doubt, and the free direction when the covariance named none
-/// and `weakest` agrees with it.
+/// and `weakest` agrees with it. With `only_where_weakest_agrees` (the grid optimum probed where
+/// a refinement converged), a flatness across `weakest` is no doubt: the grid is searched at the
+/// readings' tilt, and a tilt the refinement took out (1.5° on 3DTK's third scan, 1–3° from a
+/// drifting gyro) can leave no floor point within `τ` at any height, a flatness in height the
+/// refined pose does not share; a corridor's free axis is the refinement's weakest direction too.
 #[allow(clippy::too_many_arguments)]
 fn cost_shape(
     config: &LocalizeOptions,
@@ -197,6 +203,7 @@ fn cost_shape(
     weakest: &mut Weakest,
     flat: &mut Option<[f64; 3]>,
     doubts: &mut Vec<Doubt>,
+    only_where_weakest_agrees: bool,
 ) {
     let directions: Vec<Vec3> = match eigen {
         Some(eigen) => (0..3)
@@ -223,8 +230,10 @@ fn cost_shape(
             }
         });
     let steepest = rises.iter().map(|r| r.0).fold(0.0, f64::max);
-    if flattest.0 < config.ambiguous_rise_ratio * steepest {
-        let v = flattest.1;
+    let v = flattest.1;
+    let agrees = weakest.is_none_or(|(w, _, _)| Vec3::from(w).dot(&v).abs() > 0.9);
+    let flat_here = flattest.0 < config.ambiguous_rise_ratio * steepest;
+    if flat_here && (agrees || !only_where_weakest_agrees) {
         doubts.push(Doubt::FlatCost {
             direction: [v.x, v.y, v.z],
             distance_m: d,
@@ -234,12 +243,8 @@ fn cost_shape(
         if weakest.is_none() {
             *weakest = Some(([v.x, v.y, v.z], f64::NAN, f64::NAN));
         }
-        // The grid's cost alone can be flat where the refined pose is not: on 3DTK's scan 2 the
-        // grid's pitch was 2° off, so no floor point fell within τ at any height, while the
-        // refinement was weakest along the corridor (σ 0.29 mm against 0.10 mm). It names the
-        // free direction only when the refinement's weakest direction agrees with it (or there
-        // is no refinement).
-        let agrees = weakest.is_none_or(|(w, _, _)| Vec3::from(w).dot(&v).abs() > 0.9);
+        // The free direction only where the refinement's weakest direction agrees with it (or
+        // there is none): the grid's cost alone can be flat where the refined pose is not.
         if flat.is_none() && agrees {
             *flat = Some([v.x, v.y, v.z]);
         }
