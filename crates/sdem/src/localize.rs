@@ -26,9 +26,11 @@ pub use crate::cost::{correlate, Correlation, CostConfig, OffsetPrior};
 pub use crate::search::{HeadingWindow, SearchWindow};
 
 mod diagnose;
+mod edge;
 mod options;
 pub use diagnose::PRIOR_CONFLICT_RATIO;
 use diagnose::{attitude_corrected, diagnose, in_query_frame, prior_conflict};
+use edge::stays_on_edge;
 pub use options::{
     scan_footprint_m, LocalizeOptions, SearchMode, MAX_EXHAUSTIVE_CANDIDATES, MAX_STEP_M,
     MIN_STEP_M, MIN_TRUSTED_SUPPORT, REFINE_POINTS,
@@ -323,11 +325,7 @@ fn not_seen_through(
         return found;
     };
     let half = config.peak_radius_m / 2.0;
-    let around = SearchWindow::around(&offset, [half; 3]);
-    let window = SearchWindow {
-        min: std::array::from_fn(|a| around.min[a].max(config.window.min[a])),
-        max: std::array::from_fn(|a| around.max[a].min(config.window.max[a])),
-    };
+    let window = SearchWindow::around(&offset, [half; 3]).clipped_to(&config.window);
     let options = LocalizeOptions {
         window,
         runner_up: false,
@@ -545,61 +543,6 @@ fn search_below(
         less_seen_through,
     }))
 }
-
-/// Whether a grid optimum on the searched grid's edge (`idx`) lies on the edge of `edges`, the
-/// caller's window, which holds the searched one (a search around a candidate of another basin
-/// covers a small window inside it).
-///
-/// Without a refinement (`refined: None`), where the caller's window holds no candidate a step
-/// beyond it on that side (a heading edge always: the searched headings are the caller's). An
-/// optimum on a small window's edge well inside the caller's is a neighbour of the candidate
-/// searched around, not a pose the window cut off. Where the searched window is the caller's,
-/// every edge counts.
-///
-/// With a refinement (its offset and heading correction), when the refined pose lies within
-/// half a step (at most [`EDGE_MARGIN_M`]) of the caller's edge it was found on, or beyond. A
-/// grid coarser than the pose's precision (a LiDAR's 15–25 cm) puts an optimum well inside the
-/// window on its last candidate (with ±15 cm of height at 25 cm steps every candidate is an
-/// edge): the refinement, which the window does not bound, says where the pose is.
-fn stays_on_edge(
-    grid: &CandidateGrid,
-    idx: Index,
-    full_turn: bool,
-    edges: &SearchWindow,
-    refined: Option<(Vec3, f64)>,
-) -> bool {
-    (0..4).any(|a| {
-        let (low_edge, high_edge) = (idx[a] == 0, idx[a] + 1 == grid.counts[a]);
-        if grid.counts[a] <= 1 || !(low_edge || high_edge) || (a == 3 && full_turn) {
-            return false;
-        }
-        let Some((offset, heading)) = refined else {
-            if a == 3 {
-                return true;
-            }
-            let at = grid.offset(idx)[a];
-            return (low_edge && at - grid.step < edges.min[a] - 1e-9)
-                || (high_edge && at + grid.step > edges.max[a] + 1e-9);
-        };
-        let (value, lo, hi, half) = if a < 3 {
-            (
-                offset[a],
-                edges.min[a],
-                edges.max[a],
-                (0.5 * grid.step).min(EDGE_MARGIN_M),
-            )
-        } else {
-            let (first, last) = (grid.yaws[0], grid.yaws[grid.yaws.len() - 1]);
-            (heading, first, last, 0.5 * (grid.yaws[1] - first).abs())
-        };
-        (low_edge && value <= lo + half) || (high_edge && value >= hi - half)
-    })
-}
-
-/// A refined position this close to the window's edge (or half a step, if less) is on it,
-/// metres: the refinement is millimetre-precise, and a basin whose bottom lies a few
-/// centimetres inside the window is not cut by it.
-const EDGE_MARGIN_M: f64 = 0.02;
 
 /// What a search returns: its best candidate, its statistics, and what the exact search set
 /// aside for the runner-up search.
@@ -978,63 +921,4 @@ fn refine_quadratic(evaluator: &mut Evaluator, idx: Index) -> Option<Vec3> {
         idx[1] as f64 + u[1],
         idx[2] as f64 + u[2],
     ]))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// An unrefined optimum on the edge of a small window searched inside the caller's (around
-    /// a candidate of another basin) is on the caller's edge only where the caller's window
-    /// holds no candidate a step beyond it; a heading edge is always the caller's, and a full
-    /// turn has none. Where the searched window is the caller's, every edge counts.
-    #[test]
-    fn an_unrefined_optimum_is_on_the_edge_only_where_the_edge_is_the_callers() {
-        let caller = SearchWindow {
-            min: [-0.6, -0.6, -0.3],
-            max: [0.6, 0.6, 0.3],
-        };
-        let yaws = vec![-0.02, 0.0, 0.02];
-        let small = |centre: Vec3| {
-            let around = SearchWindow::around(&centre, [0.05; 3]);
-            let window = SearchWindow {
-                min: std::array::from_fn(|a| around.min[a].max(caller.min[a])),
-                max: std::array::from_fn(|a| around.max[a].min(caller.max[a])),
-            };
-            (
-                CandidateGrid::new(&window, 0.05, yaws.clone()).unwrap(),
-                window,
-            )
-        };
-        let (grid, inside) = small(Vec3::new(0.1, -0.2, 0.0));
-        assert_eq!(grid.counts, [3, 3, 3, 3]);
-        let edges = [
-            [0, 1, 1, 1],
-            [2, 1, 1, 1],
-            [1, 0, 1, 1],
-            [1, 2, 1, 1],
-            [1, 1, 0, 1],
-            [1, 1, 2, 1],
-        ];
-        for idx in edges {
-            assert!(!stays_on_edge(&grid, idx, false, &caller, None), "{idx:?}");
-            // The same window searched as the caller's own: its edges are the caller's.
-            assert!(stays_on_edge(&grid, idx, false, &inside, None), "{idx:?}");
-        }
-        assert!(!stays_on_edge(&grid, [1, 1, 1, 1], false, &inside, None));
-        assert!(stays_on_edge(&grid, [1, 1, 1, 0], false, &caller, None));
-        assert!(!stays_on_edge(&grid, [1, 1, 1, 0], true, &caller, None));
-        // Clipped at the caller's highest x: that side is the caller's edge, the lowest is not.
-        let (grid, _) = small(Vec3::new(0.58, 0.0, 0.0));
-        let last = grid.counts[0] - 1;
-        assert!(last >= 1, "{:?}", grid.counts);
-        assert!(stays_on_edge(&grid, [last, 1, 1, 1], false, &caller, None));
-        assert!(!stays_on_edge(&grid, [0, 1, 1, 1], false, &caller, None));
-        // Not clipped, its lowest candidate the caller's first (the window's bound a rounding
-        // inside the caller's): on the caller's edge. One step further in: not.
-        let (grid, _) = small(Vec3::new(-0.55 + 1e-12, 0.0, 0.0));
-        assert!(stays_on_edge(&grid, [0, 1, 1, 1], false, &caller, None));
-        let (grid, _) = small(Vec3::new(-0.5, 0.0, 0.0));
-        assert!(!stays_on_edge(&grid, [0, 1, 1, 1], false, &caller, None));
-    }
 }

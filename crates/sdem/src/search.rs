@@ -39,6 +39,14 @@ impl SearchWindow {
         }
     }
 
+    /// The part of this window inside `bounds` (each bound exactly one of the two windows').
+    pub fn clipped_to(&self, bounds: &SearchWindow) -> Self {
+        Self {
+            min: std::array::from_fn(|a| self.min[a].max(bounds.min[a])),
+            max: std::array::from_fn(|a| self.max[a].min(bounds.max[a])),
+        }
+    }
+
     /// Checks that the window is finite and not inverted.
     pub fn validate(&self) -> Result<()> {
         for (axis, name) in AXES.iter().enumerate() {
