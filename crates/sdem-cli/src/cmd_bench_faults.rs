@@ -210,6 +210,7 @@ fn reason_kind(doubt: &Doubt) -> &'static str {
         }
         Doubt::AttitudeCorrected { .. } => "attitude corrected",
         Doubt::UnrefutedRotation { .. } => "rotation undecided",
+        Doubt::FreeSpaceConflict { .. } => "free space",
     }
 }
 

@@ -443,6 +443,8 @@ impl Localization {
 ///   overlaps less (``angle_deg``, ``overlap_fraction``, ``best_overlap_fraction``).
 /// - ``seen_through``: a cheaper pose puts returns where the other scan saw through; the pose
 ///   is the best that does not (``distance_m``, ``cost``, ``seen_through_fraction``).
+/// - ``free_space_conflict``: a quarter or more of the returns compared at the pose lie where
+///   the other scan saw through (``seen_through_fraction``, ``trusted_below``).
 /// - ``taken_from_prediction``: along a free direction the position is the prediction's
 ///   (``direction``, ``shift_m``).
 /// - ``prior_conflict``: the scans alone fit a place far from the pose much better; the

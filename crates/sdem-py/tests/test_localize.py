@@ -115,7 +115,7 @@ def test_a_window_short_of_the_truth_gives_doubts_or_an_error_never_a_wrong_trus
     assert kinds_seen <= {"runner_up", "flat_covariance", "flat_cost", "unconstrained", "few_inliers",
                           "refinement_failed", "on_window_edge", "attitude_corrected",
                           "another_rotation", "unrefuted_rotation", "seen_through",
-                          "taken_from_prediction",
+                          "free_space_conflict", "taken_from_prediction",
                           "prior_conflict"}
 
 

@@ -119,6 +119,19 @@ pub enum Doubt {
         /// The share of its compared returns that the other scan saw through.
         seen_through_fraction: f64,
     },
+    /// A large share of the returns compared at the pose lie where the other scan's beams passed
+    /// through ([`crate::free_space`]): the two scans cannot both have been taken from there,
+    /// whatever eq. (1) says (it counts a return the other scan could not see and one it saw
+    /// through alike). At right poses the share stays small even where the scene changed
+    /// between the scans (moved rubble, dust, a person walking by; see
+    /// [`crate::localize::SEEN_THROUGH_DOUBT`]); a wrong place in a window that does not hold the
+    /// true one (a robot carried off) reaches it.
+    FreeSpaceConflict {
+        /// The share of the compared returns that the other scan saw through.
+        seen_through_fraction: f64,
+        /// The share a trusted pose stays below.
+        trusted_below: f64,
+    },
     /// The scans alone fit a place far from the pose found much better than the pose: the
     /// prediction in the cost (odometry, `--prior`) held the pose away from what the scans say.
     PriorConflict {
@@ -140,9 +153,9 @@ pub enum Doubt {
 }
 
 impl Doubt {
-    /// Whether this doubt concerns the match's shape (a repeated or flat cost, too few points,
-    /// a failed refinement), as opposed to where the search looked, what the attitude readings
-    /// allow, or what the loop did with the result. Such a match is `ambiguous` in [`crate::localize::Diagnostics`].
+    /// Whether this doubt concerns the match itself (a repeated or flat cost, too few points,
+    /// a failed refinement, surfaces where the other scan saw through), as opposed to where the
+    /// search looked, what the attitude readings allow, or what the loop did with the result. Such a match is `ambiguous` in [`crate::localize::Diagnostics`].
     pub fn is_ambiguity(&self) -> bool {
         !matches!(
             self,
@@ -177,6 +190,7 @@ impl Doubt {
             Doubt::AnotherRotation { .. } => "another_rotation",
             Doubt::UnrefutedRotation { .. } => "unrefuted_rotation",
             Doubt::SeenThrough { .. } => "seen_through",
+            Doubt::FreeSpaceConflict { .. } => "free_space_conflict",
             Doubt::TakenFromPrediction { .. } => "taken_from_prediction",
             Doubt::PriorConflict { .. } => "prior_conflict",
         }
@@ -300,6 +314,16 @@ impl fmt::Display for Doubt {
                  candidate that does not contradict the scans so",
                 distance_m * 100.0,
                 seen_through_fraction * 100.0
+            ),
+            Doubt::FreeSpaceConflict {
+                seen_through_fraction,
+                trusted_below,
+            } => write!(
+                f,
+                "{:.0} % of the returns compared lie where the other scan's beams passed \
+                 (trusted below {:.0} %): the scans cannot both have been taken from this pose",
+                seen_through_fraction * 100.0,
+                trusted_below * 100.0
             ),
             Doubt::PriorConflict {
                 distance_m,
@@ -438,6 +462,14 @@ mod tests {
                 true,
             ),
             (
+                Doubt::FreeSpaceConflict {
+                    seen_through_fraction: 0.31,
+                    trusted_below: 0.25,
+                },
+                "free_space_conflict",
+                true,
+            ),
+            (
                 Doubt::PriorConflict {
                     distance_m: 0.34,
                     cost: 4.5e-4,
@@ -459,7 +491,8 @@ mod tests {
                 Doubt::RefinementFailed { .. } => 1,
                 Doubt::FewInliers { .. }
                 | Doubt::TakenFromPrediction { .. }
-                | Doubt::AttitudeCorrected { .. } => 2,
+                | Doubt::AttitudeCorrected { .. }
+                | Doubt::FreeSpaceConflict { .. } => 2,
                 Doubt::RunnerUp { .. }
                 | Doubt::FlatCovariance { .. }
                 | Doubt::Unconstrained { .. }

@@ -35,6 +35,7 @@ DoubtKind = Literal[
     "another_rotation",
     "unrefuted_rotation",
     "seen_through",
+    "free_space_conflict",
     "taken_from_prediction",
     "prior_conflict",
 ]
