@@ -176,15 +176,16 @@ pub struct Args {
         value_parser = overlap_fraction
     )]
     min_overlap: Option<f64>,
-    /// S-DEM cell size, degrees (with --map: the map's own).
+    /// S-DEM cell size, degrees [default: matched to the scanner's angular step in the
+    /// dataset's sensor.toml, as `sdem slam` matches it; 1 without one] (with --map: the map's
+    /// own).
     #[arg(
         long,
-        default_value_t = 1.0,
         allow_hyphen_values = true,
         conflicts_with = "map",
         value_parser = resolution_degrees
     )]
-    resolution: f64,
+    resolution: Option<f64>,
     /// Derive the S-DEM grid from the reference scan and the search's step, truncation and
     /// refinement from its S-DEM (for a spinning LiDAR: `SdemConfig::for_scan`,
     /// `LocalizeOptions::for_scan`) instead of the tilting SICK's defaults; --window,
@@ -272,6 +273,8 @@ struct Report {
     nodes_bounded: usize,
     search: SearchMode,
     cost_model: CostModel,
+    /// The S-DEM grid's cell size, degrees.
+    resolution_deg: f64,
     on_window_edge: bool,
     refined: RefineOutcome,
     refinement: RefinementSummary,
@@ -638,8 +641,15 @@ pub fn run(args: Args) -> Result<Outcome> {
         let step = matched.step_m;
         (grid, localize_config(&args, search, matched, step))
     } else {
+        // The grid `sdem slam` builds for this dataset: a scanner sampling finer than 1° (a
+        // nodding SICK at 0.5°) leaves most of a 1° cell's returns unused, and its map's pairs
+        // come out differently on the coarser grid.
+        let matched = dataset
+            .sensor
+            .as_ref()
+            .map(|s| s.matched_sdem_resolution_deg());
         let grid = SdemConfig {
-            resolution_deg: args.resolution,
+            resolution_deg: args.resolution.or(matched).unwrap_or(1.0),
             ..Default::default()
         };
         (
@@ -654,7 +664,14 @@ pub fn run(args: Args) -> Result<Outcome> {
         .truth
         .as_ref()
         .map(|t| t[reference_index].inverse() * t[query_index]);
-    let report = make_report(pair, &found, &attitudes, &config, time_ms, truth.as_ref());
+    let report = make_report(
+        pair,
+        &found,
+        &attitudes,
+        (&config, sdem_config.resolution_deg),
+        time_ms,
+        truth.as_ref(),
+    );
     let outcome = Outcome::of(found.trusted, args.accept_doubtful);
     if args.json {
         print_json(&report)?;
@@ -847,7 +864,7 @@ fn make_report(
     (reference, query): (usize, usize),
     found: &Localization,
     attitudes: &Attitudes,
-    config: &LocalizeOptions,
+    (config, resolution_deg): (&LocalizeOptions, f64),
     time_ms: f64,
     truth: Option<&Pose>,
 ) -> Report {
@@ -866,6 +883,7 @@ fn make_report(
         nodes_bounded: found.nodes_bounded,
         search: config.mode,
         cost_model: config.cost.model,
+        resolution_deg,
         on_window_edge: found.on_window_edge,
         refined: found.refined,
         refinement: RefinementSummary::new(found.refined, found.refinement.as_ref()),
@@ -971,7 +989,7 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
 /// Prints the search's effort.
 fn print_search(report: &Report, config: &LocalizeOptions) {
     println!(
-        "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({})",
+        "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({}, S-DEM cells {:.3}°)",
         report.candidates_evaluated,
         report.candidates_total,
         report.nodes_bounded,
@@ -980,6 +998,7 @@ fn print_search(report: &Report, config: &LocalizeOptions) {
             SearchMode::Exhaustive => "exhaustive search",
             SearchMode::BranchAndBound => "exact branch-and-bound search",
             SearchMode::CoarseToFine => "coarse-to-fine search",
-        }
+        },
+        report.resolution_deg
     );
 }

@@ -247,3 +247,35 @@ fn the_least_overlap_can_be_set_and_the_search_obeys_it() {
     assert!(raised >= 0.99, "{raised}");
     assert_eq!(code, Some(3));
 }
+
+/// Without `--resolution` a dataset's scans are built on the grid `sdem slam` builds for it:
+/// matched to the scanner's step in its `sensor.toml` (here a pan step of 2°: 2° cells), 1°
+/// without one; `--resolution` overrides either. The JSON says which was used.
+#[test]
+fn the_grid_follows_the_datasets_sensor_unless_a_resolution_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("ds");
+    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
+    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
+    let resolution = |extra: &[&str]| {
+        let args = [&pair[..], extra, &["--json"]].concat();
+        let v = run(dir.path(), &args).json();
+        assert!(v["error_m"].as_f64().unwrap() < 0.01, "{v}");
+        v["resolution_deg"].as_f64().unwrap()
+    };
+    // `sdem simulate` writes the paper's SICK: 1° steps.
+    assert_eq!(resolution(&[]), 1.0);
+    let sensor = ds.join("sensor.toml");
+    let text = std::fs::read_to_string(&sensor).unwrap();
+    assert!(text.contains("pan_step_deg = 1.0"), "{text}");
+    std::fs::write(
+        &sensor,
+        text.replace("pan_step_deg = 1.0", "pan_step_deg = 2.0"),
+    )
+    .unwrap();
+    assert_eq!(resolution(&[]), 2.0);
+    assert_eq!(resolution(&["--resolution", "1.5"]), 1.5);
+    std::fs::remove_file(&sensor).unwrap();
+    assert_eq!(resolution(&[]), 1.0);
+}
