@@ -11,6 +11,14 @@ fn s(path: &Path) -> &str {
     path.to_str().expect("temporary paths are UTF-8")
 }
 
+/// A dataset of two stops simulated in `dir` (seed 1), as `sdem simulate` writes it.
+fn two_stops(dir: &Path) -> std::path::PathBuf {
+    let ds = dir.join("ds");
+    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
+    assert_eq!(run(dir, &sim).code, Some(0));
+    ds
+}
+
 #[test]
 fn localize_numbers_out_of_range_are_usage_errors_naming_flag_and_range() {
     let dir = tempfile::tempdir().unwrap();
@@ -129,9 +137,7 @@ fn localize_refuses_a_prior_or_place_beyond_a_million_metres() {
 #[test]
 fn localize_refuses_an_exhaustive_search_beyond_its_candidate_limit() {
     let dir = tempfile::tempdir().unwrap();
-    let ds = dir.path().join("ds");
-    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
-    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let ds = two_stops(dir.path());
     let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
     // ±2 m at 1 cm with ±2° of heading: 401 × 401 × 21 positions, many headings. Refused
     // before any is scored, naming the count, the limit and the flags that shrink it.
@@ -185,9 +191,7 @@ fn localize_refuses_an_exhaustive_search_beyond_its_candidate_limit() {
 #[test]
 fn a_prior_that_overrules_the_scans_is_doubtful() {
     let dir = tempfile::tempdir().unwrap();
-    let ds = dir.path().join("ds");
-    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
-    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let ds = two_stops(dir.path());
     let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
     let wrong = run(
         dir.path(),
@@ -222,9 +226,7 @@ fn a_prior_that_overrules_the_scans_is_doubtful() {
 #[test]
 fn the_least_overlap_can_be_set_and_the_search_obeys_it() {
     let dir = tempfile::tempdir().unwrap();
-    let ds = dir.path().join("ds");
-    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
-    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let ds = two_stops(dir.path());
     let pair = [
         "localize",
         s(&ds),
@@ -254,9 +256,7 @@ fn the_least_overlap_can_be_set_and_the_search_obeys_it() {
 #[test]
 fn the_grid_follows_the_datasets_sensor_unless_a_resolution_is_given() {
     let dir = tempfile::tempdir().unwrap();
-    let ds = dir.path().join("ds");
-    let sim = ["simulate", "--out", s(&ds), "--stops", "2", "--seed", "1"];
-    assert_eq!(run(dir.path(), &sim).code, Some(0));
+    let ds = two_stops(dir.path());
     let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
     let resolution = |extra: &[&str]| {
         let args = [&pair[..], extra, &["--json"]].concat();

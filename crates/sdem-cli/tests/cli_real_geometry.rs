@@ -184,6 +184,18 @@ fn tilted_real_pair(path: &Path, index: usize) -> (f64, f64, sdem::Localization)
     (t, d, found)
 }
 
+/// Asserts that a tilted pair's localization (`tilted_real_pair`'s translation and rotation
+/// errors and result) is trusted, within `max_m` and 0.1°.
+fn assert_trusted_within((t, d, found): &(f64, f64, sdem::Localization), max_m: f64) {
+    assert!(
+        *t < max_m && d.to_degrees() < 0.1 && found.trusted,
+        "{:.1} mm, {:.2}°, doubts {:?}",
+        t * 1e3,
+        d.to_degrees(),
+        found.doubts
+    );
+}
+
 /// [`tilted_real_pair`] of KITTI's frame 0; `None` without the frame beside the repository.
 fn tilted_kitti_pair(index: usize) -> Option<(f64, f64, sdem::Localization)> {
     let Some(path) = kitti_frame() else {
@@ -202,16 +214,10 @@ fn tilted_kitti_pair(index: usize) -> Option<(f64, f64, sdem::Localization)> {
 /// at its attitude) it is millimetres off and trusted.
 #[test]
 fn a_tilted_real_lidar_frame_without_attitude_is_levelled_by_its_points() {
-    let Some((t, d, found)) = tilted_kitti_pair(10) else {
+    let Some(pair) = tilted_kitti_pair(10) else {
         return;
     };
-    assert!(
-        t < 0.01 && d.to_degrees() < 0.1 && found.trusted,
-        "{:.1} mm, {:.2}°, doubts {:?}",
-        t * 1e3,
-        d.to_degrees(),
-        found.doubts
-    );
+    assert_trusted_within(&pair, 0.01);
 }
 
 /// Pair 5 (0.54 m and 149° apart): at the two views' levels no heading matched ("no candidate
@@ -243,14 +249,7 @@ fn a_tilted_real_scan_levelled_by_its_surfaces_is_trusted_within_their_real_spre
         eprintln!("skipped: no ../shared/data/3dtk-dat/scan000.3d beside the repository");
         return;
     };
-    let (t, d, found) = tilted_real_pair(&path, 5);
-    assert!(
-        t < 0.005 && d.to_degrees() < 0.1 && found.trusted,
-        "{:.1} mm, {:.2}°, doubts {:?}",
-        t * 1e3,
-        d.to_degrees(),
-        found.doubts
-    );
+    assert_trusted_within(&tilted_real_pair(&path, 5), 0.005);
 }
 
 /// Bad flags and files: a clear error, exit 1 (2 for usage).
