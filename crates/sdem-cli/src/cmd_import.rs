@@ -31,6 +31,10 @@ pub struct Args {
     /// How many scans to import from --first on [default: all].
     #[arg(long, allow_hyphen_values = true, value_parser = parse_count)]
     count: Option<usize>,
+    /// Import every Nth scan from --first on (--count of them): a 10 Hz LiDAR recording
+    /// thinned as a vehicle that stops to scan, or drops frames, would take it [default: 1].
+    #[arg(long, value_name = "N", allow_hyphen_values = true, value_parser = parse_every)]
+    every: Option<usize>,
     /// 3DTK only: the folder of slam6D's scanNNN.frames, written as poses_slam6d.txt (a
     /// reference, not ground truth) [default: SOURCE/slam6d_frames_2009/, else SOURCE when it
     /// holds .frames files].
@@ -71,8 +75,9 @@ pub fn run(args: Args) -> Result<()> {
         None => sdem_io::rosbag::is_rosbag(&args.source),
     };
     if is_bag {
-        if args.first != 0 || args.count.is_some() || args.frames.is_some() {
-            bail!("--first, --count and --frames are for 3DTK and KITTI folders; a bag's stops are chosen with --stops");
+        if args.first != 0 || args.count.is_some() || args.every.is_some() || args.frames.is_some()
+        {
+            bail!("--first, --count, --every and --frames are for 3DTK and KITTI folders and E57 surveys; a bag's stops are chosen with --stops");
         }
         clear_for_force(&args)?;
         return crate::cmd_import_bag::run(&args.source, &args.out, &args.bag, args.json);
@@ -92,6 +97,7 @@ pub fn run(args: Args) -> Result<()> {
     let options = ImportOptions {
         first: args.first,
         count: args.count,
+        every: args.every,
         frames_dir: args.frames.clone(),
     };
     let format = match format {
@@ -126,6 +132,15 @@ fn parse_count(text: &str) -> std::result::Result<usize, String> {
         text,
         1..=usize::MAX,
         "0 imports nothing (leave the flag out for all scans)",
+    )
+}
+
+/// Parses `--every N`: at least 1.
+fn parse_every(text: &str) -> std::result::Result<usize, String> {
+    crate::parse::count_in(
+        text,
+        1..=usize::MAX,
+        "give 1 for every scan, 5 for every fifth",
     )
 }
 

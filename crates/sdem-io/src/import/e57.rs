@@ -113,26 +113,25 @@ fn write_priors(
     Ok(())
 }
 
-/// The scan indices `options.first` and `options.count` select from a survey of `total`.
-fn selection(
-    total: usize,
-    options: &ImportOptions,
-    source: &Path,
-) -> Result<std::ops::Range<usize>> {
-    let count = options.count.unwrap_or(total.saturating_sub(options.first));
-    let end = options.first.saturating_add(count);
-    if options.first >= total || count == 0 || end > total {
+/// The scan indices `options.first`, `options.every` and `options.count` select from a survey
+/// of `total`.
+fn selection(total: usize, options: &ImportOptions, source: &Path) -> Result<Vec<usize>> {
+    let every = options.stride()?;
+    let available: Vec<usize> = (options.first.min(total)..total).step_by(every).collect();
+    let count = options.count.unwrap_or(available.len());
+    if available.is_empty() || count == 0 || count > available.len() {
         let asked = match options.count {
             Some(count) => format!("{count} from scan {}", options.first),
             None => format!("scans from {} on", options.first),
         };
         return Err(Error::Invalid(format!(
-            "{} holds {total} scans (numbered from 0), and the import asks for {asked}: beyond \
-             them, or none",
+            "{} holds {total} scans (numbered from 0), and the import asks for {asked}{}: \
+             beyond them, or none",
             source.display(),
+            super::every_text(every),
         )));
     }
-    Ok(options.first..end)
+    Ok(available.into_iter().take(count).collect())
 }
 
 /// The poses with the translation re-based on the first one's; rotations unchanged.
@@ -279,11 +278,23 @@ mod tests {
         let options = ImportOptions {
             first: 2,
             count: Some(2),
+            every: None,
             frames_dir: None,
         };
         let other = dir.path().join("other");
         let err = import_e57(&source, &other, &options).unwrap_err();
         assert!(err.to_string().contains("holds 3 scans"), "{err}");
         assert!(!other.exists());
+        // A stride picks scans by their position in the survey.
+        let every = |first, every, count| ImportOptions {
+            first,
+            count,
+            every: Some(every),
+            frames_dir: None,
+        };
+        assert_eq!(selection(3, &every(0, 2, None), &source).unwrap(), [0, 2]);
+        assert_eq!(selection(3, &every(1, 2, None), &source).unwrap(), [1]);
+        let err = selection(3, &every(0, 2, Some(3)), &source).unwrap_err();
+        assert!(err.to_string().contains("with a stride of 2"), "{err}");
     }
 }

@@ -269,6 +269,7 @@ mod tests {
         let options = ImportOptions {
             first: 2,
             count: Some(2),
+            every: None,
             frames_dir: None,
         };
         let summary = import_dataset(&source, &out, None, &options).unwrap();
@@ -285,6 +286,41 @@ mod tests {
         let (dt, dr) = pose_error(&Pose::identity(), &truth[0]);
         assert!(dt < 1e-12 && dr < 1e-12);
         assert!((truth[1].translation.vector - Vec3::new(0.8, 0.0, 0.0)).norm() < 1e-9);
+
+        // Every second frame from frame 1 on: frames 1 and 3, the truth 1.6 m apart.
+        let thinned = dir.path().join("thinned");
+        let every = ImportOptions {
+            first: 1,
+            every: Some(2),
+            ..Default::default()
+        };
+        let summary = import_dataset(&source, &thinned, None, &every).unwrap();
+        assert_eq!(summary.scans, 2);
+        assert!(summary.source_scans[1].ends_with("000003.bin"));
+        let truth = Dataset::open(&thinned).unwrap().truth.unwrap();
+        assert!((truth[1].translation.vector - Vec3::new(1.6, 0.0, 0.0)).norm() < 1e-9);
+        // Three of them are more than the folder holds; a stride of 0 is refused.
+        for (options, want) in [
+            (
+                ImportOptions {
+                    count: Some(3),
+                    ..every.clone()
+                },
+                "3 scans asked from number 1 on with a stride of 2",
+            ),
+            (
+                ImportOptions {
+                    every: Some(0),
+                    ..Default::default()
+                },
+                "at least 1",
+            ),
+        ] {
+            let err = import_dataset(&source, &dir.path().join("no"), None, &options)
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(want), "{err}");
+        }
 
         // Without poses.txt: no truth.
         let out2 = dir.path().join("ds2");

@@ -94,6 +94,11 @@ pub struct ImportOptions {
     pub first: usize,
     /// How many scans to import from `first` on (in the order of their numbers); `None` for all.
     pub count: Option<usize>,
+    /// Import every this many-th scan from `first` on (`None`: every scan), `count` of them:
+    /// a 10 Hz LiDAR recording thinned as a vehicle that stops to scan, or drops frames,
+    /// would take it. The dataset's scans are renumbered from 0 and its pose files hold the
+    /// imported scans' poses alone.
+    pub every: Option<usize>,
     /// 3DTK only: the folder of slam6D's `scanNNN.frames`. `None` looks for
     /// `SOURCE/slam6d_frames_2009/`, then for `.frames` files in `SOURCE`.
     pub frames_dir: Option<PathBuf>,
@@ -237,9 +242,11 @@ fn select(
             folder.display()
         )));
     }
+    let every = options.stride()?;
     let available: Vec<_> = files
         .into_iter()
         .filter(|(n, _)| *n >= options.first)
+        .step_by(every)
         .collect();
     let selected: Vec<_> = match options.count {
         Some(0) => {
@@ -249,8 +256,9 @@ fn select(
         }
         Some(count) if count > available.len() => {
             return Err(Error::Invalid(format!(
-                "{count} scans asked from number {} on, but {} holds {} ({what})",
+                "{count} scans asked from number {} on{}, but {} holds {} ({what})",
                 options.first,
+                every_text(every),
                 folder.display(),
                 available.len()
             )))
@@ -266,6 +274,30 @@ fn select(
         )));
     }
     Ok(selected)
+}
+
+impl ImportOptions {
+    /// The stride [`Self::every`] asks for: 1 when it is `None`.
+    ///
+    /// # Errors
+    /// [`Error::Invalid`] when it is `Some(0)`.
+    pub fn stride(&self) -> Result<usize> {
+        match self.every {
+            None => Ok(1),
+            Some(0) => Err(Error::Invalid(
+                "every 0th scan imports nothing; give a stride of at least 1".into(),
+            )),
+            Some(n) => Ok(n),
+        }
+    }
+}
+
+/// " with a stride of N" for a stride above 1, for messages.
+pub(crate) fn every_text(every: usize) -> String {
+    match every {
+        1 => String::new(),
+        n => format!(" with a stride of {n}"),
+    }
 }
 
 /// Refuses to import into a folder that holds a dataset entry.

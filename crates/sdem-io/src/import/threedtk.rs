@@ -675,6 +675,7 @@ mod tests {
         let options = ImportOptions {
             first: 1,
             count: Some(2),
+            every: None,
             frames_dir: Some(frames),
         };
         let summary = import_dataset(&source, &out, None, &options).unwrap();
