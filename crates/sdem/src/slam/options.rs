@@ -113,6 +113,11 @@ pub struct RecoveryOptions {
     /// When no prediction leads to a trusted match, the best one is searched again in a window
     /// this large, metres (a robot that drove 2 m between stops, or 30 cm up or down)…
     pub max_window_half_m: [f64; 3],
+    /// When set and narrower than `max_window_half_m`, every wide search is made in this
+    /// window first, metres: [`SlamOptions::for_scan`] widens a LiDAR's widest window eightfold
+    /// (±17 m on the KITTI frames, 0.6–2 s a search), where the tilting laser's ±2.2 m finds
+    /// frames two or three apart in 0.1–0.3 s.
+    pub first_window_half_m: Option<[f64; 3]>,
     /// … and this many degrees of heading either way without a compass, every heading being
     /// searched next. Around a compass the window is searched at the compass's own heading
     /// window first, then at what a compass near steel may be off by (±25°, at most this).
@@ -160,6 +165,7 @@ impl Default for RecoveryOptions {
     fn default() -> Self {
         Self {
             max_window_half_m: [2.2, 2.2, 0.3],
+            first_window_half_m: None,
             max_heading_half_deg: 60.0,
             every_heading_nodes: 3,
             relocalize_candidates: 6,
@@ -176,11 +182,25 @@ impl Default for RecoveryOptions {
 }
 
 impl RecoveryOptions {
+    /// The windows a wide search grows through, narrowest first: `first_window_half_m` when
+    /// it is narrower than `max_window_half_m` on some axis (and nowhere wider), then
+    /// `max_window_half_m`.
+    pub fn window_stages(&self) -> Vec<[f64; 3]> {
+        let widest = self.max_window_half_m;
+        match self.first_window_half_m {
+            Some(first) if first != widest && first.iter().zip(&widest).all(|(f, w)| f <= w) => {
+                vec![first, widest]
+            }
+            _ => vec![widest],
+        }
+    }
+
     /// Checks every value.
     pub fn validate(&self) -> Result<()> {
         let halves = self
             .max_window_half_m
             .iter()
+            .chain(self.first_window_half_m.iter().flatten())
             .chain(&self.relocalize_window_half_m);
         if let Some(h) = halves.copied().find(|h| !(h.is_finite() && *h >= 0.0)) {
             return Err(Error::Invalid(format!(
@@ -274,8 +294,15 @@ impl SlamOptions {
     ///   ([`Self::min_tracking_inlier_fraction`], 50 %), not the tilting laser's 60 %: a
     ///   LiDAR on a moving vehicle always sees new ground ahead and sparse far returns (KITTI's
     ///   tracked frames match 56–58 % of their cells at the grid's best candidate against the
-    ///   frame before), and a second run into their map was never placed; the windows and the
-    ///   recovery stay the defaults (a vehicle's motion is predicted by its last one);
+    ///   frame before), and a second run into their map was never placed; the tracking windows
+    ///   stay the defaults (a vehicle's motion is predicted by its last one), but the recovery's
+    ///   widest window and the σ of a prediction without odometry grow by the step's ratio to
+    ///   the default's (the scene is that many times larger: 7.85 on the KITTI frames, ±17 m):
+    ///   with the tilting laser's ±2.2 m and 20 cm, frames five apart (3.6–4.2 m) each opened
+    ///   a segment, the true place outside the window and then, in a wider one, 3.6 m from the
+    ///   no-motion prediction, which cost (3.6 / 0.2)² points' worth of τ² and put it over the
+    ///   search's cost cap; the tilting laser's widest window is searched first (frames two
+    ///   or three apart are found there in a sixth of the time);
     /// * **any other scanner**: [`SlamOptions::default`], the tilting laser's.
     ///
     /// # Example
@@ -292,7 +319,14 @@ impl SlamOptions {
     ///     })
     ///     .collect();
     /// let lidar = SlamOptions::for_scan(&points);
-    /// assert!(lidar.localize.step_m > SlamOptions::default().localize.step_m);
+    /// let default = SlamOptions::default();
+    /// assert!(lidar.localize.step_m > default.localize.step_m);
+    /// // Its recovery searches the tilting laser's widest window first, then one as many times
+    /// // wider as its step is coarser.
+    /// let scale = lidar.localize.step_m / default.localize.step_m;
+    /// let widest = lidar.recovery.window_stages();
+    /// assert_eq!(widest[0], default.recovery.max_window_half_m);
+    /// assert!((widest[1][0] - scale * default.recovery.max_window_half_m[0]).abs() < 1e-9);
     /// // The tilting laser's front half: the defaults.
     /// let front: Vec<Vec3> = points.iter().filter(|p| p.x > 0.0).copied().collect();
     /// assert_eq!(SlamOptions::for_scan(&front), SlamOptions::default());
@@ -316,8 +350,20 @@ impl SlamOptions {
             ..LocalizeOptions::for_scan(&scan)
         };
         let step = localize.step_m;
+        let scale = step / default.localize.step_m;
+        let widest = default.recovery.max_window_half_m;
         Self {
             sdem,
+            prior_sigma_no_odometry_m: default.prior_sigma_no_odometry_m * scale,
+            recovery: RecoveryOptions {
+                max_window_half_m: [
+                    widest[0] * scale,
+                    widest[1] * scale,
+                    widest[2].max(2.0 * step),
+                ],
+                first_window_half_m: Some(widest),
+                ..default.recovery.clone()
+            },
             loop_closure: LoopClosureConfig {
                 step_m: step,
                 window_half_m: [

@@ -111,10 +111,12 @@ impl Slam {
         // first, then at a disturbed compass's: the wider heading window holds the more wrong
         // basins (on the route bench's long steps without odometry, a compass of σ 2°, the
         // first wrong best of ±25° lay 15–33° from the true heading on five seeds of six).
-        if compass.is_some() && !base.measured && base.heading_half < widest_heading {
-            again.push(base.grown(&recovery.max_window_half_m, base.heading_half));
+        for window in recovery.window_stages() {
+            if compass.is_some() && !base.measured && base.heading_half < widest_heading {
+                again.push(base.grown(&window, base.heading_half));
+            }
+            again.push(base.grown(&window, widest_heading));
         }
-        again.push(base.grown(&recovery.max_window_half_m, widest_heading));
         // Without odometry a lost stop's best match places the new segment: one whose heading
         // the compass allows before any that it does not (a compass is off by degrees, near
         // steel by up to 20°; a basin 25° off is more often a wrong one that costs less).
