@@ -9,7 +9,8 @@ use nalgebra::{Isometry3, Vector3};
 use sdem::geometry::{Attitude, Pose};
 use sdem::sensor::SensorConfig;
 use sdem_sim::sim::lidar_street::street;
-use sdem_sim::sim::{spinning_scan, SpinningLidar};
+use rand::SeedableRng;
+use sdem_sim::sim::{spin_scan, spinning_scan, LidarConfig, SpinningLidar};
 
 #[test]
 fn localize_matches_the_grid_to_a_lidar_scan() {
@@ -56,4 +57,52 @@ fn localize_matches_the_grid_to_a_lidar_scan() {
     // The derived settings replace --step and --resolution: giving both is a usage error.
     args.extend(["--step", "0.05"]);
     assert_eq!(run(dir.path(), &args).code, Some(2));
+}
+
+/// `sdem slam` on a forward-looking solid-state LiDAR (a simulated 70° × 70° unit driven down
+/// a street, 10 frames 0.8 m apart, weaving and turning a little, no odometry, no
+/// `sensor.toml`): the options derived from its first frame map every frame in one segment
+/// within 2 cm of the truth. With the tilting laser's defaults most frames opened segments of
+/// their own, 2.7 m ATE.
+#[test]
+fn slam_maps_a_solid_state_lidar_run_with_options_derived_from_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = street(3);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    let poses: Vec<Pose> = (0..10)
+        .map(|i| {
+            let t = i as f64;
+            Isometry3::new(
+                Vector3::new(-20.0 + 0.8 * t, 0.3 * (0.3 * t).sin(), 0.0),
+                Vector3::z() * (3.0 * (0.2 * t).cos()).to_radians(),
+            )
+        })
+        .collect();
+    let scans: Vec<_> = poses
+        .iter()
+        .map(|pose| {
+            let points = spin_scan(&scene, &LidarConfig::solid_state(), pose, &mut rng).unwrap();
+            (points, Attitude::default())
+        })
+        .collect();
+    let dataset = dir.path().join("street");
+    sdem_io::write_dataset(
+        &dataset,
+        &SensorConfig::default(),
+        &scans,
+        None,
+        Some(&poses),
+        None,
+    )
+    .unwrap();
+    // No sensor model: the loop chooses its options from the first scan.
+    std::fs::remove_file(dataset.join("sensor.toml")).unwrap();
+    let report = run_json(
+        dir.path(),
+        &["slam", "street", "--out", "map", "--no-pictures", "--json"],
+    );
+    assert_eq!(report["segments"].as_array().unwrap().len(), 1, "{report}");
+    assert_eq!(report["trusted"], true, "{report}");
+    let ate = report["truth"]["ate_rmse_m"].as_f64().unwrap();
+    assert!(ate < 0.02, "ATE {ate} m");
 }

@@ -188,3 +188,56 @@ fn a_second_query_against_one_reference_gives_the_same_answer() {
         assert_eq!(first.doubts, other.doubts);
     }
 }
+
+/// `SlamOptions::for_scan` tells the scanners apart by the field of view their returns cover:
+/// a spinning LiDAR's full turn in a narrow band and a solid-state unit's forward cone get the
+/// options derived from the scan; the paper's tilting laser (half the azimuth, 85° of
+/// elevation) and a scanner that sees the whole sphere keep the tilting laser's defaults.
+#[test]
+fn the_loop_tells_lidars_from_the_tilting_laser_by_their_field_of_view() {
+    use sdem::slam::{is_solid_state_lidar, is_spinning_lidar, SlamOptions};
+    use sdem_sim::sim::{spin_scan, LidarConfig};
+    let scene = street(1);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    let spin = spin_scan(&scene, &LidarConfig::default(), &Pose::identity(), &mut rng).unwrap();
+    let solid = spin_scan(
+        &scene,
+        &LidarConfig::solid_state(),
+        &Pose::identity(),
+        &mut rng,
+    )
+    .unwrap();
+    let sweep = sim::scan(
+        &sim::paper_room(),
+        &SensorConfig::default(),
+        &Pose::identity(),
+        0.0,
+        &mut rng,
+    )
+    .points_in_sensor();
+    // Every direction of the sphere at 2°, 5 m away.
+    let sphere: Vec<Vec3> = (0..180)
+        .flat_map(|i| (0..90).map(move |j| (i, j)))
+        .map(|(i, j)| {
+            let (az, el) = (
+                (2.0 * i as f64).to_radians(),
+                (-89.0 + 2.0 * j as f64).to_radians(),
+            );
+            5.0 * Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
+        })
+        .collect();
+    assert!(is_spinning_lidar(&spin) && !is_solid_state_lidar(&spin));
+    assert!(is_solid_state_lidar(&solid) && !is_spinning_lidar(&solid));
+    let default = SlamOptions::default();
+    for (name, scan) in [("spinning", &spin), ("solid-state", &solid)] {
+        let derived = SlamOptions::for_scan(scan);
+        assert!(derived.localize.step_m > default.localize.step_m, "{name}");
+    }
+    for (name, scan) in [("tilting laser", &sweep), ("whole sphere", &sphere)] {
+        assert!(
+            !is_spinning_lidar(scan) && !is_solid_state_lidar(scan),
+            "{name}"
+        );
+        assert_eq!(SlamOptions::for_scan(scan), default, "{name}");
+    }
+}

@@ -254,6 +254,22 @@ const LIDAR_VOXEL_RANGE_M: f64 = 20.0;
 /// `LIDAR_MAX_ELEVATION_DEG` of elevation (the 1st to 99th percentile). A tilting laser
 /// sweeps half the azimuth and 85° of elevation; a rotating 3D laser scanner the whole sphere.
 pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
+    field_of_view(points_in_sensor).is_some_and(|(azimuth, elevation)| {
+        azimuth >= LIDAR_MIN_AZIMUTH_DEG && elevation <= LIDAR_MAX_ELEVATION_DEG
+    })
+}
+
+/// Whether `points_in_sensor` look like one frame of a forward-looking solid-state LiDAR (a
+/// Livox, a MEMS or flash unit): their directions cover at most
+/// `SOLID_STATE_MAX_AZIMUTH_DEG` of azimuth (in 1° bins). A tilting laser pans over 180°.
+pub fn is_solid_state_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
+    field_of_view(points_in_sensor)
+        .is_some_and(|(azimuth, _)| azimuth <= SOLID_STATE_MAX_AZIMUTH_DEG)
+}
+
+/// The azimuth the points' directions cover (1° bins with a return) and the band of elevation
+/// they span (the 1st to 99th percentile), degrees; `None` for fewer than 1,000 usable points.
+fn field_of_view(points_in_sensor: &[crate::geometry::Vec3]) -> Option<(f64, f64)> {
     let mut azimuth_bins = vec![false; 360];
     let mut elevations: Vec<f64> = Vec::with_capacity(points_in_sensor.len());
     for p in points_in_sensor {
@@ -266,12 +282,12 @@ pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
         elevations.push((p.z / r).asin().to_degrees());
     }
     if elevations.len() < 1000 {
-        return false;
+        return None;
     }
     elevations.sort_by(f64::total_cmp);
     let at = |q: f64| elevations[((elevations.len() - 1) as f64 * q) as usize];
     let covered = azimuth_bins.iter().filter(|&&b| b).count() as f64;
-    covered >= LIDAR_MIN_AZIMUTH_DEG && at(0.99) - at(0.01) <= LIDAR_MAX_ELEVATION_DEG
+    Some((covered, at(0.99) - at(0.01)))
 }
 
 /// A scanner is a spinning multi-beam LiDAR ([`SlamOptions::for_scan`]) when its scan covers at
@@ -279,6 +295,10 @@ pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
 pub const LIDAR_MIN_AZIMUTH_DEG: f64 = 300.0;
 /// … within at most this band of elevation, degrees (a tilting laser sweeps 85° or more).
 pub const LIDAR_MAX_ELEVATION_DEG: f64 = 60.0;
+/// A scanner is a forward-looking solid-state LiDAR ([`SlamOptions::for_scan`]) when its scan
+/// covers at most this much of the azimuth, degrees (Livox units 38–82°, the widest MEMS units
+/// 120°; the tilting laser pans over 180°).
+pub const SOLID_STATE_MAX_AZIMUTH_DEG: f64 = 120.0;
 
 impl SlamOptions {
     /// The loop's options for the scanner that took `points_in_sensor`, as `sdem slam` chooses
@@ -303,7 +323,13 @@ impl SlamOptions {
     ///   no-motion prediction, which cost (3.6 / 0.2)² points' worth of τ² and put it over the
     ///   search's cost cap; the tilting laser's widest window is searched first (frames two
     ///   or three apart are found there in a sixth of the time);
-    /// * **any other scanner**: [`SlamOptions::default`], the tilting laser's.
+    /// * **a forward-looking solid-state LiDAR** ([`is_solid_state_lidar`]: at most 120° of
+    ///   azimuth): the same. On a simulated street (a 70° × 70° unit of 64 rows, 0.2° in
+    ///   azimuth, 12 frames 0.8 m apart, no odometry) the tilting laser's defaults put 10 of 12
+    ///   frames in segments of their own (270 cm ATE, 0.78 s a frame), these options map them in
+    ///   one (0.40 cm, 16 ms);
+    /// * **any other scanner** (a tilting laser's half sphere, a rotating scanner's whole one):
+    ///   [`SlamOptions::default`], the tilting laser's.
     ///
     /// # Example
     /// ```
@@ -334,7 +360,7 @@ impl SlamOptions {
     pub fn for_scan<P: crate::geometry::AsPoint>(points_in_sensor: &[P]) -> Self {
         let points_in_sensor = &*P::as_vec3s(points_in_sensor);
         let default = Self::default();
-        if !is_spinning_lidar(points_in_sensor) {
+        if !(is_spinning_lidar(points_in_sensor) || is_solid_state_lidar(points_in_sensor)) {
             return default;
         }
         let sdem = SdemConfig::for_scan(points_in_sensor);
