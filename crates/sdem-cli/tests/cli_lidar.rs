@@ -6,10 +6,10 @@ mod common;
 
 use common::{run, run_json};
 use nalgebra::{Isometry3, Vector3};
+use rand::SeedableRng;
 use sdem::geometry::{Attitude, Pose};
 use sdem::sensor::SensorConfig;
 use sdem_sim::sim::lidar_street::street;
-use rand::SeedableRng;
 use sdem_sim::sim::{spin_scan, spinning_scan, LidarConfig, SpinningLidar};
 
 #[test]

@@ -200,6 +200,15 @@ fn the_loop_tells_lidars_from_the_tilting_laser_by_their_field_of_view() {
     let scene = street(1);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
     let spin = spin_scan(&scene, &LidarConfig::default(), &Pose::identity(), &mut rng).unwrap();
+    // An Ouster OS0: 128 rows over ±45°.
+    let os0 = LidarConfig {
+        rings: 128,
+        elevation_min_deg: -45.0,
+        elevation_max_deg: 45.0,
+        azimuth_step_deg: 0.35,
+        ..LidarConfig::default()
+    };
+    let os0 = spin_scan(&scene, &os0, &Pose::identity(), &mut rng).unwrap();
     let solid = spin_scan(
         &scene,
         &LidarConfig::solid_state(),
@@ -227,9 +236,10 @@ fn the_loop_tells_lidars_from_the_tilting_laser_by_their_field_of_view() {
         })
         .collect();
     assert!(is_spinning_lidar(&spin) && !is_solid_state_lidar(&spin));
+    assert!(is_spinning_lidar(&os0) && !is_solid_state_lidar(&os0));
     assert!(is_solid_state_lidar(&solid) && !is_spinning_lidar(&solid));
     let default = SlamOptions::default();
-    for (name, scan) in [("spinning", &spin), ("solid-state", &solid)] {
+    for (name, scan) in [("spinning", &spin), ("OS0", &os0), ("solid-state", &solid)] {
         let derived = SlamOptions::for_scan(scan);
         assert!(derived.localize.step_m > default.localize.step_m, "{name}");
     }

@@ -252,7 +252,8 @@ const LIDAR_VOXEL_RANGE_M: f64 = 20.0;
 /// Whether `points_in_sensor` look like one turn of a spinning multi-beam LiDAR: their
 /// directions cover at least `LIDAR_MIN_AZIMUTH_DEG` of azimuth (in 1° bins) within at most
 /// `LIDAR_MAX_ELEVATION_DEG` of elevation (the 1st to 99th percentile). A tilting laser
-/// sweeps half the azimuth and 85° of elevation; a rotating 3D laser scanner the whole sphere.
+/// sweeps half the azimuth; a rotating 3D laser scanner nearly the whole sphere, an Ouster
+/// OS0 90° of elevation, a Velodyne 27–40°.
 pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
     field_of_view(points_in_sensor).is_some_and(|(azimuth, elevation)| {
         azimuth >= LIDAR_MIN_AZIMUTH_DEG && elevation <= LIDAR_MAX_ELEVATION_DEG
@@ -293,8 +294,11 @@ fn field_of_view(points_in_sensor: &[crate::geometry::Vec3]) -> Option<(f64, f64
 /// A scanner is a spinning multi-beam LiDAR ([`SlamOptions::for_scan`]) when its scan covers at
 /// least this much of the azimuth, degrees…
 pub const LIDAR_MIN_AZIMUTH_DEG: f64 = 300.0;
-/// … within at most this band of elevation, degrees (a tilting laser sweeps 85° or more).
-pub const LIDAR_MAX_ELEVATION_DEG: f64 = 60.0;
+/// … within at most this band of elevation, degrees: the widest spinning LiDARs (an Ouster OS0,
+/// 90°) and not a rotating scanner's sphere (about 180°). At 60° a simulated OS0 (128 rows over
+/// ±45°) got the tilting laser's defaults and 11 of 12 frames down a street opened segments
+/// (269 cm ATE, 1.55 s a frame); with the derived options 0.06 cm, 87 ms.
+pub const LIDAR_MAX_ELEVATION_DEG: f64 = 120.0;
 /// A scanner is a forward-looking solid-state LiDAR ([`SlamOptions::for_scan`]) when its scan
 /// covers at most this much of the azimuth, degrees (Livox units 38–82°, the widest MEMS units
 /// 120°; the tilting laser pans over 180°).
