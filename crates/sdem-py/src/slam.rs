@@ -36,7 +36,8 @@ use std::path::PathBuf;
 ///         ``reference_radius_m`` (4.0), ``max_reference_nodes`` (3),
 ///         ``min_reference_overlap_cells`` (300), ``min_tracking_inlier_fraction`` (0.5: a
 ///         match from a prediction is taken at once only above it, else searched again wider),
-///         ``edge_sigma_floor_m`` (0.005), ``edge_sigma_floor_deg`` (0.1), ``recovery`` (what
+///         ``check_no_motion`` (false: a match from the no-motion prediction taken at once;
+///         a LiDAR's options search its runner-up first), ``edge_sigma_floor_m`` (0.005), ``edge_sigma_floor_deg`` (0.1), ``recovery`` (what
 ///         the loop does when its predictions fail: the widest window, every heading, the whole
 ///         map), ``loop_closure``, ``optimize`` (the pose graph), ``voxel`` (the fused
 ///         occupancy map) and ``growth`` (what keeps the work per stop and the memory bounded

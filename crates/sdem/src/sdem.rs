@@ -67,10 +67,16 @@ impl Default for SdemConfig {
 pub const SCAN_ELEVATION_MARGIN_DEG: f64 = 5.0;
 
 /// [`SdemConfig::for_scan`] takes the finest resolution at which at most this fraction of the
-/// cells in the scanned band are holes (empty between two known cells, above and below or left
-/// and right): a grid finer than the scanner's coarser angular step leaves every other row or
-/// column of cells empty.
+/// cells in the scanned band are holes (empty between two known cells at most
+/// `MAX_HOLE_RUN` cells away, above and below or left and right): a grid finer than the
+/// scanner's coarser angular step leaves rows or columns of cells empty.
 pub const MAX_HOLE_FRACTION: f64 = 0.1;
+
+/// An empty cell is a hole when known cells lie within this many cells of it on both sides
+/// (above and below, or left and right): a grid of 0.5° over a 16-beam LiDAR's rings, 2° apart,
+/// leaves three empty rows between two known ones, and no cell a neighbour above and below to
+/// measure its surface by.
+const MAX_HOLE_RUN: usize = 3;
 
 /// The resolutions [`SdemConfig::for_scan`] tries, finest first, degrees (each shrunk so that
 /// whole cells make a full turn).
@@ -88,8 +94,10 @@ impl SdemConfig {
     /// * **Resolution**: the finest of 0.1°–2° (shrunk so that whole cells make a turn) at which
     ///   at most [`MAX_HOLE_FRACTION`] of the scanned cells are holes: about the scanner's
     ///   coarser angular step (0.5° for a Velodyne HDL-64E, whose 64 lasers lie 0.3–0.5° apart
-    ///   and fire every 0.17°; 1° for the tilting SICK of the paper). Finer cells would leave
-    ///   rows of holes between the lasers, coarser ones keep only the nearest of several returns.
+    ///   and fire every 0.17°; 2° for a 16-beam one whose lasers lie 2° apart; 1° for the tilting
+    ///   SICK of the paper). Finer cells would leave rows of holes between the lasers (and no
+    ///   surface measurable from a cell's neighbours above and below), coarser ones keep only
+    ///   the nearest of several returns.
     /// * **Elevation**: the scan's own band (−25°..+3° for the HDL-64E), widened by
     ///   [`SCAN_ELEVATION_MARGIN_DEG`] each way for the tilt between two levelled scans, in whole
     ///   degrees. A scan levelled by an attitude tilted further loses the points beyond: widen
@@ -252,14 +260,22 @@ pub const MAX_CELLS: usize = 3600 * 1800;
 /// above and below it or to its left and right. Among the empty cells and the known ones.
 fn hole_fraction(directions: &[(f64, f64)], resolution_deg: f64, elevation_min: f64) -> f64 {
     let (known, rows, columns) = occupancy(directions, resolution_deg, elevation_min);
+    let at = |e: usize, a: usize| known[e * columns + a % columns];
+    // Whether a known cell lies within `MAX_HOLE_RUN` cells of (e, a) along (de, da).
+    let known_within = |e: usize, a: usize, de: isize, da: isize| {
+        (1..=MAX_HOLE_RUN as isize).any(|k| {
+            let row = e as isize + de * k;
+            let column = (a + columns) as isize + da * k;
+            (0..rows as isize).contains(&row) && at(row as usize, column as usize)
+        })
+    };
     let (mut holes, mut filled) = (0usize, 0usize);
     for e in 0..rows {
         for a in 0..columns {
-            let at = |e: usize, a: usize| known[e * columns + a % columns];
             if at(e, a) {
                 filled += 1;
-            } else if (e > 0 && e + 1 < rows && at(e - 1, a) && at(e + 1, a))
-                || (at(e, a + columns - 1) && at(e, a + 1))
+            } else if (known_within(e, a, -1, 0) && known_within(e, a, 1, 0))
+                || (known_within(e, a, 0, -1) && known_within(e, a, 0, 1))
             {
                 holes += 1;
             }

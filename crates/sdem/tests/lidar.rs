@@ -92,6 +92,20 @@ fn the_grid_is_derived_from_the_scanner() {
         (-180.0, 180.0)
     );
     assert_eq!(narrow.resolution_deg, hdl32.resolution_deg);
+    // 16 lasers 2° apart (a VLP-16), fired every 0.2°: finer cells would leave rows of holes
+    // between the lasers, and no cell a neighbour above and below to measure its surface by.
+    let vlp16: Vec<Vec3> = (0..16)
+        .flat_map(|laser| (0..1800).map(move |k| (laser, k)))
+        .map(|(laser, k)| {
+            let (el, az) = (
+                (-15.0 + 2.0 * laser as f64).to_radians(),
+                (0.2 * k as f64).to_radians(),
+            );
+            10.0 * Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
+        })
+        .collect();
+    let vlp16 = SdemConfig::for_scan(&vlp16);
+    assert!(vlp16.resolution_deg >= 1.9, "{}", vlp16.resolution_deg);
     // The paper's tilting SICK, 1° pan and tilt steps: 1° cells, as the sensor model says.
     let sensor = SensorConfig::default();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
@@ -110,7 +124,7 @@ fn the_grid_is_derived_from_the_scanner() {
         SdemConfig::default()
     );
     // Every derived grid is a valid one.
-    for g in [hdl64, hdl32, narrow, sick] {
+    for g in [hdl64, hdl32, vlp16, narrow, sick] {
         g.validate().unwrap();
     }
 }

@@ -52,6 +52,14 @@ pub struct SlamOptions {
     /// simulated 1 m step where right ones match 50–90 %. Below, the scan is searched again,
     /// wider and against more nodes, with the runner-up search.
     pub min_tracking_inlier_fraction: f64,
+    /// A match from the no-motion prediction (a step without odometry and without a motion
+    /// before it to repeat: the second scan of a run or segment) is taken only after the
+    /// runner-up search finds no rival basin, never from the quick search. A LiDAR's rings draw
+    /// the same circles on a flat road wherever the vehicle stands: a simulated 16-beam
+    /// scanner's second frame, 0.8 m on, matched 56 % of its cells where the first stood and
+    /// was taken there, with the next one after it. [`Self::for_scan`] sets it for LiDARs; a
+    /// stop-and-go tilting laser takes such a match at once (`false`).
+    pub check_no_motion: bool,
     /// Floor on the standard deviation of an edge's translation, metres: the matcher's
     /// covariance is the two scans' alone, and a match can still be off by more.
     pub edge_sigma_floor_m: f64,
@@ -93,6 +101,7 @@ impl Default for SlamOptions {
             max_reference_nodes: 3,
             min_reference_overlap_cells: 300,
             min_tracking_inlier_fraction: 0.5,
+            check_no_motion: false,
             edge_sigma_floor_m: 0.005,
             edge_sigma_floor_deg: 0.1,
             recovery: RecoveryOptions::default(),
@@ -384,6 +393,7 @@ impl SlamOptions {
         let widest = default.recovery.max_window_half_m;
         Self {
             sdem,
+            check_no_motion: true,
             prior_sigma_no_odometry_m: default.prior_sigma_no_odometry_m * scale,
             recovery: RecoveryOptions {
                 max_window_half_m: [

@@ -67,7 +67,9 @@ impl Slam {
                 scan,
                 prediction,
                 Nodes::Recent,
-                k > 0,
+                k > 0
+                    || (prediction.source == PredictionSource::NoMotion
+                        && self.config.check_no_motion),
                 (segment, last),
                 attempts,
             )?;
