@@ -94,7 +94,8 @@ pub struct ImportOptions {
     pub first: usize,
     /// How many scans to import from `first` on (in the order of their numbers); `None` for all.
     pub count: Option<usize>,
-    /// Import every this many-th scan from `first` on (`None`: every scan), `count` of them:
+    /// Import every this many-th scan number from the first at or after `first` on (`None`:
+    /// every scan; E57: every this many-th scan of the survey), `count` of them:
     /// a 10 Hz LiDAR recording thinned as a vehicle that stops to scan, or drops frames,
     /// would take it. The dataset's scans are renumbered from 0 and its pose files hold the
     /// imported scans' poses alone.
@@ -242,11 +243,17 @@ fn select(
             folder.display()
         )));
     }
+    // Every Kth scan number from the first one at or after `first` (a file missing at a
+    // selected number is not replaced by its neighbour).
     let every = options.stride()?;
+    let start = files
+        .iter()
+        .map(|(n, _)| *n)
+        .filter(|n| *n >= options.first)
+        .min();
     let available: Vec<_> = files
         .into_iter()
-        .filter(|(n, _)| *n >= options.first)
-        .step_by(every)
+        .filter(|(n, _)| start.is_some_and(|s| *n >= s && (*n - s) % every == 0))
         .collect();
     let selected: Vec<_> = match options.count {
         Some(0) => {

@@ -310,13 +310,14 @@ fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
 /// the import numbers the dataset's scans from 0 without gaps, so a lost or deleted scan would
 /// silently join its neighbours as consecutive stops, and the user would never learn that the
 /// motion between them spans two. `--first` and `--count` choose where a selection starts and
-/// ends, so only a gap inside it is an error.
-fn check_no_gap(scans: &[(usize, std::path::PathBuf)]) -> Result<()> {
+/// ends, so only a gap inside it is an error; with `--every K` the selected numbers lie `every`
+/// apart, and a missing one among them is the gap.
+fn check_no_gap(scans: &[(usize, std::path::PathBuf)], every: usize) -> Result<()> {
     for pair in scans.windows(2) {
         let [(before, before_path), (after, after_path)] = pair else {
             continue;
         };
-        if *after == before + 1 {
+        if *after == before + every {
             continue;
         }
         // The missing file, with the digits of its neighbour (`scan001.3d`, not `scan1.3d`).
@@ -325,8 +326,8 @@ fn check_no_gap(scans: &[(usize, std::path::PathBuf)]) -> Result<()> {
             .and_then(|s| s.to_str())
             .and_then(|s| s.strip_prefix("scan"))
             .map_or(0, str::len);
-        let missing = before_path.with_file_name(format!("scan{:0digits$}.3d", before + 1));
-        let gap = after - before - 1;
+        let missing = before_path.with_file_name(format!("scan{:0digits$}.3d", before + every));
+        let gap = (after - before) / every - 1;
         return Err(Error::Invalid(format!(
             "{} is missing ({gap} scan(s) missing between {} and {}): the import would number the \
              scans on either side of the gap as consecutive stops; restore it, or import each \
@@ -360,7 +361,7 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
         source,
         "3DTK scanNNN.3d files",
     )?;
-    check_no_gap(&scans)?;
+    check_no_gap(&scans, options.stride()?)?;
     let mut odometry = Vec::with_capacity(scans.len());
     for (_, scan) in &scans {
         let pose_path = scan.with_extension("pose");
@@ -821,6 +822,33 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(import_3dtk(&source, &out, &options).unwrap().scans, 1);
+    }
+
+    #[test]
+    fn every_kth_scan_is_imported_and_a_missing_one_among_them_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let source = uos_folder(dir.path(), 7);
+        // scan003 missing does not matter to every second scan from 0, and is a gap from 1.
+        std::fs::remove_file(source.join("scan003.3d")).unwrap();
+        let every = |first| ImportOptions {
+            first,
+            every: Some(2),
+            ..Default::default()
+        };
+        let out = dir.path().join("even");
+        let summary = import_3dtk(&source, &out, &every(0)).unwrap();
+        assert_eq!(summary.scans, 4);
+        assert!(summary.source_scans[3].ends_with("scan006.3d"));
+        // Its odometry is each scan's own pose: 3 m from scan 0 to scan 2 (1.5 m a scan).
+        let odometry = crate::read_kitti_poses(&out.join(crate::ODOMETRY_FILE)).unwrap();
+        assert!((odometry[1].translation.vector.norm() - 3.0).abs() < 1e-9);
+        let err = import_3dtk(&source, &dir.path().join("odd"), &every(1))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("scan003.3d is missing") && err.contains("scan005.3d"),
+            "{err}"
+        );
     }
 
     /// No temporary file is left anywhere under `dir`.
