@@ -16,7 +16,7 @@ use sdem::localize::{
 };
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::search::{MAX_GRID_CANDIDATES, MAX_MATCHED_HEADING_STEP_DEG};
-use sdem::slam::Near;
+use sdem::slam::{is_solid_state_lidar, is_spinning_lidar, Near};
 use sdem::Scan;
 use sdem_io::Dataset;
 use std::path::PathBuf;
@@ -24,7 +24,7 @@ use std::time::Instant;
 
 mod report;
 
-use report::{make_report, print_text};
+use report::{make_report, print_text, Settings};
 
 /// Arguments of `sdem localize`.
 #[derive(clap::Args)]
@@ -110,15 +110,14 @@ pub struct Args {
     )]
     prior: Option<OffsetPrior>,
     /// Grid step of the search, metres, at most the window's longest side (with --map: the
-    /// map's own).
+    /// map's own) [default: 0.01; a LiDAR's derived from its scan].
     #[arg(
         long,
-        default_value_t = 0.01,
         allow_hyphen_values = true,
         conflicts_with = "map",
         value_parser = positive_metres
     )]
-    step: f64,
+    step: Option<f64>,
     /// Score every candidate of the window (the paper's search; slow): at most 4,000,000
     /// candidates, about a minute on 2 cores (see --max-candidates). Same as `--search
     /// exhaustive`; another --search with it is refused.
@@ -184,9 +183,11 @@ pub struct Args {
     )]
     resolution: Option<f64>,
     /// Derive the S-DEM grid from the reference scan and the search's step, truncation and
-    /// refinement from its S-DEM (for a spinning LiDAR: `SdemConfig::for_scan`,
-    /// `LocalizeOptions::for_scan`) instead of the tilting SICK's defaults; --window,
-    /// --heading-window and the other search flags still apply.
+    /// refinement from its S-DEM (`SdemConfig::for_scan`, `LocalizeOptions::for_scan`) instead
+    /// of the tilting SICK's defaults; --window, --heading-window and the other search flags
+    /// still apply. Without it they are derived all the same for a spinning or solid-state
+    /// LiDAR's scans (as `sdem slam` chooses them) when the dataset has no sensor.toml and
+    /// neither --step nor --resolution is given.
     #[arg(long, conflicts_with_all = ["step", "resolution", "map"])]
     match_scan: bool,
     /// Take a result with doubts as the best guess: exit status 0 instead of 3. The output
@@ -284,6 +285,9 @@ fn parse_prior(text: &str) -> Result<OffsetPrior, String> {
     Ok(prior)
 }
 
+/// The search's step without --step (a LiDAR's is derived from its scan), metres.
+const DEFAULT_STEP_M: f64 = 0.01;
+
 /// Parses `--near x,y,z` (metres).
 fn parse_near(text: &str) -> Result<[f64; 3], String> {
     check_position(numbers(text, "x,y,z in metres")?)
@@ -327,13 +331,14 @@ fn check_step_fits_window(step: f64, window: Option<&SearchWindow>) -> Result<()
 /// search counts them again once the scans are read, and refuses the whole grid then.
 fn check_grid_size(args: &Args, mode: SearchMode) -> Result<()> {
     let window = args.window.unwrap_or_else(SearchWindow::paper);
-    let [x, y, z] = window.positions(args.step).map_err(|e| {
+    let step = args.step.unwrap_or(DEFAULT_STEP_M);
+    let [x, y, z] = window.positions(step).map_err(|e| {
         usage_error(
             "localize",
             format!(
                 "--window {} at --step {} m: {e}",
                 window_text(&window),
-                fmt_number(args.step)
+                fmt_number(step)
             ),
         )
     })?;
@@ -578,9 +583,10 @@ pub fn run(args: Args) -> Result<Outcome> {
         bail!("give DATASET --reference I --query J, or --map DIR SCAN");
     };
     let search = search_of(&args)?;
-    // With --match-scan the step comes from the scan, not the command line.
+    // Checked before anything is read, at the default step unless --step is given (a LiDAR's
+    // derived step is coarser, so its grid is smaller); --match-scan's step comes from the scan.
     if !args.match_scan {
-        check_step_fits_window(args.step, args.window.as_ref())?;
+        check_step_fits_window(args.step.unwrap_or(DEFAULT_STEP_M), args.window.as_ref())?;
         check_grid_size(&args, search.0)?;
     }
     let dataset = Dataset::open(&dataset_path)?;
@@ -593,7 +599,23 @@ pub fn run(args: Args) -> Result<Outcome> {
             );
         }
     }
-    let (sdem_config, config) = if args.match_scan {
+    // The settings: derived from the reference scan with --match-scan, or for a LiDAR's scans
+    // when no sensor model, step or resolution says otherwise (as `sdem slam` chooses them);
+    // else the sensor model's grid or the tilting SICK's defaults.
+    let settings = if args.match_scan {
+        Settings::Derived
+    } else if args.step.is_none() && args.resolution.is_none() && dataset.sensor.is_none() && {
+        let points = dataset.load_scan(reference_index)?;
+        is_spinning_lidar(&points) || is_solid_state_lidar(&points)
+    } {
+        Settings::DerivedForLidar
+    } else {
+        match dataset.sensor {
+            Some(_) => Settings::Sensor,
+            None => Settings::Default,
+        }
+    };
+    let (sdem_config, config) = if settings.derived() {
         let points = dataset.load_scan(reference_index)?;
         let attitude = dataset
             .attitude_or_level(reference_index)
@@ -616,7 +638,12 @@ pub fn run(args: Args) -> Result<Outcome> {
         };
         (
             grid,
-            localize_config(&args, search, LocalizeOptions::default(), args.step),
+            localize_config(
+                &args,
+                search,
+                LocalizeOptions::default(),
+                args.step.unwrap_or(DEFAULT_STEP_M),
+            ),
         )
     };
     let pair = (reference_index, query_index);
@@ -630,7 +657,7 @@ pub fn run(args: Args) -> Result<Outcome> {
         pair,
         &found,
         &attitudes,
-        (&config, sdem_config.resolution_deg),
+        (&config, sdem_config.resolution_deg, settings),
         time_ms,
         truth.as_ref(),
     );

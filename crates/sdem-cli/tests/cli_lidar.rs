@@ -54,15 +54,30 @@ fn localize_matches_the_grid_to_a_lidar_scan() {
         error_m < 0.03 && error_deg < 0.3,
         "{error_m} m, {error_deg}°"
     );
+    assert_eq!(report["settings"], "derived", "{report}");
     // The derived settings replace --step and --resolution: giving both is a usage error.
     args.extend(["--step", "0.05"]);
     assert_eq!(run(dir.path(), &args).code, Some(2));
+    // Without a sensor model a LiDAR's scans get the derived settings unasked, the same pose;
+    // a --step given keeps the tilting SICK's.
+    std::fs::remove_file(dataset.join("sensor.toml")).unwrap();
+    let mut unasked = vec!["localize", ds, "--reference", "0", "--query", "1", "--json"];
+    unasked.extend(search);
+    let derived = run_json(dir.path(), &unasked);
+    assert_eq!(derived["settings"], "derived_for_lidar", "{derived}");
+    assert_eq!(
+        derived["reference_from_query"],
+        report["reference_from_query"]
+    );
+    unasked.extend(["--step", "0.05"]);
+    let stepped = run(dir.path(), &unasked).json();
+    assert_eq!(stepped["settings"], "default", "{stepped}");
 }
 
 /// `sdem slam` of `lidar` driven down a simulated street (10 frames 0.8 m apart, weaving and
 /// turning a little, no odometry, no attitude readings, no `sensor.toml`): the report, its ATE
-/// asserted below 2 cm.
-fn slam_down_a_street(lidar: &LidarConfig) -> serde_json::Value {
+/// asserted below 2 cm, and the `config.toml` the run chose.
+fn slam_down_a_street(lidar: &LidarConfig) -> (serde_json::Value, toml::Value) {
     let dir = tempfile::tempdir().unwrap();
     let scene = street(3);
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
@@ -102,7 +117,8 @@ fn slam_down_a_street(lidar: &LidarConfig) -> serde_json::Value {
     );
     let ate = report["truth"]["ate_rmse_m"].as_f64().unwrap();
     assert!(ate < 0.02, "ATE {ate} m");
-    report
+    let config = std::fs::read_to_string(dir.path().join("map/config.toml")).unwrap();
+    (report, toml::from_str(&config).unwrap())
 }
 
 /// A forward-looking solid-state LiDAR (a 70° × 70° unit) down the street: the options derived
@@ -110,7 +126,11 @@ fn slam_down_a_street(lidar: &LidarConfig) -> serde_json::Value {
 /// frames opened segments of their own, 2.7 m ATE.
 #[test]
 fn slam_maps_a_solid_state_lidar_run_with_options_derived_from_it() {
-    let report = slam_down_a_street(&LidarConfig::solid_state());
+    let (report, config) = slam_down_a_street(&LidarConfig::solid_state());
+    assert!(
+        config["localize"]["step_m"].as_float().unwrap() > 0.02,
+        "{config}"
+    );
     assert_eq!(report["segments"].as_array().unwrap().len(), 1, "{report}");
     assert_eq!(report["trusted"], true, "{report}");
 }
@@ -128,7 +148,12 @@ fn slam_maps_a_16_beam_lidar_run() {
         elevation_max_deg: 15.0,
         ..LidarConfig::default()
     };
-    let report = slam_down_a_street(&vlp16);
+    let (report, config) = slam_down_a_street(&vlp16);
+    assert!(
+        config["sdem"]["resolution_deg"].as_float().unwrap() >= 1.9,
+        "{config}"
+    );
+    assert_eq!(config["check_no_motion"].as_bool(), Some(true), "{config}");
     assert_eq!(report["segments"].as_array().unwrap().len(), 1, "{report}");
     assert_eq!(report["trusted"], true, "{report}");
 }

@@ -10,6 +10,37 @@ use sdem::localize::{
 use serde::Serialize;
 use serde_json::Value;
 
+/// Where a pair's grid and search scale came from (`settings` in the JSON).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub(crate) enum Settings {
+    /// The tilting SICK's defaults (and `--step`, `--resolution`).
+    Default,
+    /// The grid the dataset's `sensor.toml` matches.
+    Sensor,
+    /// Derived from the reference scan, as `--match-scan` asks.
+    Derived,
+    /// Derived from the reference scan, a LiDAR's, without being asked.
+    DerivedForLidar,
+}
+
+impl Settings {
+    /// Whether the grid and the search's scale come from the reference scan.
+    pub(crate) fn derived(self) -> bool {
+        matches!(self, Self::Derived | Self::DerivedForLidar)
+    }
+
+    /// The words the text output uses.
+    fn text(self) -> &'static str {
+        match self {
+            Self::Default => "the tilting SICK's defaults",
+            Self::Sensor => "the sensor.toml's grid",
+            Self::Derived => "derived from the reference scan",
+            Self::DerivedForLidar => "derived from the reference scan, a LiDAR's",
+        }
+    }
+}
+
 #[derive(Serialize)]
 pub(super) struct Report {
     reference: usize,
@@ -28,6 +59,8 @@ pub(super) struct Report {
     cost_model: CostModel,
     /// The S-DEM grid's cell size, degrees.
     resolution_deg: f64,
+    /// Where the grid and the search's scale came from.
+    settings: Settings,
     on_window_edge: bool,
     refined: RefineOutcome,
     refinement: RefinementSummary,
@@ -51,7 +84,7 @@ pub(super) fn make_report(
     (reference, query): (usize, usize),
     found: &Localization,
     attitudes: &Attitudes,
-    (config, resolution_deg): (&LocalizeOptions, f64),
+    (config, resolution_deg, settings): (&LocalizeOptions, f64, Settings),
     time_ms: f64,
     truth: Option<&Pose>,
 ) -> Report {
@@ -71,6 +104,7 @@ pub(super) fn make_report(
         search: config.mode,
         cost_model: config.cost.model,
         resolution_deg,
+        settings,
         on_window_edge: found.on_window_edge,
         refined: found.refined,
         refinement: RefinementSummary::new(found.refined, found.refinement.as_ref()),
@@ -190,7 +224,7 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
 /// Prints the search's effort.
 fn print_search(report: &Report, config: &LocalizeOptions) {
     println!(
-        "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({}, S-DEM cells {:.3}°)",
+        "  {} of {} candidates scored, {} boxes bounded, in {:.0} ms ({}, S-DEM cells {:.3}°, {})",
         report.candidates_evaluated,
         report.candidates_total,
         report.nodes_bounded,
@@ -200,6 +234,7 @@ fn print_search(report: &Report, config: &LocalizeOptions) {
             SearchMode::BranchAndBound => "exact branch-and-bound search",
             SearchMode::CoarseToFine => "coarse-to-fine search",
         },
-        report.resolution_deg
+        report.resolution_deg,
+        report.settings.text()
     );
 }
