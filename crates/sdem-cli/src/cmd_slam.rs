@@ -48,8 +48,8 @@ pub struct Args {
     /// A TOML file with the loop's settings (the fields of config.toml, which every run writes;
     /// missing keys take the defaults). Without it, the defaults, with the S-DEM's resolution
     /// matched to the scanner's angular step when the dataset has a sensor.toml; without one,
-    /// derived from the first scan when it is a spinning multi-beam LiDAR's (every azimuth
-    /// within a band of elevation: `SlamOptions::for_scan`).
+    /// derived from the first scan when it is a LiDAR's (a spinning one: every azimuth within a
+    /// band of elevation; a solid-state one: at most 120° of azimuth; `SlamOptions::for_scan`).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Grid step of the search, metres [default: 0.02, or the config file's].

@@ -721,8 +721,10 @@ fn lidar_frames_five_apart_are_mapped_in_one_segment() {
         dir.path(),
         &["slam", "fifth", "--out", "fifth-map", "--no-pictures"],
     );
+    let report = dir.path().join("fifth-map/report.json");
     let report: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("fifth-map/report.json")).unwrap(),
+        &std::fs::read_to_string(&report)
+            .unwrap_or_else(|e| panic!("{}: {e}\n{}", report.display(), mapped.stderr)),
     )
     .unwrap();
     assert_eq!(report["scans"], 4, "{report}");

@@ -635,12 +635,13 @@ pub fn slam_options<'py>(
 }
 
 /// The loop's options matched to a scan (``SlamOptions::for_scan``), with ``overrides`` laid
-/// over them, as a dict for ``sdem.Slam(**options)``. For a spinning multi-beam LiDAR (every
-/// azimuth within a band of elevation): the S-DEM grid at the scan's own angular step, the
-/// search's step, truncation and refinement from its ranges, loop closure and the fused map
-/// on that step (rays up to 20 m), as ``sdem slam`` chooses them for a dataset without
-/// ``sensor.toml``; for any other scanner, ``sdem.slam_options()``'s defaults (the tilting
-/// laser's).
+/// over them, as a dict for ``sdem.Slam(**options)``. For a LiDAR (a spinning one: every
+/// azimuth within a band of elevation; a solid-state one: at most 120° of azimuth): the S-DEM
+/// grid at the scan's own angular step, the search's step, truncation and refinement from its
+/// ranges, loop closure and the fused map on that step (rays up to 20 m), the recovery's
+/// widest window and the no-odometry σ scaled with the step, the no-motion match checked for
+/// a rival, as ``sdem slam`` chooses them for a dataset without ``sensor.toml``; for any
+/// other scanner, ``sdem.slam_options()``'s defaults (the tilting laser's).
 ///
 /// Args:
 ///     points: the first scan, ``(N, 3)`` float32 or float64, sensor frame, metres.

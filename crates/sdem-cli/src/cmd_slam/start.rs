@@ -102,8 +102,9 @@ pub(super) fn start_fresh(args: &Args, dataset: &Dataset) -> Result<Run> {
                 config.sdem.resolution_deg = sensor.matched_sdem_resolution_deg();
                 config
             }
-            // No sensor model: the options follow the first scan's own sampling (a spinning
-            // LiDAR's grid and search; the tilting laser's defaults otherwise).
+            // No sensor model: the options follow the first scan's own sampling (a spinning or
+            // solid-state LiDAR's grid, search and recovery; the tilting laser's defaults
+            // otherwise).
             None if !dataset.is_empty() => {
                 let first = dataset
                     .load_scan(0)

@@ -133,7 +133,7 @@ def slam_options(**overrides: Any) -> dict[str, Any]:
     """Every ``SlamOptions`` field with its default, ``overrides`` laid over them."""
 
 def slam_options_for_scan(points: Points, **overrides: Any) -> dict[str, Any]:
-    """``SlamOptions::for_scan``: the loop's options matched to a (spinning LiDAR's) first scan."""
+    """``SlamOptions::for_scan``: the loop's options matched to a (LiDAR's) first scan."""
 
 def read_points(path: PathLike) -> npt.NDArray[np.float64]:
     """Reads ``.ply``, ``.pcd``, ``.las``/``.laz``, ``.xyz``/``.txt``, KITTI ``.bin``, 3DTK

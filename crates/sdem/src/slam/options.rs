@@ -122,10 +122,12 @@ pub struct RecoveryOptions {
     /// When no prediction leads to a trusted match, the best one is searched again in a window
     /// this large, metres (a robot that drove 2 m between stops, or 30 cm up or down)…
     pub max_window_half_m: [f64; 3],
-    /// When set and narrower than `max_window_half_m`, every wide search is made in this
-    /// window first, metres: [`SlamOptions::for_scan`] widens a LiDAR's widest window eightfold
-    /// (±17 m on the KITTI frames, 0.6–2 s a search), where the tilting laser's ±2.2 m finds
-    /// frames two or three apart in 0.1–0.3 s.
+    /// When set (no wider than `max_window_half_m` on any axis), the wider window around the
+    /// best prediction is searched in this window first, metres (the search over every heading,
+    /// the new segment's guess and the joins keep the widest): [`SlamOptions::for_scan`] widens
+    /// a LiDAR's widest window by its step's ratio to the default's (7.85 on the KITTI frames:
+    /// ±17.3 m, 0.6–2 s a search), where the tilting laser's ±2.2 m finds frames two or three
+    /// apart in 0.1–0.3 s.
     pub first_window_half_m: Option<[f64; 3]>,
     /// … and this many degrees of heading either way without a compass, every heading being
     /// searched next. Around a compass the window is searched at the compass's own heading
@@ -139,9 +141,10 @@ pub struct RecoveryOptions {
     /// this many nodes are tried, those whose place descriptors look most like the scan's
     /// first, each searched over every heading.
     pub relocalize_candidates: usize,
-    /// … within this half-size around each node, metres: as wide as the widest recovery
-    /// window, since a robot facing the other way from the nodes that saw what it sees stands
-    /// up to a few metres from them (a second run facing back along the first).
+    /// … within this half-size around each node, metres: as wide as the tilting laser's widest
+    /// recovery window (a LiDAR's keeps it), since a robot facing the other way from the nodes
+    /// that saw what it sees stands up to a few metres from them (a second run facing back
+    /// along the first).
     pub relocalize_window_half_m: [f64; 3],
     /// … and a node's place is the node and up to this many nodes of its segment within
     /// `relocalize_radius_m`, merged.
@@ -192,8 +195,8 @@ impl Default for RecoveryOptions {
 
 impl RecoveryOptions {
     /// The windows a wide search grows through, narrowest first: `first_window_half_m` when
-    /// it is narrower than `max_window_half_m` on some axis (and nowhere wider), then
-    /// `max_window_half_m`.
+    /// it is set and differs from `max_window_half_m` (validation refuses one wider on an
+    /// axis), then `max_window_half_m`.
     pub fn window_stages(&self) -> Vec<[f64; 3]> {
         let widest = self.max_window_half_m;
         match self.first_window_half_m {
@@ -206,6 +209,19 @@ impl RecoveryOptions {
 
     /// Checks every value.
     pub fn validate(&self) -> Result<()> {
+        if let Some(first) = self.first_window_half_m {
+            if first
+                .iter()
+                .zip(&self.max_window_half_m)
+                .any(|(f, w)| f > w)
+            {
+                return Err(Error::Invalid(format!(
+                    "recovery.first_window_half_m {first:?} m is wider than max_window_half_m \
+                     {:?} m on an axis; give a first window inside the widest",
+                    self.max_window_half_m
+                )));
+            }
+        }
         let halves = self
             .max_window_half_m
             .iter()
@@ -303,11 +319,12 @@ fn field_of_view(points_in_sensor: &[crate::geometry::Vec3]) -> Option<(f64, f64
 /// A scanner is a spinning multi-beam LiDAR ([`SlamOptions::for_scan`]) when its scan covers at
 /// least this much of the azimuth, degrees…
 pub const LIDAR_MIN_AZIMUTH_DEG: f64 = 300.0;
-/// … within at most this band of elevation, degrees: the widest spinning LiDARs (an Ouster OS0,
-/// 90°) and not a rotating scanner's sphere (about 180°). At 60° a simulated OS0 (128 rows over
-/// ±45°) got the tilting laser's defaults and 11 of 12 frames down a street opened segments
-/// (269 cm ATE, 1.55 s a frame); with the derived options 0.06 cm, 87 ms.
-pub const LIDAR_MAX_ELEVATION_DEG: f64 = 120.0;
+/// … within at most this band of elevation (the 1st to 99th percentile of the returns),
+/// degrees: the widest spinning LiDARs (an Ouster OS0, 90°), and not a rotating scanner's
+/// sphere (about 180°; outdoors, without returns from the sky, 110° or more). At 60° a
+/// simulated OS0 (128 rows over ±45°) got the tilting laser's defaults and 11 of 12 frames down
+/// a street were doubtful (`examples/lidar_runs`); with the derived options 0.05–0.06 cm ATE.
+pub const LIDAR_MAX_ELEVATION_DEG: f64 = 100.0;
 /// A scanner is a forward-looking solid-state LiDAR ([`SlamOptions::for_scan`]) when its scan
 /// covers at most this much of the azimuth, degrees (Livox units 38–82°, the widest MEMS units
 /// 120°; the tilting laser pans over 180°).
@@ -330,7 +347,7 @@ impl SlamOptions {
     ///   frame before), and a second run into their map was never placed; the tracking windows
     ///   stay the defaults (a vehicle's motion is predicted by its last one), but the recovery's
     ///   widest window and the σ of a prediction without odometry grow by the step's ratio to
-    ///   the default's (the scene is that many times larger: 7.85 on the KITTI frames, ±17 m):
+    ///   the default's (the scene is that many times larger: 7.85 on the KITTI frames, ±17.3 m):
     ///   with the tilting laser's ±2.2 m and 20 cm, frames five apart (3.6–4.2 m) each opened
     ///   a segment, the true place outside the window and then, in a wider one, 3.6 m from the
     ///   no-motion prediction, which cost (3.6 / 0.2)² points' worth of τ² and put it over the
@@ -338,9 +355,9 @@ impl SlamOptions {
     ///   or three apart are found there in a sixth of the time);
     /// * **a forward-looking solid-state LiDAR** ([`is_solid_state_lidar`]: at most 120° of
     ///   azimuth): the same. On a simulated street (a 70° × 70° unit of 64 rows, 0.2° in
-    ///   azimuth, 12 frames 0.8 m apart, no odometry) the tilting laser's defaults put 10 of 12
-    ///   frames in segments of their own (270 cm ATE, 0.78 s a frame), these options map them in
-    ///   one (0.40 cm, 16 ms);
+    ///   azimuth, 12 frames 0.8 m apart, no odometry, no attitude; `examples/lidar_runs`) the
+    ///   tilting laser's defaults leave 10–11 of 12 frames doubtful, these options map them in
+    ///   one segment (0.31–0.37 cm ATE, 14–15 ms a frame);
     /// * **any other scanner** (a tilting laser's half sphere, a rotating scanner's whole one):
     ///   [`SlamOptions::default`], the tilting laser's.
     ///
@@ -543,6 +560,24 @@ impl SlamOptions {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A wide search grows through the first window to the widest; a first window equal to the
+    /// widest, or none, is one stage; one wider on an axis is refused, naming the setting.
+    #[test]
+    fn the_recovery_windows_grow_from_the_first_to_the_widest() {
+        let mut recovery = RecoveryOptions::default();
+        let widest = recovery.max_window_half_m;
+        assert_eq!(recovery.window_stages(), vec![widest]);
+        recovery.first_window_half_m = Some(widest);
+        assert_eq!(recovery.window_stages(), vec![widest]);
+        let first = [1.0, 1.0, 0.3];
+        recovery.first_window_half_m = Some(first);
+        assert_eq!(recovery.window_stages(), vec![first, widest]);
+        recovery.validate().unwrap();
+        recovery.first_window_half_m = Some([1.0, 3.0, 0.3]);
+        let e = recovery.validate().unwrap_err().to_string();
+        assert!(e.contains("first_window_half_m"), "{e}");
+    }
 
     /// A search step wider than the tracking window is refused, naming the widest it may be;
     /// the defaults, and a spinning LiDAR's derived options, pass.
