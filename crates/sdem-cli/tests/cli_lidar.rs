@@ -7,10 +7,30 @@ mod common;
 use common::{run, run_json};
 use nalgebra::{Isometry3, Vector3};
 use rand::SeedableRng;
-use sdem::geometry::{Attitude, Pose};
+use sdem::geometry::{Attitude, Pose, Vec3};
 use sdem::sensor::SensorConfig;
 use sdem_sim::sim::lidar_street::street;
 use sdem_sim::sim::{spin_scan, spinning_scan, LidarConfig, SpinningLidar};
+
+/// Writes `scans` with their true `poses` as the dataset `dir/street` (with the default
+/// `sensor.toml` and readings of a level, unturned scanner, as `write_dataset` writes them).
+fn write_street(
+    dir: &std::path::Path,
+    scans: &[(Vec<Vec3>, Attitude)],
+    poses: &[Pose],
+) -> std::path::PathBuf {
+    let dataset = dir.join("street");
+    sdem_io::write_dataset(
+        &dataset,
+        &SensorConfig::default(),
+        scans,
+        None,
+        Some(poses),
+        None,
+    )
+    .unwrap();
+    dataset
+}
 
 #[test]
 fn localize_matches_the_grid_to_a_lidar_scan() {
@@ -30,17 +50,7 @@ fn localize_matches_the_grid_to_a_lidar_scan() {
             Attitude::default(),
         ),
     ];
-    let dataset = dir.path().join("street");
-    let poses = [Pose::identity(), truth];
-    sdem_io::write_dataset(
-        &dataset,
-        &SensorConfig::default(),
-        &scans,
-        None,
-        Some(&poses),
-        None,
-    )
-    .unwrap();
+    let dataset = write_street(dir.path(), &scans, &[Pose::identity(), truth]);
     let ds = dataset.to_str().unwrap();
     let search = ["--window", "-1:1,-1:1,-0.3:0.3", "--heading-window", "5"];
     let mut args = vec!["localize", ds, "--reference", "0", "--query", "1", "--json"];
@@ -97,16 +107,7 @@ fn slam_down_a_street(lidar: &LidarConfig) -> (serde_json::Value, toml::Value) {
             (points, Attitude::default())
         })
         .collect();
-    let dataset = dir.path().join("street");
-    sdem_io::write_dataset(
-        &dataset,
-        &SensorConfig::default(),
-        &scans,
-        None,
-        Some(&poses),
-        None,
-    )
-    .unwrap();
+    let dataset = write_street(dir.path(), &scans, &poses);
     // No sensor model (the loop chooses its options from the first scan) and no attitude
     // readings (the scans are levelled by their surfaces).
     std::fs::remove_file(dataset.join("sensor.toml")).unwrap();
