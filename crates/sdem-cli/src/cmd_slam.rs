@@ -52,7 +52,8 @@ pub struct Args {
     /// band of elevation; a solid-state one: at most 120° of azimuth; `SlamOptions::for_scan`).
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Grid step of the search, metres [default: 0.02, or the config file's].
+    /// Grid step of the search, metres [default: 0.02, a LiDAR's derived from its first scan,
+    /// or the config file's]. A LiDAR's recovery windows stay those its scan's scale gave.
     #[arg(long, allow_hyphen_values = true, value_parser = crate::parse::positive_metres)]
     step: Option<f64>,
     /// Do not look for loop closures.
