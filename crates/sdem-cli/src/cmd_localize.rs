@@ -16,7 +16,7 @@ use sdem::localize::{
 };
 use sdem::sdem::{Sdem, SdemConfig};
 use sdem::search::{MAX_GRID_CANDIDATES, MAX_MATCHED_HEADING_STEP_DEG};
-use sdem::slam::{is_solid_state_lidar, is_spinning_lidar, Near};
+use sdem::slam::{is_lidar, Near};
 use sdem::Scan;
 use sdem_io::Dataset;
 use std::path::PathBuf;
@@ -602,53 +602,59 @@ pub fn run(args: Args) -> Result<Outcome> {
     // The settings: derived from the reference scan with --match-scan, or for a LiDAR's scans
     // when no sensor model, step or resolution says otherwise (as `sdem slam` chooses them);
     // else the sensor model's grid or the tilting SICK's defaults.
-    let settings = if args.match_scan {
-        Settings::Derived
-    } else if args.step.is_none() && args.resolution.is_none() && dataset.sensor.is_none() && {
-        let points = dataset.load_scan(reference_index)?;
-        is_spinning_lidar(&points) || is_solid_state_lidar(&points)
-    } {
-        Settings::DerivedForLidar
+    // The reference scan is read once here when its points decide the settings.
+    let unasked = args.step.is_none() && args.resolution.is_none() && dataset.sensor.is_none();
+    let reference_points = if args.match_scan || unasked {
+        Some(dataset.load_scan(reference_index)?)
     } else {
-        match dataset.sensor {
-            Some(_) => Settings::Sensor,
-            None => Settings::Default,
-        }
+        None
     };
-    let (sdem_config, config) = if settings.derived() {
-        let points = dataset.load_scan(reference_index)?;
-        let attitude = dataset
-            .attitude_or_level(reference_index)
-            .unwrap_or_default();
-        let grid = SdemConfig::for_scan(&points);
-        let matched = LocalizeOptions::for_scan(&Sdem::from_points(&points, &attitude, &grid)?);
-        let step = matched.step_m;
-        (grid, localize_config(&args, search, matched, step))
-    } else {
-        // The grid `sdem slam` builds for this dataset: a scanner sampling finer than 1° (a
-        // nodding SICK at 0.5°) leaves most of a 1° cell's returns unused, and its map's pairs
-        // come out differently on the coarser grid.
-        let matched = dataset
-            .sensor
-            .as_ref()
-            .map(|s| s.matched_sdem_resolution_deg());
-        let grid = SdemConfig {
-            resolution_deg: args.resolution.or(matched).unwrap_or(1.0),
-            ..Default::default()
+    let settings = match &reference_points {
+        _ if args.match_scan => Settings::Derived,
+        Some(points) if is_lidar(points) => Settings::DerivedForLidar,
+        _ if dataset.sensor.is_some() => Settings::Sensor,
+        _ => Settings::Default,
+    };
+    let (sdem_config, config) =
+        if let (true, Some(points)) = (settings.derived(), &reference_points) {
+            let attitude = dataset
+                .attitude_or_level(reference_index)
+                .unwrap_or_default();
+            let grid = SdemConfig::for_scan(points);
+            let matched = LocalizeOptions::for_scan(&Sdem::from_points(points, &attitude, &grid)?);
+            let step = matched.step_m;
+            (grid, localize_config(&args, search, matched, step))
+        } else {
+            // The grid `sdem slam` builds for this dataset: a scanner sampling finer than 1° (a
+            // nodding SICK at 0.5°) leaves most of a 1° cell's returns unused, and its map's pairs
+            // come out differently on the coarser grid.
+            let matched = dataset
+                .sensor
+                .as_ref()
+                .map(|s| s.matched_sdem_resolution_deg());
+            let grid = SdemConfig {
+                resolution_deg: args.resolution.or(matched).unwrap_or(1.0),
+                ..Default::default()
+            };
+            (
+                grid,
+                localize_config(
+                    &args,
+                    search,
+                    LocalizeOptions::default(),
+                    args.step.unwrap_or(DEFAULT_STEP_M),
+                ),
+            )
         };
-        (
-            grid,
-            localize_config(
-                &args,
-                search,
-                LocalizeOptions::default(),
-                args.step.unwrap_or(DEFAULT_STEP_M),
-            ),
-        )
-    };
     let pair = (reference_index, query_index);
     let attitudes = attitudes_of(&dataset, &dataset_path, pair, &attitude_flags(&args))?;
-    let (found, time_ms) = localize_scans(&dataset, pair, &attitudes, &sdem_config, &config)?;
+    let (found, time_ms) = localize_scans(
+        &dataset,
+        pair,
+        reference_points,
+        &attitudes,
+        (&sdem_config, &config),
+    )?;
     let truth = dataset
         .truth
         .as_ref()
@@ -790,11 +796,14 @@ fn make_scan(
 fn localize_scans(
     dataset: &Dataset,
     (reference_index, query_index): (usize, usize),
+    reference_points: Option<Vec<sdem::geometry::Vec3>>,
     attitudes: &Attitudes,
-    sdem_config: &SdemConfig,
-    config: &LocalizeOptions,
+    (sdem_config, config): (&SdemConfig, &LocalizeOptions),
 ) -> Result<(Localization, f64)> {
-    let reference_points = load_points(dataset, reference_index)?;
+    let reference_points = match reference_points {
+        Some(points) => points.into_iter().map(nalgebra::Point3::from).collect(),
+        None => load_points(dataset, reference_index)?,
+    };
     let query_points = load_points(dataset, query_index)?;
     let start = Instant::now();
     // The two S-DEMs side by side, as `sdem bench` builds a pair's.

@@ -59,7 +59,9 @@ mod step;
 mod trajectory;
 mod upkeep;
 
-pub use options::{is_solid_state_lidar, is_spinning_lidar, RecoveryOptions, SlamOptions};
+pub use options::{
+    is_lidar, is_solid_state_lidar, is_spinning_lidar, RecoveryOptions, SlamOptions,
+};
 pub use relocalize::{relocalize, Near, Relocalization};
 pub use segments::Segment;
 pub use step::{

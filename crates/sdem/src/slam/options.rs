@@ -200,9 +200,7 @@ impl RecoveryOptions {
     pub fn window_stages(&self) -> Vec<[f64; 3]> {
         let widest = self.max_window_half_m;
         match self.first_window_half_m {
-            Some(first) if first != widest && first.iter().zip(&widest).all(|(f, w)| f <= w) => {
-                vec![first, widest]
-            }
+            Some(first) if first != widest => vec![first, widest],
             _ => vec![widest],
         }
     }
@@ -280,9 +278,7 @@ const LIDAR_VOXEL_RANGE_M: f64 = 20.0;
 /// sweeps half the azimuth; a rotating 3D laser scanner nearly the whole sphere, an Ouster
 /// OS0 90° of elevation, a Velodyne 27–40°.
 pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
-    field_of_view(points_in_sensor).is_some_and(|(azimuth, elevation)| {
-        azimuth >= LIDAR_MIN_AZIMUTH_DEG && elevation <= LIDAR_MAX_ELEVATION_DEG
-    })
+    field_of_view(points_in_sensor).is_some_and(|(azimuth, elevation)| spinning(azimuth, elevation))
 }
 
 /// Whether `points_in_sensor` look like one frame of a forward-looking solid-state LiDAR (a
@@ -291,6 +287,19 @@ pub fn is_spinning_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
 pub fn is_solid_state_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
     field_of_view(points_in_sensor)
         .is_some_and(|(azimuth, _)| azimuth <= SOLID_STATE_MAX_AZIMUTH_DEG)
+}
+
+/// Whether `points_in_sensor` look like a spinning ([`is_spinning_lidar`]) or a solid-state
+/// ([`is_solid_state_lidar`]) LiDAR's, their field of view measured once.
+pub fn is_lidar(points_in_sensor: &[crate::geometry::Vec3]) -> bool {
+    field_of_view(points_in_sensor).is_some_and(|(azimuth, elevation)| {
+        spinning(azimuth, elevation) || azimuth <= SOLID_STATE_MAX_AZIMUTH_DEG
+    })
+}
+
+/// [`is_spinning_lidar`] of a field of view, degrees.
+fn spinning(azimuth: f64, elevation: f64) -> bool {
+    azimuth >= LIDAR_MIN_AZIMUTH_DEG && elevation <= LIDAR_MAX_ELEVATION_DEG
 }
 
 /// The azimuth the points' directions cover (1° bins with a return) and the band of elevation
@@ -390,7 +399,7 @@ impl SlamOptions {
     pub fn for_scan<P: crate::geometry::AsPoint>(points_in_sensor: &[P]) -> Self {
         let points_in_sensor = &*P::as_vec3s(points_in_sensor);
         let default = Self::default();
-        if !(is_spinning_lidar(points_in_sensor) || is_solid_state_lidar(points_in_sensor)) {
+        if !is_lidar(points_in_sensor) {
             return default;
         }
         let sdem = SdemConfig::for_scan(points_in_sensor);
