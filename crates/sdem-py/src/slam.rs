@@ -37,9 +37,10 @@ use std::path::PathBuf;
 ///         ``min_reference_overlap_cells`` (300), ``min_tracking_inlier_fraction`` (0.5: a
 ///         match from a prediction is taken at once only above it, else searched again wider),
 ///         ``check_no_motion`` (false: a match from the no-motion prediction taken at once;
-///         a LiDAR's options search its runner-up first), ``edge_sigma_floor_m`` (0.005), ``edge_sigma_floor_deg`` (0.1), ``recovery`` (what
-///         the loop does when its predictions fail: the widest window, every heading, the whole
-///         map), ``loop_closure``, ``optimize`` (the pose graph), ``voxel`` (the fused
+///         a LiDAR's options search its runner-up first), ``edge_sigma_floor_m`` (0.005),
+///         ``edge_sigma_floor_deg`` (0.1), ``recovery`` (what the loop does when its
+///         predictions fail: the widest window, every heading, the whole map),
+///         ``loop_closure``, ``optimize`` (the pose graph), ``voxel`` (the fused
 ///         occupancy map) and ``growth`` (what keeps the work per stop and the memory bounded
 ///         as the map grows). A step's ``status`` is ``first``, ``tracked``, ``recovered``,
 ///         ``relocalized``, ``new_segment`` (found nowhere with confidence: a new map segment,

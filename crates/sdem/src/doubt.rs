@@ -155,7 +155,8 @@ pub enum Doubt {
 impl Doubt {
     /// Whether this doubt concerns the match itself (a repeated or flat cost, too few points,
     /// a failed refinement, surfaces where the other scan saw through), as opposed to where the
-    /// search looked, what the attitude readings allow, or what the loop did with the result. Such a match is `ambiguous` in [`crate::localize::Diagnostics`].
+    /// search looked, what the attitude readings allow, or what the loop did with the result.
+    /// Such a match is `ambiguous` in [`crate::localize::Diagnostics`].
     pub fn is_ambiguity(&self) -> bool {
         !matches!(
             self,

@@ -259,7 +259,8 @@ pub const MAX_CELLS: usize = 3600 * 1800;
 
 /// The fraction of the cells of a grid of `resolution_deg` in the band the `directions`
 /// (azimuth in [0, 360), elevation, degrees) cover that are holes: empty, with a known cell
-/// above and below it or to its left and right. Among the empty cells and the known ones.
+/// within [`MAX_HOLE_RUN`] cells above and below it or to its left and right. Among the empty
+/// cells and the known ones.
 fn hole_fraction(directions: &[(f64, f64)], resolution_deg: f64, elevation_min: f64) -> f64 {
     let (known, rows, columns) = occupancy(directions, resolution_deg, elevation_min);
     let at = |e: usize, a: usize| known[e * columns + a % columns];
