@@ -830,7 +830,7 @@ pub(crate) fn refine_from(
         settled |= step < SETTLED_STEP;
     }
     let (h, sigma_sq, inliers, supporting) = last.expect("at least one iteration ran");
-    check_plausible(initial, &rotation, &translation, prior, config)?;
+    check_plausible(initial, &rotation, &translation, prior, all, config)?;
     // The residuals of neighbouring points are not independent (see `design_effect`).
     let pose = (rotation.matrix().cast::<f32>(), translation.cast::<f32>());
     let scale = annealed_scale(config, iterations, settled);
@@ -920,32 +920,56 @@ fn solve_step(
 /// the configuration finds plausible. A translation within three σ of the `prior`'s offset is
 /// plausible however far it moved: along a direction the surfaces leave free (a corridor's
 /// axis) the prior, not the surfaces, sets the position, and it may lie farther from the grid's
-/// optimum than the refinement is otherwise trusted to move.
+/// optimum than the refinement is otherwise trusted to move. So is one within the configured
+/// move plus what the refinement's turn moves the scan's points at their median range
+/// (`query_points`, levelled sensor frame): the grid is searched at the readings' tilt (and
+/// heading steps), and where that tilt is off by Δθ the grid's best offset makes up for it by
+/// about the points' distance × Δθ (a scanner sees to one side of itself, so the shift does not
+/// average out), which the refinement then takes back.
 fn check_plausible(
     initial: &Isometry3<f64>,
     rotation: &Rotation3<f64>,
     translation: &Vec3,
     prior: Option<&OffsetPrior>,
+    query_points: &[[f32; 3]],
     config: &RefineConfig,
 ) -> Result<()> {
     let rotation_change = (rotation * initial.rotation.to_rotation_matrix().transpose()).angle();
     let translation_change = (translation - initial.translation.vector).norm();
     let vouched_for =
         prior.is_some_and(|p| (translation - Vec3::from(p.offset)).norm() <= 3.0 * p.sigma_m);
+    let plausible_m = || config.max_translation_m + rotation_change * median_range(query_points);
     if rotation_change.to_degrees() > config.max_rotation_deg
-        || (translation_change > config.max_translation_m && !vouched_for)
+        || (translation_change > config.max_translation_m
+            && !vouched_for
+            && translation_change > plausible_m())
     {
         return Err(Error::RefinementFailed {
             reason: format!(
-                "refinement moved {:.1} cm and {:.2}°, beyond the plausible {:.1} cm and {:.1}°",
+                "refinement moved {:.1} cm and {:.2}°, beyond the plausible {:.1} cm (at that \
+                 turn) and {:.1}°",
                 translation_change * 100.0,
                 rotation_change.to_degrees(),
-                config.max_translation_m * 100.0,
+                plausible_m() * 100.0,
                 config.max_rotation_deg
             ),
         });
     }
     Ok(())
+}
+
+/// The median distance of `points` from the origin, metres (0 for none).
+fn median_range(points: &[[f32; 3]]) -> f64 {
+    let mut ranges: Vec<f32> = points
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .filter(|r| r.is_finite())
+        .collect();
+    if ranges.is_empty() {
+        return 0.0;
+    }
+    let mid = ranges.len() / 2;
+    *ranges.select_nth_unstable_by(mid, f32::total_cmp).1 as f64
 }
 
 #[cfg(test)]

@@ -99,3 +99,38 @@ fn bad_settings_are_refused_by_name() {
     }
     RefineConfig::default().validate().unwrap();
 }
+
+/// A refined pose that turned by Δθ from the grid's may have moved by the configured 10 cm plus
+/// what that turn moves the points at their median range: the grid, searched at the readings'
+/// tilt, shifted its offset to make up for the tilt the refinement takes out (3DTK's third
+/// scan: 10.4 cm with a turn of 2.26°, points 1.6 m away). Without the turn, or beyond it, the
+/// move is refused.
+#[test]
+fn a_move_that_makes_up_for_a_turn_is_plausible() {
+    let config = RefineConfig::default();
+    let initial = Isometry3::identity();
+    // Points 4 m from the sensor: a turn of 2° moves them 14 cm.
+    let points: Vec<[f32; 3]> = (0..100)
+        .map(|i| {
+            let a = (i as f32).to_radians() * 3.0;
+            [4.0 * a.cos(), 4.0 * a.sin(), 0.0]
+        })
+        .collect();
+    let turned = Rotation3::from_axis_angle(&Vec3::y_axis(), 2f64.to_radians());
+    let straight = Rotation3::identity();
+    let moved = |cm: f64| Vec3::new(0.0, 0.0, cm / 100.0);
+    // 12 cm: within 10 cm + 4 m × 2° (24 cm) with the turn, beyond 10 cm without it.
+    assert!(check_plausible(&initial, &turned, &moved(12.0), None, &points, &config).is_ok());
+    let err = check_plausible(&initial, &straight, &moved(12.0), None, &points, &config)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("moved 12.0 cm"), "{err}");
+    // 30 cm is beyond what the turn allows too, and the message says how far it may go.
+    let err = check_plausible(&initial, &turned, &moved(30.0), None, &points, &config)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("plausible 24.0 cm"), "{err}");
+    // Within 10 cm, with or without a turn; and no points: the configured move alone.
+    assert!(check_plausible(&initial, &straight, &moved(9.0), None, &[], &config).is_ok());
+    assert!(check_plausible(&initial, &turned, &moved(12.0), None, &[], &config).is_err());
+}
