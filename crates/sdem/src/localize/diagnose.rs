@@ -91,6 +91,7 @@ pub(super) fn diagnose(
             &mut flat,
             &mut doubts,
             false,
+            Some(r),
         );
     }
     let flat_found = doubts[before..]
@@ -110,6 +111,7 @@ pub(super) fn diagnose(
             &mut flat,
             &mut doubts,
             refinement.is_some(),
+            refinement,
         );
     }
     // Too little in common, or the points did not confirm the grid's answer: on the fault
@@ -185,6 +187,17 @@ fn covariance_shape(
     (Some(([v.x, v.y, v.z], sigma_max, sigma_min)), flat)
 }
 
+/// The share of the refined points' surface that must face up or down (within 60°) for a flat
+/// eq. (1) in height to be no doubt ([`Refinement::support`]): a tenth, where a free
+/// direction's is a few per cent (a corridor's axis seen from a small window: 3.5 %; the
+/// `unconstrained` doubt fires below 1 %) and a floor and ceiling seen by a scanner that tilts
+/// through them hold a fifth (3DTK's example scans: 19 %, where eq. (1) rose less than
+/// 2·10⁻⁶ m² 5 cm up or down against 2.6·10⁻⁴ m² across the corridor).
+pub const FLAT_COST_HELD_BY_SUPPORT: f64 = 0.1;
+
+/// A direction within 25° of the vertical is "in height" for [`FLAT_COST_HELD_BY_SUPPORT`].
+const VERTICAL_COS: f64 = 0.9;
+
 /// The cost's own shape: how much it rises half the peak radius away from the optimum, along
 /// the principal directions `eigen` (the axes without them). Flat along one direction and steep
 /// along another is a corridor: a doubt, and the free direction when the covariance named none
@@ -204,6 +217,7 @@ fn cost_shape(
     flat: &mut Option<[f64; 3]>,
     doubts: &mut Vec<Doubt>,
     only_where_weakest_agrees: bool,
+    refinement: Option<&Refinement>,
 ) {
     let directions: Vec<Vec3> = match eigen {
         Some(eigen) => (0..3)
@@ -233,7 +247,15 @@ fn cost_shape(
     let v = flattest.1;
     let agrees = weakest.is_none_or(|(w, _, _)| Vec3::from(w).dot(&v).abs() > 0.9);
     let flat_here = flattest.0 < config.ambiguous_rise_ratio * steepest;
-    if flat_here && (agrees || !only_where_weakest_agrees) {
+    // Flat in height where floors or ceilings the refinement matched face that way: eq. (1)
+    // compares ranges, and a floor seen at a grazing angle (ahead of a scanner half a metre up)
+    // changes its range along the ray by more than the truncation within one cell, so that a
+    // shift in height moves few points in or out of `τ`; the points' planes hold the height.
+    // Not across: walls face a scanner beside them, and a flat cost across them is a doubt (the
+    // fault bench's moved rubble: a pose 10 cm off along x, flat there, with walls facing x).
+    let held_by_floors = v.z.abs() >= VERTICAL_COS
+        && refinement.is_some_and(|r| r.support(&v) >= FLAT_COST_HELD_BY_SUPPORT);
+    if flat_here && !held_by_floors && (agrees || !only_where_weakest_agrees) {
         doubts.push(Doubt::FlatCost {
             direction: [v.x, v.y, v.z],
             distance_m: d,
@@ -356,3 +378,84 @@ pub(super) fn prior_conflict(
 /// disagree plainly, while along a corridor's axis, where only the prediction can say, it
 /// varies by tens of per cent).
 pub const PRIOR_CONFLICT_RATIO: f64 = 2.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Isometry3, Matrix6};
+
+    /// A refinement whose matched surfaces face up or down for `vertical` of their area, the
+    /// rest across (y).
+    fn refined_with_vertical_share(vertical: f64) -> Refinement {
+        let up = (vertical * 100.0).round() as usize;
+        Refinement {
+            reference_level_from_query_level: Isometry3::identity(),
+            iterations: 5,
+            converged: true,
+            inliers: 100,
+            rms_m: 0.005,
+            information: Matrix6::identity(),
+            supporting_normals: (0..100)
+                .map(|i| {
+                    (
+                        if i < up {
+                            [0.0, 0.0, 1.0]
+                        } else {
+                            [0.0, 1.0, 0.0]
+                        },
+                        1.0,
+                    )
+                })
+                .collect(),
+        }
+    }
+
+    /// Eq. (1) flat in height and steep across: a doubt where few matched surfaces face up,
+    /// none where a fifth of them do (a floor seen at a grazing angle, whose ranges eq. (1)
+    /// compares within a cell's spread while the points' planes hold the height). Flat across,
+    /// however many surfaces face that way: a doubt.
+    #[test]
+    fn a_flat_cost_along_a_direction_the_surfaces_face_is_no_doubt() {
+        let config = LocalizeOptions::default();
+        // The doubts of eq. (1) shaped as `cost_at` about the origin, with `refinement`.
+        let shape = |cost_at: &mut dyn FnMut(Vec3) -> f64, refinement: Option<&Refinement>| {
+            let (mut weakest, mut flat, mut doubts) = (None, None, Vec::new());
+            cost_shape(
+                &config,
+                cost_at(Vec3::zeros()),
+                Vec3::zeros(),
+                None,
+                cost_at,
+                &mut weakest,
+                &mut flat,
+                &mut doubts,
+                false,
+                refinement,
+            );
+            doubts
+        };
+        let mut flat_in_height = |o: Vec3| 1e-3 + 0.1 * (o.x * o.x + o.y * o.y) + 1e-4 * o.z * o.z;
+        let few = shape(
+            &mut flat_in_height,
+            Some(&refined_with_vertical_share(0.03)),
+        );
+        assert!(
+            matches!(few.as_slice(), [Doubt::FlatCost { direction, .. }] if direction[2].abs() > 0.99),
+            "{few:?}"
+        );
+        assert!(shape(&mut flat_in_height, Some(&refined_with_vertical_share(0.2))).is_empty());
+        // No refinement: the cost alone decides.
+        assert_eq!(shape(&mut flat_in_height, None).len(), 1);
+        // Flat across (x), with as many surfaces facing x: a doubt all the same.
+        let mut across = refined_with_vertical_share(0.0);
+        for n in across.supporting_normals.iter_mut().take(20) {
+            n.0 = [1.0, 0.0, 0.0];
+        }
+        let mut flat_across = |o: Vec3| 1e-3 + 1e-4 * o.x * o.x + 0.1 * (o.y * o.y + o.z * o.z);
+        let doubts = shape(&mut flat_across, Some(&across));
+        assert!(
+            matches!(doubts.as_slice(), [Doubt::FlatCost { direction, .. }] if direction[0].abs() > 0.99),
+            "{doubts:?}"
+        );
+    }
+}
