@@ -369,7 +369,10 @@ impl Map {
 
     /// The merged virtual S-DEM of `node_ids` seen from `origin` (world frame), with world axes:
     /// every node's points carried into the world and binned around `origin`, nearest per cell
-    /// (paper Sec. III-C's virtual S-DEM, over several nodes).
+    /// (paper Sec. III-C's virtual S-DEM, over several nodes). Its level is as uncertain as the
+    /// least certain of the nodes' attitude readings, and at least the default σ: a match that
+    /// tilts a query against it is judged by what the readings allow
+    /// ([`crate::Doubt::AttitudeCorrected`]).
     ///
     /// # Errors
     /// An unknown node id, or an invalid S-DEM configuration.
@@ -389,7 +392,15 @@ impl Map {
             })?;
             points.extend(node.points_in_world().into_iter().map(|p| p - origin));
         }
-        Sdem::from_points(&points, &crate::geometry::Attitude::default(), sdem)
+        // A node's level in the map is its match's, not its reading's: the default σ at least,
+        // more where a reading says its level is that uncertain.
+        let mut level = Attitude::default();
+        let readings = (node_ids.iter()).filter_map(|&id| self.nodes[id].attitude_reading.as_ref());
+        for reading in readings {
+            level.sigma.roll_pitch = level.sigma.roll_pitch.max(reading.sigma.roll_pitch);
+            level.sigma.yaw = level.sigma.yaw.max(reading.sigma.yaw);
+        }
+        Sdem::from_points(&points, &level, sdem)
     }
 
     /// The nodes of node `node_id`'s segment whose origins lie within `radius_m` of its own,
@@ -884,4 +895,47 @@ fn rejection(
 pub fn world_from_query(origin: &Vec3, found: &Localization) -> Pose {
     Isometry3::from_parts(Translation3::from(*origin), UnitQuaternion::identity())
         * found.reference_from_query
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{Attitude, AttitudeSigma};
+
+    /// The merged reference is as uncertain in level as the least certain of its nodes'
+    /// readings, so that a match that tilts a query against it is judged by the σ a user gave
+    /// (`attitude.csv`'s columns; the default 0.5° whatever they said before).
+    #[test]
+    fn the_merged_reference_carries_its_readings_sigma() {
+        let points: Vec<Vec3> = (0..2000)
+            .map(|i| {
+                let (a, e) = ((i % 100) as f64 * 0.06, (i / 100) as f64 * 0.05 - 0.5);
+                Vec3::new(a.cos() * e.cos(), a.sin() * e.cos(), e.sin()) * 3.0
+            })
+            .collect();
+        let grid = SdemConfig::default();
+        let reading = |deg: Option<f64>| {
+            deg.map(|d| Attitude {
+                sigma: AttitudeSigma {
+                    roll_pitch: d.to_radians(),
+                    yaw: 20f64.to_radians(),
+                },
+                ..Attitude::default()
+            })
+        };
+        let node = |id, deg| {
+            Node::from_scan(id, id, Pose::identity(), reading(deg), &points, &grid).unwrap()
+        };
+        let map = Map {
+            nodes: vec![node(0, Some(1.0)), node(1, Some(0.2)), node(2, None)],
+        };
+        let sigma = |ids: &[usize]| {
+            let merged = map.merged_reference(ids, &Vec3::zeros(), &grid).unwrap();
+            (merged.attitude().sigma.roll_pitch.to_degrees() * 1e6).round() / 1e6
+        };
+        assert_eq!(sigma(&[0, 1]), 1.0);
+        // Never below the default: a node's level in the map is its match's.
+        assert_eq!(sigma(&[1, 2]), 0.5);
+        assert_eq!(sigma(&[2]), 0.5);
+    }
 }

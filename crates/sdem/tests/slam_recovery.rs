@@ -489,3 +489,46 @@ fn an_odometry_glitch_of_a_kilometre_is_recovered_from() {
         assert!(e < 0.02, "{e} m off");
     }
 }
+
+/// A reading's σ counts on both sides of `attitude_corrected` in the loop: the second stop's
+/// gyro reads 2.4° too much pitch. At the default σ (0.5° each) the match where the stop is,
+/// which takes the 2.4° out, is a doubt (beyond 3 × hypot(0.5°, 0.5°) = 2.1°), and the stop is
+/// found only by relocalizing it (levelled by its surfaces); with the query's reading at σ 1.5°
+/// (3 × hypot(0.5°, 1.5°) = 4.7°) it is tracked, the reference's σ the default. The loop judged
+/// every match by the default σ on both sides whatever the readings said.
+#[test]
+fn a_readings_sigma_is_what_a_corrected_tilt_is_judged_by() {
+    use sdem::geometry::{Attitude, AttitudeSigma};
+    let run = stops(&[0.0, 0.3]);
+    let run_with = |sigma_deg: f64| {
+        let mut slam = Slam::new(SlamOptions::default()).unwrap();
+        add(&mut slam, &run[0], 0);
+        let mut reading = run[1].sweep.mean_attitude();
+        reading.pitch += 2.4f64.to_radians();
+        reading.sigma = AttitudeSigma {
+            roll_pitch: sigma_deg.to_radians(),
+            ..Attitude::default().sigma
+        };
+        let report = slam
+            .add_scan(&ScanInput {
+                scan_index: 1,
+                points_in_sensor: &run[1].sweep.points_in_sensor(),
+                attitude: Some(reading),
+                odometry: None,
+            })
+            .unwrap();
+        let e = error_m(&slam.poses()[1], &run[1].world_from_sensor);
+        assert!(report.trusted && e < 0.01, "σ {sigma_deg}°: {e} m off");
+        report
+    };
+    let tight = run_with(0.5);
+    let first = &tight.attempts[0];
+    assert!(
+        !first.accepted
+            && (first.doubts.iter()).any(|d| matches!(d, Doubt::AttitudeCorrected { .. })),
+        "{first:?}"
+    );
+    assert_eq!(tight.status, StepStatus::Relocalized);
+    let loose = run_with(1.5);
+    assert_eq!(loose.status, StepStatus::Tracked, "{:?}", loose.attempts);
+}

@@ -104,11 +104,16 @@ impl Slam {
         let last_node = &self.map.nodes[last];
         let last_pose = last_node.world_from_sensor;
         let last_attitude = attitude_of(&last_pose);
-        let (roll, pitch) = scan
-            .attitude
-            .map_or((last_attitude.roll, last_attitude.pitch), |a| {
-                (a.roll, a.pitch)
-            });
+        // The reading's tilt with its σ (what `attitude_corrected` judges a match by), else the
+        // last node's with the default σ.
+        let (roll, pitch, sigma) = scan.attitude.map_or(
+            (last_attitude.roll, last_attitude.pitch, Default::default()),
+            |a| (a.roll, a.pitch, a.sigma),
+        );
+        let level = |yaw| Attitude {
+            sigma,
+            ..Attitude::new(roll, pitch, yaw)
+        };
         let compass = self.compass(scan);
         let config = &self.config;
         // Without odometry: the compass's heading, else the motion's.
@@ -124,7 +129,7 @@ impl Slam {
             Prediction {
                 source,
                 position: pose.translation.vector,
-                attitude: Attitude::new(roll, pitch, yaw),
+                attitude: level(yaw),
                 heading_prior,
                 heading_half,
                 window_half: config.window_half_no_odometry_m,
@@ -162,7 +167,7 @@ impl Slam {
             all.push(Prediction {
                 source: PredictionSource::Odometry,
                 position: pose.translation.vector,
-                attitude: Attitude::new(roll, pitch, attitude_of(&pose).yaw),
+                attitude: level(attitude_of(&pose).yaw),
                 heading_prior: HeadingPrior::Odometry,
                 heading_half: config.heading_half_deg,
                 window_half,
