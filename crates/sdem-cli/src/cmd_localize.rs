@@ -173,8 +173,8 @@ pub struct Args {
     )]
     min_overlap: Option<f64>,
     /// S-DEM cell size, degrees [default: matched to the scanner's angular step in the
-    /// dataset's sensor.toml, as `sdem slam` matches it; 1 without one] (with --map: the map's
-    /// own).
+    /// dataset's sensor.toml, as `sdem slam` matches it; without one, to the reference scan's
+    /// sampling, 0.5° at the finest] (with --map: the map's own).
     #[arg(
         long,
         allow_hyphen_values = true,
@@ -613,7 +613,8 @@ pub fn run(args: Args) -> Result<Outcome> {
         _ if args.match_scan => Settings::Derived,
         Some(points) if is_lidar(points) => Settings::DerivedForLidar,
         _ if dataset.sensor.is_some() => Settings::Sensor,
-        _ => Settings::Default,
+        Some(_) => Settings::MatchedGrid,
+        None => Settings::Default,
     };
     let (sdem_config, config) =
         if let (true, Some(points)) = (settings.derived(), &reference_points) {
@@ -627,11 +628,13 @@ pub fn run(args: Args) -> Result<Outcome> {
         } else {
             // The grid `sdem slam` builds for this dataset: a scanner sampling finer than 1° (a
             // nodding SICK at 0.5°) leaves most of a 1° cell's returns unused, and its map's pairs
-            // come out differently on the coarser grid.
-            let matched = dataset
-                .sensor
-                .as_ref()
-                .map(|s| s.matched_sdem_resolution_deg());
+            // come out differently on the coarser grid. Without a sensor model, the grid matched
+            // to the reference scan's sampling (as `sdem slam` matches it to the first scan's).
+            let matched = match (&dataset.sensor, &reference_points) {
+                (Some(sensor), _) => Some(sensor.matched_sdem_resolution_deg()),
+                (None, Some(points)) => Some(SdemConfig::default_for_scan(points).resolution_deg),
+                (None, None) => None,
+            };
             let grid = SdemConfig {
                 resolution_deg: args.resolution.or(matched).unwrap_or(1.0),
                 ..Default::default()

@@ -642,7 +642,8 @@ pub fn slam_options<'py>(
 /// ranges, loop closure and the fused map on that step (rays up to 20 m), the recovery's
 /// widest window and the no-odometry σ scaled with the step, the no-motion match checked for
 /// a rival, as ``sdem slam`` chooses them for a dataset without ``sensor.toml``; for any
-/// other scanner, ``sdem.slam_options()``'s defaults (the tilting laser's).
+/// other scanner, ``sdem.slam_options()``'s defaults (the tilting laser's) on S-DEM cells
+/// matched to the scan's sampling, 0.5° at the finest.
 ///
 /// Args:
 ///     points: the first scan, ``(N, 3)`` float32 or float64, sensor frame, metres.

@@ -76,9 +76,11 @@ impl SensorConfig {
     /// shrunk so that a whole number of cells makes a full turn. A cell then holds about one
     /// return. Coarser cells keep only the nearest of several returns and thin the scan out;
     /// on the 3DTK scans (0.5° beams, 0.517° lines) 1° cells left the match 3.1° in pitch from
-    /// slam6D on scan 1, 0.5165° cells 0.18°.
+    /// slam6D on scan 1, 0.5165° cells 0.18°. Never finer than 0.1°, the finest grid an S-DEM
+    /// of a full sphere may have ([`crate::sdem::MAX_CELLS`]): a survey scanner's 0.04° keeps
+    /// the nearest of several returns a cell.
     pub fn matched_sdem_resolution_deg(&self) -> f64 {
-        let step = self.tilt_step_deg.max(self.pan_step_deg);
+        let step = self.tilt_step_deg.max(self.pan_step_deg).max(0.1);
         360.0 / (360.0 / step - 1e-9).ceil()
     }
 
@@ -404,6 +406,19 @@ mod tests {
             ..SensorConfig::default()
         };
         assert_eq!(fine.matched_sdem_resolution_deg(), 0.25);
+        // A survey scanner's 0.04°: the finest grid a full sphere may have.
+        let survey = SensorConfig {
+            tilt_step_deg: 0.04,
+            pan_step_deg: 0.04,
+            ..SensorConfig::default()
+        };
+        let r = survey.matched_sdem_resolution_deg();
+        assert_relative_eq!(r, 0.1, epsilon = 1e-12);
+        let grid = crate::sdem::SdemConfig {
+            resolution_deg: r,
+            ..Default::default()
+        };
+        assert!(grid.validate().is_ok());
     }
 
     #[test]

@@ -273,6 +273,28 @@ fn the_loop_tells_lidars_from_the_tilting_laser_by_their_field_of_view() {
             !is_spinning_lidar(scan) && !is_solid_state_lidar(scan),
             "{name}"
         );
-        assert_eq!(SlamOptions::for_scan(scan), default, "{name}");
+        // The defaults, on cells matched to the scan's sampling: the paper's sweep's 1° (the
+        // default), the spheres' 2°.
+        let options = SlamOptions::for_scan(scan);
+        let resolution = if name == "tilting laser" { 1.0 } else { 2.0 };
+        assert_eq!(options.sdem.resolution_deg, resolution, "{name}");
+        let on_default_cells = SlamOptions {
+            sdem: default.sdem.clone(),
+            ..options
+        };
+        assert_eq!(on_default_cells, default, "{name}");
     }
+    // A scanner sampling its front half at 0.3° gets cells of 0.5°, the finest matched.
+    let fine: Vec<Vec3> = (0..600)
+        .flat_map(|i| (0..200).map(move |j| (i, j)))
+        .map(|(i, j)| {
+            let (az, el) = (
+                (-90.0 + 0.3 * i as f64).to_radians(),
+                (-30.0 + 0.3 * j as f64).to_radians(),
+            );
+            5.0 * Vec3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin())
+        })
+        .collect();
+    assert!(!is_spinning_lidar(&fine) && !is_solid_state_lidar(&fine));
+    assert_eq!(SlamOptions::for_scan(&fine).sdem.resolution_deg, 0.5);
 }

@@ -22,6 +22,9 @@ pub(crate) enum Settings {
     Derived,
     /// Derived from the reference scan, a LiDAR's, without being asked.
     DerivedForLidar,
+    /// The tilting SICK's defaults on cells matched to the reference scan's sampling (no
+    /// sensor model, no LiDAR; [`sdem::SdemConfig::default_for_scan`]).
+    MatchedGrid,
 }
 
 impl Settings {
@@ -37,6 +40,7 @@ impl Settings {
             Self::Sensor => "the sensor.toml's grid",
             Self::Derived => "derived from the reference scan",
             Self::DerivedForLidar => "derived from the reference scan, a LiDAR's",
+            Self::MatchedGrid => "the tilting SICK's defaults, cells matched to the reference scan",
         }
     }
 }
