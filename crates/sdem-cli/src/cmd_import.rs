@@ -194,10 +194,15 @@ fn print_text(args: &Args, summary: &ImportSummary) {
         n.iter().max().unwrap_or(&0)
     );
     if summary.format == ImportFormat::Uos3dtk {
+        let far = match summary.no_return_from_m {
+            Some(from) => format!(
+                "{} points at the scanner's \"no return\" range ({from:.2} m and beyond)",
+                summary.dropped_far
+            ),
+            None => "no \"no return\" points (the scans have no such range)".into(),
+        };
         println!(
-            "  dropped {} points beyond {} m (no return) and {} nearer than {} m (the robot)",
-            summary.dropped_far,
-            sdem_io::UOS_MAX_RANGE_M,
+            "  dropped {far} and {} points nearer than {} m (the robot)",
             summary.dropped_near,
             sdem_io::UOS_MIN_RANGE_M
         );

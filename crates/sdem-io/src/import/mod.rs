@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 
 mod e57;
 mod kitti;
+mod line_scanner;
 mod threedtk;
 
 pub use self::e57::import_e57;
@@ -120,8 +121,12 @@ pub struct ImportSummary {
     pub source_scans: Vec<PathBuf>,
     /// The points kept in each scan.
     pub points_per_scan: Vec<usize>,
-    /// Points dropped as farther than [`UOS_MAX_RANGE_M`] (3DTK), over all scans.
+    /// Points dropped at the scanner's "no return" range (3DTK), over all scans.
     pub dropped_far: usize,
+    /// 3DTK: the range from which a scan's returns were taken for "no return" (the least over
+    /// the scans), metres; `None` where no scan has one and every return was kept.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub no_return_from_m: Option<f64>,
     /// Points dropped as nearer than [`UOS_MIN_RANGE_M`] (3DTK), over all scans.
     pub dropped_near: usize,
     /// Points dropped as invalid (E57: no return, a direction without a range), over all scans.
@@ -144,6 +149,7 @@ impl ImportSummary {
             source_scans: scans.iter().map(|(_, p)| p.clone()).collect(),
             points_per_scan: Vec::with_capacity(scans.len()),
             dropped_far: 0,
+            no_return_from_m: None,
             dropped_near: 0,
             dropped_invalid: 0,
             written: Vec::new(),

@@ -10,16 +10,22 @@
 //!
 //! - **Scans**: each `scanNNN.3d` is read with [`crate::read_points`] (which already applies
 //!   `C` and the centimetres), and written as `scans/000000.ply`, … (binary PLY, numbered from 0
-//!   in the order of `NNN`). Points farther than [`UOS_MAX_RANGE_M`] (30 m; 3DTK's "no return"
-//!   sentinel sits at ~32.76 m) and nearer than [`UOS_MIN_RANGE_M`] (0.2 m; the robot itself and
-//!   invalid returns) are dropped; the summary counts them.
+//!   in the order of `NNN`). Returns at a scan's "no return" range (where 0.5 % of its points or
+//!   more pile up within 2 cm of its farthest range: 32.75–32.77 m on 3DTK's example scans;
+//!   [`line_scanner::no_return_range`]) are no surface and are dropped, and so are returns
+//!   nearer than [`UOS_MIN_RANGE_M`] (0.2 m; the robot itself and invalid returns); the summary
+//!   counts both. Every other return is kept, however far.
 //! - **`scanNNN.pose`** (two lines: `x y z` in cm, then `θx θy θz` in degrees, with
 //!   `world_from_scan = [Rx(θx)·Ry(θy)·Rz(θz) | t]` in 3DTK's frame, see [`read_uos_pose`]) is
 //!   the robot's initial estimate, i.e. its odometry. It is converted as above and written as
 //!   `odometry.txt`, and the roll, pitch and yaw of the converted rotation (sdem's
 //!   `R = Rz·Ry·Rx`) as `attitude.csv`, since 3DTK data has no separate gyro/compass reading.
-//! - **`sensor.toml`**: the scanner's geometry as measured from the example scans
-//!   ([`uos_sensor`]).
+//! - **`sensor.toml`**: the scanner's beam and line steps measured from the scans' point order
+//!   ([`line_scanner::measure_line_scanner`]; the median over the scans), the extents of the
+//!   returns' directions and ranges, and an assumed 1 cm range noise ([`measured_sensor`]), so
+//!   that `sdem slam` matches its S-DEM to the scanner that took the scans. Where no scan shows
+//!   a scanner's lines (points merged or reordered), none is written and the summary says so:
+//!   `sdem slam` then chooses its grid from the first scan.
 //!   A `.pose` must exist for every imported `.3d`.
 //! - **`scanNNN.frames`** (slam6D's output; one line per registration step, a 4×4 matrix in
 //!   OpenGL column-major order in cm, then a flag), when a frames folder is given or found
@@ -30,6 +36,7 @@
 //! 3DTK's poses are in 3DTK's world frame, the frame of its scan 0, and are kept there (not
 //! re-based on the first imported scan) so that the attitude keeps its roll and pitch.
 
+use super::line_scanner::{self, measure_line_scanner, no_return_range, LineScannerSteps};
 use super::{
     check_out, check_source, numbered_files, scan_name, select, write_or_roll_back, ImportFormat,
     ImportOptions, ImportSummary,
@@ -46,33 +53,15 @@ use sdem::geometry::{attitude_of, Attitude, Pose, Vec3};
 use sdem::sensor::SensorConfig;
 use std::path::Path;
 
-/// 3DTK points farther than this (metres) are dropped on import: the scanner's "no return"
-/// sentinel (~32.76 m) and beyond.
+/// A range (metres) beyond the returns of 3DTK's example scans worth matching (their farthest
+/// surfaces, the end of a corridor, lie 31–32.4 m away, just short of the ~32.76 m their scanner
+/// reports for "no return"): the range the benches re-view those scans with. An import keeps
+/// every return short of each scan's own "no return" range.
 pub const UOS_MAX_RANGE_M: f64 = 30.0;
 
 /// 3DTK points nearer than this (metres) are dropped on import: returns from the robot itself and
 /// invalid ones.
 pub const UOS_MIN_RANGE_M: f64 = 0.2;
-
-/// The scanner behind 3DTK's example scans, measured from the files (see
-/// `../shared/data/3dtk-dat/README.txt`): a nodded 2D LRF, 360 beams 0.5° apart over 180° per
-/// line, 226 lines pitched from −48.7° to +67.6° (0.517° apart). The range noise is not stated
-/// anywhere; a SICK LMS's 1 cm is assumed. Written as the dataset's `sensor.toml`, so that `sdem
-/// slam` matches its S-DEM to the scanner's step.
-pub fn uos_sensor() -> SensorConfig {
-    SensorConfig {
-        tilt_min_deg: -48.7,
-        tilt_max_deg: 67.6,
-        tilt_step_deg: 0.517,
-        pan_min_deg: -90.0,
-        pan_max_deg: 90.0,
-        pan_step_deg: 0.5,
-        max_range_m: UOS_MAX_RANGE_M,
-        min_range_m: UOS_MIN_RANGE_M,
-        range_noise_m: 0.01,
-        ..SensorConfig::default()
-    }
-}
 
 /// The largest translation, metres from 3DTK's origin, that a `.pose` or `.frames` may hold: a
 /// robot's survey spans kilometres, not a thousand; beyond this the value is damaged (a `1e300`
@@ -284,15 +273,16 @@ pub fn read_uos_frames_last(path: &Path) -> Result<Pose> {
     })
 }
 
-/// Keeps the points with `UOS_MIN_RANGE_M ≤ |p| ≤ UOS_MAX_RANGE_M`; returns them with the
-/// counts dropped as far and as near.
-fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
+/// Keeps the points with `UOS_MIN_RANGE_M ≤ |p|` and, where the scan has a "no return" range
+/// (`no_return_from`), `|p| < no_return_from`; returns them with the number dropped at the
+/// "no return" range and the number dropped as too near.
+fn filter_uos_points(points: Vec<Vec3>, no_return_from: Option<f64>) -> (Vec<Vec3>, usize, usize) {
     let (mut far, mut near) = (0, 0);
     let kept = points
         .into_iter()
         .filter(|p| {
             let r = p.norm();
-            if r > UOS_MAX_RANGE_M {
+            if no_return_from.is_some_and(|from| r >= from) {
                 far += 1;
                 false
             } else if r < UOS_MIN_RANGE_M {
@@ -304,6 +294,95 @@ fn filter_uos_points(points: Vec<Vec3>) -> (Vec<Vec3>, usize, usize) {
         })
         .collect();
     (kept, far, near)
+}
+
+/// The sensor model an import writes: the median of the scans' measured steps (rounded to a
+/// thousandth of a degree), the extents of the kept returns' directions (elevation as tilt,
+/// azimuth as pan: a nodded scanner's line pitches and beam angles; a full turn where no
+/// azimuth is left out) and ranges, and a 1 cm range noise (not in the files; a SICK LMS's).
+/// `None` when no scan's steps were measured.
+fn measured_sensor(steps: &[LineScannerSteps], extents: &Extents) -> Option<SensorConfig> {
+    let round = |v: f64| (v * 1e3).round() / 1e3;
+    let beam = line_scanner::median(steps.iter().map(|s| s.beam_step_deg).collect())?;
+    let line = line_scanner::median(steps.iter().map(|s| s.line_step_deg).collect())?;
+    let (pan_min_deg, pan_max_deg) = extents.azimuth_deg();
+    let sensor = SensorConfig {
+        tilt_min_deg: round(extents.elevation_deg.0).max(-90.0),
+        tilt_max_deg: round(extents.elevation_deg.1).min(90.0),
+        tilt_step_deg: round(line).max(1e-3),
+        pan_min_deg,
+        pan_max_deg,
+        pan_step_deg: round(beam).max(1e-3),
+        min_range_m: UOS_MIN_RANGE_M,
+        // Up to the next 10 cm above the farthest return kept.
+        max_range_m: ((extents.max_range_m * 10.0).floor() + 1.0) / 10.0,
+        range_noise_m: 0.01,
+        ..SensorConfig::default()
+    };
+    sensor.validate().ok().map(|()| sensor)
+}
+
+/// The directions and ranges the kept returns of every scan cover.
+struct Extents {
+    /// Lowest and highest elevation, degrees.
+    elevation_deg: (f64, f64),
+    /// Per 1° bin of azimuth (from −180°), the least and greatest azimuth of a return in it,
+    /// degrees (`None`: no return).
+    azimuth_bins: [Option<(f64, f64)>; 360],
+    max_range_m: f64,
+}
+
+impl Extents {
+    fn new() -> Self {
+        Self {
+            elevation_deg: (90.0, -90.0),
+            azimuth_bins: [None; 360],
+            max_range_m: 0.0,
+        }
+    }
+
+    fn add(&mut self, points: &[Vec3]) {
+        for p in points {
+            let r = p.norm();
+            let elevation = (p.z / r).asin().to_degrees();
+            let azimuth = p.y.atan2(p.x).to_degrees();
+            self.elevation_deg.0 = self.elevation_deg.0.min(elevation);
+            self.elevation_deg.1 = self.elevation_deg.1.max(elevation);
+            let bin = &mut self.azimuth_bins[((azimuth + 180.0).floor() as usize).min(359)];
+            *bin = Some(bin.map_or((azimuth, azimuth), |(lo, hi)| {
+                (lo.min(azimuth), hi.max(azimuth))
+            }));
+            self.max_range_m = self.max_range_m.max(r);
+        }
+    }
+
+    /// The azimuth extent, degrees to a thousandth: the circle without its longest run of empty
+    /// 1° bins (−180..180 where that run is shorter than 10°, a scanner that turns all the way,
+    /// or where the returns lie across ±180°, behind the scanner).
+    fn azimuth_deg(&self) -> (f64, f64) {
+        let bins = &self.azimuth_bins;
+        let (mut gap_start, mut gap_len) = (0, 0);
+        for start in 0..360 {
+            let len = (0..360)
+                .take_while(|k| bins[(start + k) % 360].is_none())
+                .count();
+            if len > gap_len {
+                (gap_start, gap_len) = (start, len);
+            }
+        }
+        if gap_len < 10 || gap_len == 360 {
+            return (-180.0, 180.0);
+        }
+        // The returns run from the bin after the gap to the bin before it.
+        let first = bins[(gap_start + gap_len) % 360].map_or(-180.0, |b| b.0);
+        let last = bins[(gap_start + 359) % 360].map_or(180.0, |b| b.1);
+        let round = |v: f64| (v * 1e3).round() / 1e3;
+        if first < last {
+            (round(first), round(last))
+        } else {
+            (-180.0, 180.0)
+        }
+    }
 }
 
 /// Refuses a gap in the numbers of the selected scans (`scan000`, `scan002` without `scan001`):
@@ -413,22 +492,31 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
     let attitudes: Vec<Attitude> = odometry.iter().map(attitude_of).collect();
     let mut summary = ImportSummary::empty(ImportFormat::Uos3dtk, source, out, &scans);
     write_or_roll_back(out, || {
+        let (mut steps, mut extents) = (Vec::new(), Extents::new());
         for (index, (_, scan)) in scans.iter().enumerate() {
-            let (points, far, near) = filter_uos_points(read_points(scan)?);
+            let raw = read_points(scan)?;
+            steps.extend(measure_line_scanner(&raw));
+            let no_return_from = no_return_range(&raw);
+            let (points, far, near) = filter_uos_points(raw, no_return_from);
             if points.is_empty() {
                 return Err(Error::parse(
                     scan,
                     None,
                     format!(
-                        "no point lies between {UOS_MIN_RANGE_M} m and {UOS_MAX_RANGE_M} m of the \
-                         sensor; nothing is left to import"
+                        "no point lies {UOS_MIN_RANGE_M} m or more from the sensor short of its \
+                         \"no return\" range; nothing is left to import"
                     ),
                 ));
             }
+            extents.add(&points);
             write_points_ply(&out.join(SCANS_DIR).join(scan_name(index, "ply")), &points)?;
             summary.points_per_scan.push(points.len());
             summary.dropped_far += far;
             summary.dropped_near += near;
+            summary.no_return_from_m = match (summary.no_return_from_m, no_return_from) {
+                (Some(a), Some(b)) => Some(a.min(b)),
+                (a, b) => a.or(b),
+            };
         }
         summary
             .written
@@ -437,8 +525,26 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
         summary.written.push(ODOMETRY_FILE.into());
         write_attitude_csv(&out.join(ATTITUDE_FILE), &attitudes)?;
         summary.written.push(ATTITUDE_FILE.into());
-        write_sensor_toml(&out.join(SENSOR_FILE), &uos_sensor())?;
-        summary.written.push(SENSOR_FILE.into());
+        match measured_sensor(&steps, &extents) {
+            Some(sensor) => {
+                summary.notes.push(format!(
+                    "{SENSOR_FILE}: beams {}° apart, lines {}° apart, measured from the point \
+                     order of {} of the {} scans",
+                    sensor.pan_step_deg,
+                    sensor.tilt_step_deg,
+                    steps.len(),
+                    scans.len()
+                ));
+                write_sensor_toml(&out.join(SENSOR_FILE), &sensor)?;
+                summary.written.push(SENSOR_FILE.into());
+            }
+            None => summary.notes.push(format!(
+                "no {SENSOR_FILE} written: no scan lists its points in a line scanner's order \
+                 (lines of beams at a regular step), so the scanner's steps are unknown; sdem \
+                 slam chooses its grid from the first scan (write a {SENSOR_FILE} with the \
+                 scanner's steps to match it)"
+            )),
+        }
         if let Some(slam6d) = &slam6d {
             write_poses(&out.join(SLAM6D_FILE), slam6d)?;
             summary.written.push(SLAM6D_FILE.into());
@@ -703,6 +809,117 @@ mod tests {
             .to_string();
         assert!(err.contains("already exists"), "{err}");
         assert_eq!(Dataset::open(&out).unwrap().len(), 2);
+    }
+
+    /// A scan file of a line scanner in 3DTK's frame and centimetres, with `far` returns at
+    /// 45–60 m (a real far wall) and, when `no_return`, every 40th beam at 327.67 m (a
+    /// scanner's "no return" range).
+    fn uos_line_scan(
+        beam_step_deg: f64,
+        line_step_deg: f64,
+        far: usize,
+        no_return: bool,
+    ) -> String {
+        let lines = (60.0 / line_step_deg) as usize;
+        let beams = (180.0 / beam_step_deg) as usize + 1;
+        let scan = crate::import::line_scanner::tests::line_scan(
+            Vec3::y(),
+            -30.0,
+            line_step_deg,
+            lines,
+            beam_step_deg,
+            beams,
+            crate::import::line_scanner::tests::room,
+        );
+        let mut text = String::new();
+        for (i, p) in scan.iter().enumerate() {
+            let p = if i < far {
+                p.normalize() * (45.0 + 0.05 * i as f64)
+            } else if no_return && i % 40 == 7 {
+                p.normalize() * 327.67
+            } else {
+                *p
+            };
+            // sdem (x forward, y left, z up, m) → 3DTK (x right, y up, z forward, cm).
+            text += &format!("{} {} {}\n", -p.y * 100.0, p.z * 100.0, p.x * 100.0);
+        }
+        text
+    }
+
+    #[test]
+    fn the_sensor_written_is_the_scanner_measured_and_far_returns_are_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        let source = uos_folder(dir.path(), 2);
+        // A scanner of 1° beams and 0.75° lines that reports "no return" at 327.67 m and sees
+        // a wall 45–60 m away.
+        for i in 0..2 {
+            write(
+                &source,
+                &format!("scan{i:03}.3d"),
+                &uos_line_scan(1.0, 0.75, 300, true),
+            );
+        }
+        let out = dir.path().join("ds");
+        let summary = import_3dtk(&source, &out, &ImportOptions::default()).unwrap();
+        let sensor = crate::read_sensor_toml(&out.join(SENSOR_FILE)).unwrap();
+        assert_eq!((sensor.pan_step_deg, sensor.tilt_step_deg), (1.0, 0.75));
+        assert_eq!(sensor.matched_sdem_resolution_deg(), 1.0);
+        // Nodded about the left axis, a line at +θ looks θ down.
+        assert_eq!((sensor.tilt_min_deg, sensor.tilt_max_deg), (-29.25, 30.0));
+        assert_eq!((sensor.pan_min_deg, sensor.pan_max_deg), (-90.0, 90.0));
+        // The far wall is kept (the sensor's range reaches it); the "no return" beams are not.
+        assert_eq!(sensor.max_range_m, 60.0);
+        let beams = 181 * 80;
+        let no_return = (0..beams).filter(|i| *i >= 300 && i % 40 == 7).count();
+        assert_eq!(summary.dropped_far, 2 * no_return, "{summary:?}");
+        assert_eq!(summary.points_per_scan, vec![beams - no_return; 2]);
+        assert!(
+            summary
+                .no_return_from_m
+                .is_some_and(|r| (327.6..327.67).contains(&r)),
+            "{summary:?}"
+        );
+        assert!(summary.notes[0].contains("measured"), "{:?}", summary.notes);
+
+        // Points in no scanner's order: no sensor.toml, and the note says why.
+        let dir = tempfile::tempdir().unwrap();
+        let source = uos_folder(dir.path(), 2);
+        let in_order = uos_line_scan(0.5, 0.5, 0, false);
+        let lines: Vec<&str> = in_order.lines().collect();
+        let shuffled: String = (0..lines.len())
+            .map(|i| format!("{}\n", lines[(i * 7919) % lines.len()]))
+            .collect();
+        for i in 0..2 {
+            write(&source, &format!("scan{i:03}.3d"), &shuffled);
+        }
+        let out = dir.path().join("ds");
+        let summary = import_3dtk(&source, &out, &ImportOptions::default()).unwrap();
+        assert!(!out.join(SENSOR_FILE).exists());
+        assert!(!summary.written.iter().any(|w| w == SENSOR_FILE));
+        assert!(
+            summary.notes[0].contains("no sensor.toml"),
+            "{:?}",
+            summary.notes
+        );
+        assert_eq!((summary.dropped_far, summary.no_return_from_m), (0, None));
+    }
+
+    /// 3DTK's example scans, where they lie beside the repository: 0.5° beams, 0.517° lines.
+    #[test]
+    fn the_example_scans_show_their_scanners_steps() {
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/3dtk-dat/scan000.3d");
+        if !path.is_file() {
+            eprintln!("skipped: no {} beside the repository", path.display());
+            return;
+        }
+        let points = read_points(&path).unwrap();
+        let steps = measure_line_scanner(&points).unwrap();
+        assert!((steps.beam_step_deg - 0.5).abs() < 1e-3, "{steps:?}");
+        assert!((steps.line_step_deg - 0.517).abs() < 1e-3, "{steps:?}");
+        assert_eq!(steps.lines, 226);
+        let from = no_return_range(&points).unwrap();
+        assert!((32.74..32.76).contains(&from), "{from}");
     }
 
     #[test]
