@@ -603,15 +603,18 @@ pub fn run(args: Args) -> Result<Outcome> {
     // when no sensor model, step or resolution says otherwise (as `sdem slam` chooses them);
     // else the sensor model's grid or the tilting SICK's defaults.
     // The reference scan is read once here when its points decide the settings.
-    let unasked = args.step.is_none() && args.resolution.is_none() && dataset.sensor.is_none();
-    let reference_points = if args.match_scan || unasked {
+    // Without a sensor model or a resolution, the grid is matched to the reference scan (with
+    // --step too); a LiDAR's search settings are derived only when no step is given either.
+    let unasked_grid = args.resolution.is_none() && dataset.sensor.is_none();
+    let unasked = unasked_grid && args.step.is_none();
+    let reference_points = if args.match_scan || unasked_grid {
         Some(dataset.load_scan(reference_index)?)
     } else {
         None
     };
     let settings = match &reference_points {
         _ if args.match_scan => Settings::Derived,
-        Some(points) if is_lidar(points) => Settings::DerivedForLidar,
+        Some(points) if unasked && is_lidar(points) => Settings::DerivedForLidar,
         _ if dataset.sensor.is_some() => Settings::Sensor,
         Some(_) => Settings::MatchedGrid,
         None => Settings::Default,

@@ -200,7 +200,7 @@ fn import_3dtk_converts_frames_and_filters_points() {
     );
     assert!(text.contains("imported 1 3DTK scans"), "{text}");
     assert!(
-        text.contains("\"no return\" range (32.74 m and beyond)"),
+        text.contains("\"no return\" range (32.76 m and beyond)"),
         "{text}"
     );
     assert!(text.contains("no sensor.toml written"), "{text}");

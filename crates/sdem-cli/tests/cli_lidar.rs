@@ -69,7 +69,8 @@ fn localize_matches_the_grid_to_a_lidar_scan() {
     args.extend(["--step", "0.05"]);
     assert_eq!(run(dir.path(), &args).code, Some(2));
     // Without a sensor model a LiDAR's scans get the derived settings unasked, the same pose;
-    // a --step given keeps the tilting SICK's.
+    // a --step given keeps the tilting SICK's search, on cells matched to the scan (the derived
+    // grid's resolution); a --resolution given, the defaults on its cells.
     std::fs::remove_file(dataset.join("sensor.toml")).unwrap();
     let mut unasked = vec!["localize", ds, "--reference", "0", "--query", "1", "--json"];
     unasked.extend(search);
@@ -81,7 +82,15 @@ fn localize_matches_the_grid_to_a_lidar_scan() {
     );
     unasked.extend(["--step", "0.05"]);
     let stepped = run(dir.path(), &unasked).json();
-    assert_eq!(stepped["settings"], "default", "{stepped}");
+    assert_eq!(stepped["settings"], "matched_grid", "{stepped}");
+    assert_eq!(
+        stepped["resolution_deg"], derived["resolution_deg"],
+        "{stepped}"
+    );
+    unasked.extend(["--resolution", "1.5"]);
+    let resolved = run(dir.path(), &unasked).json();
+    assert_eq!(resolved["settings"], "default", "{resolved}");
+    assert_eq!(resolved["resolution_deg"], 1.5, "{resolved}");
 }
 
 /// `sdem slam` of `lidar` driven down a simulated street (10 frames 0.8 m apart, weaving and

@@ -254,19 +254,21 @@ fn the_least_overlap_can_be_set_and_the_search_obeys_it() {
 }
 
 /// Without `--resolution` a dataset's scans are built on the grid `sdem slam` builds for it:
-/// matched to the scanner's step in its `sensor.toml` (here a pan step of 2°: 2° cells), 1°
-/// without one; `--resolution` overrides either. The JSON says which was used.
+/// matched to the scanner's step in its `sensor.toml` (here a pan step of 2°: 2° cells), and
+/// without one to the reference scan's sampling (the paper's sweep: 1°; `settings`
+/// `matched_grid`); `--resolution` overrides either. The JSON says which was used.
 #[test]
 fn the_grid_follows_the_datasets_sensor_unless_a_resolution_is_given() {
     let dir = tempfile::tempdir().unwrap();
     let ds = two_stops(dir.path());
     let pair = ["localize", s(&ds), "--reference", "0", "--query", "1"];
-    let resolution = |extra: &[&str]| {
+    let settings = |extra: &[&str]| {
         let args = [&pair[..], extra, &["--json"]].concat();
         let v = run(dir.path(), &args).json();
         assert!(v["error_m"].as_f64().unwrap() < 0.01, "{v}");
-        v["resolution_deg"].as_f64().unwrap()
+        (v["resolution_deg"].as_f64().unwrap(), v["settings"].clone())
     };
+    let resolution = |extra: &[&str]| settings(extra).0;
     // `sdem simulate` writes the paper's SICK: 1° steps.
     assert_eq!(resolution(&[]), 1.0);
     let sensor = ds.join("sensor.toml");
@@ -280,5 +282,7 @@ fn the_grid_follows_the_datasets_sensor_unless_a_resolution_is_given() {
     assert_eq!(resolution(&[]), 2.0);
     assert_eq!(resolution(&["--resolution", "1.5"]), 1.5);
     std::fs::remove_file(&sensor).unwrap();
-    assert_eq!(resolution(&[]), 1.0);
+    assert_eq!(settings(&[]), (1.0, "matched_grid".into()));
+    // A --step leaves the grid matched to the scan.
+    assert_eq!(settings(&["--step", "0.02"]), (1.0, "matched_grid".into()));
 }

@@ -198,8 +198,9 @@
 //!
 //! - **3DTK** (`scanNNN.3d` + `scanNNN.pose`, optionally slam6D's `scanNNN.frames`): scans
 //!   converted to sdem's frame as for `.3d` above and written as `scans/NNNNNN.ply`, without the
-//!   points farther than 30 m (3DTK's no-return sentinel, ~32.76 m) or nearer than 0.2 m (the
-//!   robot itself). 3DTK's frame is left-handed, so a pose `M` becomes `C · M · C⁻¹` with the
+//!   returns at the scanner's "no return" range (where they pile up at the far end: ~32.76 m on
+//!   3DTK's example scans) or nearer than 0.2 m (the robot itself); the scanner's beam and line
+//!   steps, measured from the scans' point order, become `sensor.toml`. 3DTK's frame is left-handed, so a pose `M` becomes `C · M · C⁻¹` with the
 //!   axis map `C · (x, y, z) = (z, −x, y)` (a reflection) and the translation in metres; a turn
 //!   by θ about 3DTK's up axis is a yaw of −θ. The `.pose` files (the robot's initial estimate)
 //!   become `odometry.txt` and, through their roll/pitch/yaw, `attitude.csv`; the last line of

@@ -904,7 +904,7 @@ mod tests {
 
     /// The merged reference is as uncertain in level as the least certain of its nodes'
     /// readings, so that a match that tilts a query against it is judged by the σ a user gave
-    /// (`attitude.csv`'s columns; the default 0.5° whatever they said before).
+    /// (`attitude.csv`'s columns, `--attitude-sigma-deg`), never below the default.
     #[test]
     fn the_merged_reference_carries_its_readings_sigma() {
         let points: Vec<Vec3> = (0..2000)

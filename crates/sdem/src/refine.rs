@@ -922,10 +922,11 @@ fn solve_step(
 /// axis) the prior, not the surfaces, sets the position, and it may lie farther from the grid's
 /// optimum than the refinement is otherwise trusted to move. So is one within the configured
 /// move plus what the refinement's turn moves the scan's points at their median range
-/// (`query_points`, levelled sensor frame): the grid is searched at the readings' tilt (and
-/// heading steps), and where that tilt is off by Δθ the grid's best offset makes up for it by
-/// about the points' distance × Δθ (a scanner sees to one side of itself, so the shift does not
-/// average out), which the refinement then takes back.
+/// (`query_points`, levelled sensor frame), that share at most the configured move again: the
+/// grid is searched at the readings' tilt (and heading steps), and where that tilt is off by Δθ
+/// the grid's best offset makes up for it by about the points' distance × Δθ (a scanner sees to
+/// one side of itself, so the shift does not average out), which the refinement then takes
+/// back.
 fn check_plausible(
     initial: &Isometry3<f64>,
     rotation: &Rotation3<f64>,
@@ -938,7 +939,12 @@ fn check_plausible(
     let translation_change = (translation - initial.translation.vector).norm();
     let vouched_for =
         prior.is_some_and(|p| (translation - Vec3::from(p.offset)).norm() <= 3.0 * p.sigma_m);
-    let plausible_m = || config.max_translation_m + rotation_change * median_range(query_points);
+    // The turn's share is held to the configured move itself (twice it in all): a refinement
+    // that went wrong in rotation must not buy itself any move by turning (5° at 15 m: 1.3 m).
+    let plausible_m = || {
+        let turn_share = rotation_change * median_range(query_points);
+        config.max_translation_m + turn_share.min(config.max_translation_m)
+    };
     if rotation_change.to_degrees() > config.max_rotation_deg
         || (translation_change > config.max_translation_m
             && !vouched_for

@@ -494,8 +494,7 @@ fn an_odometry_glitch_of_a_kilometre_is_recovered_from() {
 /// gyro reads 2.4° too much pitch. At the default σ (0.5° each) the match where the stop is,
 /// which takes the 2.4° out, is a doubt (beyond 3 × hypot(0.5°, 0.5°) = 2.1°), and the stop is
 /// found only by relocalizing it (levelled by its surfaces); with the query's reading at σ 1.5°
-/// (3 × hypot(0.5°, 1.5°) = 4.7°) it is tracked, the reference's σ the default. The loop judged
-/// every match by the default σ on both sides whatever the readings said.
+/// (3 × hypot(0.5°, 1.5°) = 4.7°) it is tracked, the reference's σ the default.
 #[test]
 fn a_readings_sigma_is_what_a_corrected_tilt_is_judged_by() {
     use sdem::geometry::{Attitude, AttitudeSigma};

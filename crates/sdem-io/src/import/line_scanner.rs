@@ -42,11 +42,18 @@ const MAX_BEAM_STEP_DEG: f64 = 10.0;
 /// The share of a scan's returns that must lie on the measured lines.
 const MIN_SHARE_ON_LINES: f64 = 0.8;
 
+/// The share of a line's beams that may lie off its plane.
+const MAX_OFF_PLANE: f64 = 0.05;
+
+/// Planes of successive lines closer than this many beam steps are pieces of one line.
+const SAME_LINE_STEPS: f64 = 0.2;
+
 /// Measures a line scanner's beam and line steps from one scan's points in the order the
 /// scanner took them (any frame centred on the sensor). `None` where the order shows no regular
-/// planar lines: fewer than [`MIN_LINES`] lines of [`MIN_BEAMS_PER_LINE`] beams, neighbours
-/// farther apart than [`MAX_BEAM_STEP_DEG`], lines that are not planes through the sensor (a
-/// spinning LiDAR's cones), or fewer than [`MIN_SHARE_ON_LINES`] of the returns on them.
+/// planar lines: fewer than [`MIN_LINES`] lines of [`MIN_BEAMS_PER_LINE`] beams that are planes
+/// through the sensor (a spinning LiDAR's rings are cones), neighbours farther apart than
+/// [`MAX_BEAM_STEP_DEG`], or fewer than [`MIN_SHARE_ON_LINES`] of the returns on such lines (a
+/// scanner that sweeps back and forth, whose lines run into each other without a jump).
 /// Points at the origin (no direction) are skipped.
 pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     let directions: Vec<Vec3> = points
@@ -73,17 +80,25 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     }
     lines.push(&directions[start..]);
     // Each line's plane through the sensor: its normal is the direction its beams least spread
-    // along; a beam farther from the plane than half a step makes it no plane.
+    // along. A line with more than `MAX_OFF_PLANE` of its beams farther from the plane than half
+    // a step is no plane (a spinning LiDAR's ring is a cone) and is left out; a stray beam or
+    // two (a mixed return, a coordinate rounded to the centimetre near the sensor) is not.
     let tolerance = (0.5 * beam_step_deg).to_radians().sin();
     let mut normals: Vec<Vec3> = Vec::new();
     let mut on_lines = 0;
     for line in lines.iter().filter(|l| l.len() >= MIN_BEAMS_PER_LINE) {
-        let scatter: Matrix3<f64> = line.iter().map(|d| d * d.transpose()).sum();
-        let eigen = SymmetricEigen::new(scatter);
-        let smallest = eigen.eigenvalues.imin();
-        let mut normal: Vec3 = eigen.eigenvectors.column(smallest).into_owned();
-        if line.iter().any(|d| d.dot(&normal).abs() > tolerance) {
-            return None;
+        let mut normal = plane_normal(line.iter());
+        let off_plane = line
+            .iter()
+            .filter(|d| d.dot(&normal).abs() > tolerance)
+            .count();
+        if off_plane as f64 > MAX_OFF_PLANE * line.len() as f64 {
+            continue;
+        }
+        if off_plane > 0 {
+            // Fitted again without the stray beams, which tilted the first fit.
+            let on_plane = line.iter().filter(|d| d.dot(&normal).abs() <= tolerance);
+            normal = plane_normal(on_plane);
         }
         // Successive normals point the same way, so that their angle is the step, not its
         // supplement.
@@ -97,10 +112,12 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     {
         return None;
     }
+    // Two pieces of one line (split where the beams found nothing over more than four steps)
+    // lie in one plane: their angle is no step between lines.
     let line_step_deg = median(
-        normals
-            .windows(2)
+        (normals.windows(2))
             .map(|w| angle_deg(&w[0], &w[1]))
+            .filter(|&a| a > SAME_LINE_STEPS * beam_step_deg)
             .collect(),
     )?;
     (line_step_deg > 1e-3 && line_step_deg <= 45.0).then_some(LineScannerSteps {
@@ -110,40 +127,57 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     })
 }
 
-/// How far below the farthest return a return still counts as the scanner's "no return" range,
-/// metres: 3DTK's example scans report it as 32.759–32.767 m (a SICK's 32,767 mm, rounded
-/// through centimetres and three coordinates).
+/// The width of the band of ranges a scanner's "no return" value fills, metres: 3DTK's example
+/// scans report it as 32.759–32.767 m (a SICK's 32,767 mm, rounded through centimetres and
+/// three coordinates).
 const NO_RETURN_BAND_M: f64 = 0.02;
 
 /// The share of a scan's points that must lie in that band for it to be a "no return" range:
 /// 1.6–1.8 % on the example scans.
 const NO_RETURN_MIN_SHARE: f64 = 0.005;
 
-/// The range a scanner writes for a beam that saw nothing, if the scan has one: the farthest
-/// range, when the returns pile up there: at least [`NO_RETURN_MIN_SHARE`] of the points within
-/// [`NO_RETURN_BAND_M`] of it, and twice as many as in the ten times wider band just short of
-/// it (where a real surface at the farthest range thins out). Returns from that range on are
-/// no surface. `None` when the farthest returns are surfaces like any other (a scanner that
-/// leaves out the beams without a return).
+/// The range a scanner writes for a beam that saw nothing, if the scan has one: where the
+/// returns pile up at the far end of the scan. Among the farthest fifth of the returns, the
+/// band of [`NO_RETURN_BAND_M`] that holds the most; it is the "no return" range when it holds
+/// at least [`NO_RETURN_MIN_SHARE`] of the points, twice as many as the ten times wider band
+/// just short of it (where a real surface at the farthest range thins out), and ten times as
+/// many as lie beyond it (a stray return or two farther than the pile-up does not hide it; a
+/// wall seen head-on, with the room's far side beyond, is no pile-up). Returns from that range
+/// on are no surface. `None` when the farthest returns are surfaces like any other (a scanner
+/// that leaves out the beams without a return).
 pub fn no_return_range(points: &[Vec3]) -> Option<f64> {
-    let ranges: Vec<f64> = points
+    let mut ranges: Vec<f64> = points
         .iter()
         .map(|p| p.norm())
         .filter(|r| r.is_finite())
         .collect();
-    let farthest = ranges.iter().copied().reduce(f64::max)?;
-    if farthest <= NO_RETURN_BAND_M {
-        return None;
-    }
-    let from = farthest - NO_RETURN_BAND_M;
-    let short_of = from - 10.0 * NO_RETURN_BAND_M;
-    let in_band = ranges.iter().filter(|&&r| r >= from).count();
-    let below = ranges
-        .iter()
-        .filter(|&&r| (short_of..from).contains(&r))
-        .count();
-    (in_band as f64 >= NO_RETURN_MIN_SHARE * ranges.len() as f64 && in_band >= 2 * below)
-        .then_some(from)
+    ranges.sort_by(f64::total_cmp);
+    let n = ranges.len();
+    // The number of ranges in [from, to).
+    let count = |from: f64, to: f64| {
+        ranges.partition_point(|&r| r < to) - ranges.partition_point(|&r| r < from)
+    };
+    let (start, in_band) = (n * 4 / 5..n)
+        .map(|i| (ranges[i], count(ranges[i], ranges[i] + NO_RETURN_BAND_M)))
+        .max_by(|a, b| a.1.cmp(&b.1).then(a.0.total_cmp(&b.0)))?;
+    let below = count(start - 10.0 * NO_RETURN_BAND_M, start);
+    let beyond = n - ranges.partition_point(|&r| r < start + NO_RETURN_BAND_M);
+    (start > NO_RETURN_BAND_M
+        && in_band as f64 >= NO_RETURN_MIN_SHARE * n as f64
+        && in_band >= 2 * below
+        && in_band >= 10 * beyond)
+        .then_some(start)
+}
+
+/// The normal of the plane through the origin that `directions` spread least from: the
+/// eigenvector of their scatter with the least eigenvalue.
+fn plane_normal<'a>(directions: impl Iterator<Item = &'a Vec3>) -> Vec3 {
+    let scatter: Matrix3<f64> = directions.map(|d| d * d.transpose()).sum();
+    let eigen = SymmetricEigen::new(scatter);
+    eigen
+        .eigenvectors
+        .column(eigen.eigenvalues.imin())
+        .into_owned()
 }
 
 fn angle_deg(a: &Vec3, b: &Vec3) -> f64 {
@@ -166,9 +200,9 @@ pub(super) mod tests {
     use super::*;
     use nalgebra::Rotation3;
 
-    /// A scan of a line scanner in the order it takes it: `lines` lines, each `line_step` degrees
-    /// further about `axis` (through the sensor), of beams `beam_step` degrees apart over
-    /// `beam_span` degrees in the line's plane; every surface `range` metres away.
+    /// A scan of a line scanner in the order it takes it: `lines` lines, each `line_step_deg`
+    /// further about `axis` (through the sensor), of `beams` beams `beam_step_deg` apart in the
+    /// line's plane from −90° on; each surface `range(line, beam)` metres away.
     pub fn line_scan(
         axis: Vec3,
         first_line_deg: f64,
@@ -235,6 +269,28 @@ pub(super) mod tests {
         assert!((steps.line_step_deg - 1.5).abs() < 1e-6, "{steps:?}");
     }
 
+    /// A stray beam in every line (a mixed return off the line's plane) and every line split
+    /// by a stretch of sky (no returns over 20 beams) leave the steps as they are.
+    #[test]
+    fn stray_beams_and_split_lines_leave_the_steps() {
+        let scan = line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room);
+        let kept: Vec<Vec3> = (scan.iter().enumerate())
+            .filter(|(i, _)| !(60..80).contains(&(i % 181)))
+            .map(|(i, p)| {
+                if i % 181 == 100 {
+                    // 1.5–2° off the line's plane: beyond half a step, within the line's run.
+                    p + Vec3::new(0.0, 0.0, p.norm() * 2f64.to_radians().tan())
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        let steps = measure_line_scanner(&kept).expect("lines with a stray beam and a gap");
+        assert!((steps.beam_step_deg - 1.0).abs() < 1e-6, "{steps:?}");
+        assert!((steps.line_step_deg - 0.8).abs() < 1e-6, "{steps:?}");
+        assert_eq!(steps.lines, 202, "two pieces a line");
+    }
+
     #[test]
     fn a_cloud_in_no_scanner_order_is_not_measured() {
         let scan = line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room);
@@ -264,18 +320,29 @@ pub(super) mod tests {
         let mut scan = line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room);
         // The farthest returns are surfaces: no "no return" range.
         assert_eq!(no_return_range(&scan), None);
-        // 2 % of the beams report 32.76 ± 0.005 m.
+        // 2 % of the beams report 32.760–32.764 m.
         for (i, p) in scan.iter_mut().enumerate().filter(|(i, _)| i % 50 == 0) {
-            *p = p.normalize() * (32.76 + 0.001 * (i % 5) as f64);
+            *p = p.normalize() * (32.76 + 0.001 * ((i / 50) % 5) as f64);
         }
         let from = no_return_range(&scan).expect("a pile-up at the far end");
-        assert!((32.74..32.765).contains(&from), "{from}");
+        assert!((32.755..32.761).contains(&from), "{from}");
+        // A stray return or two beyond the pile-up does not hide it.
+        scan[1] = scan[1].normalize() * 40.0;
+        scan[2] = scan[2].normalize() * 55.0;
+        assert_eq!(no_return_range(&scan), Some(from));
         // A far wall seen by a few beams is a surface.
         let mut far_wall = line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room);
         for p in far_wall.iter_mut().take(20) {
             *p = p.normalize() * 150.0;
         }
         assert_eq!(no_return_range(&far_wall), None);
+        // A band full of returns with the room's far side beyond it (a wall seen head-on) is no
+        // pile-up at the far end.
+        let mut wall = line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room);
+        for p in wall.iter_mut().step_by(5) {
+            *p = p.normalize() * 5.5;
+        }
+        assert_eq!(no_return_range(&wall), None);
         assert_eq!(no_return_range(&[]), None);
     }
 }

@@ -11,8 +11,8 @@
 //! - **Scans**: each `scanNNN.3d` is read with [`crate::read_points`] (which already applies
 //!   `C` and the centimetres), and written as `scans/000000.ply`, … (binary PLY, numbered from 0
 //!   in the order of `NNN`). Returns at a scan's "no return" range (where 0.5 % of its points or
-//!   more pile up within 2 cm of its farthest range: 32.75–32.77 m on 3DTK's example scans;
-//!   [`line_scanner::no_return_range`]) are no surface and are dropped, and so are returns
+//!   more pile up within 2 cm at the far end of its ranges: 32.76 m on 3DTK's example scans;
+//!   [`line_scanner::no_return_range`]) and beyond are no surface and are dropped, and so are returns
 //!   nearer than [`UOS_MIN_RANGE_M`] (0.2 m; the robot itself and invalid returns); the summary
 //!   counts both. Every other return is kept, however far.
 //! - **`scanNNN.pose`** (two lines: `x y z` in cm, then `θx θy θz` in degrees, with
@@ -53,10 +53,10 @@ use sdem::geometry::{attitude_of, Attitude, Pose, Vec3};
 use sdem::sensor::SensorConfig;
 use std::path::Path;
 
-/// A range (metres) beyond the returns of 3DTK's example scans worth matching (their farthest
-/// surfaces, the end of a corridor, lie 31–32.4 m away, just short of the ~32.76 m their scanner
-/// reports for "no return"): the range the benches re-view those scans with. An import keeps
-/// every return short of each scan's own "no return" range.
+/// The range (metres) within which the benches re-view 3DTK's example scans (`sdem bench
+/// --suite real-geometry`, `examples/real_unlevelled`): their surfaces but the corridor's far
+/// end, whose returns 30–32.4 m away disagree between scans by metres. The import keeps every
+/// return short of each scan's own "no return" range.
 pub const UOS_MAX_RANGE_M: f64 = 30.0;
 
 /// 3DTK points nearer than this (metres) are dropped on import: returns from the robot itself and
@@ -297,14 +297,26 @@ fn filter_uos_points(points: Vec<Vec3>, no_return_from: Option<f64>) -> (Vec<Vec
 }
 
 /// The sensor model an import writes: the median of the scans' measured steps (rounded to a
-/// thousandth of a degree), the extents of the kept returns' directions (elevation as tilt,
-/// azimuth as pan: a nodded scanner's line pitches and beam angles; a full turn where no
-/// azimuth is left out) and ranges, and a 1 cm range noise (not in the files; a SICK LMS's).
-/// `None` when no scan's steps were measured.
-fn measured_sensor(steps: &[LineScannerSteps], extents: &Extents) -> Option<SensorConfig> {
+/// thousandth of a degree; the line step as the tilt step and the beam step as the pan step, a
+/// nodding scanner's layout, also for a scanner that turns its lines about the vertical: the
+/// S-DEM's cells follow the coarser of the two), the extents of the kept returns' directions
+/// (elevation as tilt, azimuth as pan; a full turn where no azimuth is left out) and ranges, and
+/// a 1 cm range noise (not in the files; a SICK LMS's). `Err` saying why when no scan's steps
+/// were measured, or when the model they make is not valid.
+fn measured_sensor(
+    steps: &[LineScannerSteps],
+    extents: &Extents,
+) -> std::result::Result<SensorConfig, String> {
     let round = |v: f64| (v * 1e3).round() / 1e3;
-    let beam = line_scanner::median(steps.iter().map(|s| s.beam_step_deg).collect())?;
-    let line = line_scanner::median(steps.iter().map(|s| s.line_step_deg).collect())?;
+    let unordered = || {
+        "no scan lists its points in a line scanner's order (lines of beams at a regular step), \
+         so the scanner's steps are unknown"
+            .to_string()
+    };
+    let beam = line_scanner::median(steps.iter().map(|s| s.beam_step_deg).collect())
+        .ok_or_else(unordered)?;
+    let line = line_scanner::median(steps.iter().map(|s| s.line_step_deg).collect())
+        .ok_or_else(unordered)?;
     let (pan_min_deg, pan_max_deg) = extents.azimuth_deg();
     let sensor = SensorConfig {
         tilt_min_deg: round(extents.elevation_deg.0).max(-90.0),
@@ -319,7 +331,10 @@ fn measured_sensor(steps: &[LineScannerSteps], extents: &Extents) -> Option<Sens
         range_noise_m: 0.01,
         ..SensorConfig::default()
     };
-    sensor.validate().ok().map(|()| sensor)
+    sensor.validate().map_err(|e| {
+        format!("the scanner measured (beams {beam:.3}° and lines {line:.3}° apart) makes no valid sensor model: {e}")
+    })?;
+    Ok(sensor)
 }
 
 /// The directions and ranges the kept returns of every scan cover.
@@ -526,7 +541,7 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
         write_attitude_csv(&out.join(ATTITUDE_FILE), &attitudes)?;
         summary.written.push(ATTITUDE_FILE.into());
         match measured_sensor(&steps, &extents) {
-            Some(sensor) => {
+            Ok(sensor) => {
                 summary.notes.push(format!(
                     "{SENSOR_FILE}: beams {}° apart, lines {}° apart, measured from the point \
                      order of {} of the {} scans",
@@ -538,11 +553,9 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
                 write_sensor_toml(&out.join(SENSOR_FILE), &sensor)?;
                 summary.written.push(SENSOR_FILE.into());
             }
-            None => summary.notes.push(format!(
-                "no {SENSOR_FILE} written: no scan lists its points in a line scanner's order \
-                 (lines of beams at a regular step), so the scanner's steps are unknown; sdem \
-                 slam chooses its grid from the first scan (write a {SENSOR_FILE} with the \
-                 scanner's steps to match it)"
+            Err(why) => summary.notes.push(format!(
+                "no {SENSOR_FILE} written: {why}; sdem slam chooses its grid from the first scan \
+                 (write a {SENSOR_FILE} with the scanner's steps to match it)"
             )),
         }
         if let Some(slam6d) = &slam6d {

@@ -187,8 +187,8 @@ fn covariance_shape(
     (Some(([v.x, v.y, v.z], sigma_max, sigma_min)), flat)
 }
 
-/// The share of the refined points' surface that must face up or down (within 60°) for a flat
-/// eq. (1) in height to be no doubt ([`Refinement::support`]): a tenth, where a free
+/// The share of the refined points' surface that must face a direction within 25° of the
+/// vertical (each normal within 60° of it) for a flat eq. (1) along it to be no doubt ([`Refinement::support`]): a tenth, where a free
 /// direction's is a few per cent (a corridor's axis seen from a small window: 3.5 %; the
 /// `unconstrained` doubt fires below 1 %) and a floor and ceiling seen by a scanner that tilts
 /// through them hold a fifth (3DTK's example scans: 19 %, where eq. (1) rose less than
@@ -233,9 +233,20 @@ fn cost_shape(
             (rise, *v)
         })
         .collect();
-    let flattest = rises
-        .iter()
-        .cloned()
+    // Flat in height where floors or ceilings the refinement matched face that way: eq. (1)
+    // compares ranges, and a floor seen at a grazing angle (ahead of a scanner half a metre up)
+    // changes its range along the ray by more than the truncation within one cell, so that a
+    // shift in height moves few points in or out of `τ`; the points' planes hold the height.
+    // Not across: walls face a scanner beside them, and a flat cost across them is a doubt (the
+    // fault bench's moved rubble: a pose 10 cm off along x, flat there, with walls facing x).
+    // A direction so held is left out, and the flattest of the others judged: a corridor flat
+    // in height and along its axis still shows its axis.
+    let held_by_floors = |v: &Vec3| {
+        v.z.abs() >= VERTICAL_COS
+            && refinement.is_some_and(|r| r.support(v) >= FLAT_COST_HELD_BY_SUPPORT)
+    };
+    let flattest = (rises.iter().cloned())
+        .filter(|(_, v)| !held_by_floors(v))
         .fold((f64::INFINITY, Vec3::zeros()), |a, b| {
             if b.0 < a.0 {
                 b
@@ -247,15 +258,7 @@ fn cost_shape(
     let v = flattest.1;
     let agrees = weakest.is_none_or(|(w, _, _)| Vec3::from(w).dot(&v).abs() > 0.9);
     let flat_here = flattest.0 < config.ambiguous_rise_ratio * steepest;
-    // Flat in height where floors or ceilings the refinement matched face that way: eq. (1)
-    // compares ranges, and a floor seen at a grazing angle (ahead of a scanner half a metre up)
-    // changes its range along the ray by more than the truncation within one cell, so that a
-    // shift in height moves few points in or out of `τ`; the points' planes hold the height.
-    // Not across: walls face a scanner beside them, and a flat cost across them is a doubt (the
-    // fault bench's moved rubble: a pose 10 cm off along x, flat there, with walls facing x).
-    let held_by_floors = v.z.abs() >= VERTICAL_COS
-        && refinement.is_some_and(|r| r.support(&v) >= FLAT_COST_HELD_BY_SUPPORT);
-    if flat_here && !held_by_floors && (agrees || !only_where_weakest_agrees) {
+    if flat_here && (agrees || !only_where_weakest_agrees) {
         doubts.push(Doubt::FlatCost {
             direction: [v.x, v.y, v.z],
             distance_m: d,
@@ -446,6 +449,13 @@ mod tests {
         assert!(shape(&mut flat_in_height, Some(&refined_with_vertical_share(0.2))).is_empty());
         // No refinement: the cost alone decides.
         assert_eq!(shape(&mut flat_in_height, None).len(), 1);
+        // Flat in height and, a little less, along x (a corridor's axis): the axis is the doubt.
+        let mut flat_both = |o: Vec3| 1e-3 + 2e-4 * o.x * o.x + 0.1 * o.y * o.y + 1e-4 * o.z * o.z;
+        let doubts = shape(&mut flat_both, Some(&refined_with_vertical_share(0.2)));
+        assert!(
+            matches!(doubts.as_slice(), [Doubt::FlatCost { direction, .. }] if direction[0].abs() > 0.99),
+            "{doubts:?}"
+        );
         // Flat across (x), with as many surfaces facing x: a doubt all the same.
         let mut across = refined_with_vertical_share(0.0);
         for n in across.supporting_normals.iter_mut().take(20) {

@@ -119,17 +119,19 @@ fn a_move_that_makes_up_for_a_turn_is_plausible() {
     let turned = Rotation3::from_axis_angle(&Vec3::y_axis(), 2f64.to_radians());
     let straight = Rotation3::identity();
     let moved = |cm: f64| Vec3::new(0.0, 0.0, cm / 100.0);
-    // 12 cm: within 10 cm + 4 m × 2° (24 cm) with the turn, beyond 10 cm without it.
+    // 12 cm: within 10 cm + 4 m × 2° with the turn, beyond 10 cm without it.
     assert!(check_plausible(&initial, &turned, &moved(12.0), None, &points, &config).is_ok());
     let err = check_plausible(&initial, &straight, &moved(12.0), None, &points, &config)
         .unwrap_err()
         .to_string();
     assert!(err.contains("moved 12.0 cm"), "{err}");
-    // 30 cm is beyond what the turn allows too, and the message says how far it may go.
-    let err = check_plausible(&initial, &turned, &moved(30.0), None, &points, &config)
+    // 19 cm is within 10 cm + the turn's share, which is held to 10 cm (4 m × 2° would be 14);
+    // 21 cm is beyond, and the message says how far it may go.
+    assert!(check_plausible(&initial, &turned, &moved(19.0), None, &points, &config).is_ok());
+    let err = check_plausible(&initial, &turned, &moved(21.0), None, &points, &config)
         .unwrap_err()
         .to_string();
-    assert!(err.contains("plausible 24.0 cm"), "{err}");
+    assert!(err.contains("plausible 20.0 cm"), "{err}");
     // Within 10 cm, with or without a turn; and no points: the configured move alone.
     assert!(check_plausible(&initial, &straight, &moved(9.0), None, &[], &config).is_ok());
     assert!(check_plausible(&initial, &turned, &moved(12.0), None, &[], &config).is_err());
