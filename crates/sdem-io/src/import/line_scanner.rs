@@ -52,8 +52,9 @@ const SAME_LINE_STEPS: f64 = 0.2;
 /// scanner took them (any frame centred on the sensor). `None` where the order shows no regular
 /// planar lines: fewer than [`MIN_LINES`] lines of [`MIN_BEAMS_PER_LINE`] beams that are planes
 /// through the sensor (a spinning LiDAR's rings are cones), neighbours farther apart than
-/// [`MAX_BEAM_STEP_DEG`], or fewer than [`MIN_SHARE_ON_LINES`] of the returns on such lines (a
-/// scanner that sweeps back and forth, whose lines run into each other without a jump).
+/// [`MAX_BEAM_STEP_DEG`], or fewer than [`MIN_SHARE_ON_LINES`] of the returns on such lines. A
+/// scanner that sweeps its lines back and forth is measured too: a line ends where the sweep
+/// turns round.
 /// Points at the origin (no direction) are skipped.
 pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     let directions: Vec<Vec3> = points
@@ -69,11 +70,18 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     if !(beam_step_deg > 1e-3 && beam_step_deg <= MAX_BEAM_STEP_DEG) {
         return None;
     }
-    // Runs of neighbours within a few beam steps of each other.
+    // Runs of neighbours within a few beam steps of each other, sweeping on the same way: a
+    // scanner that sweeps its lines back and forth turns round between two of them, one line
+    // step from where it was.
     let mut lines: Vec<&[Vec3]> = Vec::new();
     let mut start = 0;
     for (i, gap) in gaps.iter().enumerate() {
-        if *gap > LINE_BREAK_STEPS * beam_step_deg {
+        // Against the step two back: the sweep turns round through a step across to the next
+        // line (at right angles to both), and a stray beam off the line, whose steps to and from
+        // it lean either way, does not turn it.
+        let step = |k: usize| directions[k + 1] - directions[k];
+        let turns_round = i >= start + 2 && step(i).dot(&step(i - 2)) < 0.0;
+        if *gap > LINE_BREAK_STEPS * beam_step_deg || turns_round {
             lines.push(&directions[start..=i]);
             start = i + 1;
         }
@@ -289,6 +297,26 @@ pub(super) mod tests {
         assert!((steps.beam_step_deg - 1.0).abs() < 1e-6, "{steps:?}");
         assert!((steps.line_step_deg - 0.8).abs() < 1e-6, "{steps:?}");
         assert_eq!(steps.lines, 202, "two pieces a line");
+    }
+
+    /// A scanner that sweeps every other line the other way: each line ends where the sweep
+    /// turns round, one line step from the next line's first beam.
+    #[test]
+    fn a_scanner_sweeping_back_and_forth_is_measured() {
+        let scan = line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room);
+        let zigzag: Vec<Vec3> = (scan.chunks(181).enumerate())
+            .flat_map(|(l, line)| {
+                let mut line = line.to_vec();
+                if l % 2 == 1 {
+                    line.reverse();
+                }
+                line
+            })
+            .collect();
+        let steps = measure_line_scanner(&zigzag).expect("lines swept both ways");
+        assert!((steps.beam_step_deg - 1.0).abs() < 1e-6, "{steps:?}");
+        assert!((steps.line_step_deg - 0.8).abs() < 1e-6, "{steps:?}");
+        assert_eq!(steps.lines, 101);
     }
 
     #[test]
