@@ -62,11 +62,17 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
         .filter(|p| p.iter().all(|v| v.is_finite()) && p.norm() > 1e-6)
         .map(|p| p.normalize())
         .collect();
-    let gaps: Vec<f64> = directions
-        .windows(2)
-        .map(|w| angle_deg(&w[0], &w[1]))
-        .collect();
-    let beam_step_deg = median(gaps.clone())?;
+    let gap = |i: usize| angle_deg(&directions[i], &directions[i + 1]);
+    let n_gaps = directions.len().saturating_sub(1);
+    // The median of every gap, held as `f32` (a survey's `.3d` file holds millions of points);
+    // the lines below take the gaps again one by one.
+    let mut gaps: Vec<f32> = (0..n_gaps).map(|i| gap(i) as f32).collect();
+    if gaps.is_empty() {
+        return None;
+    }
+    let mid = gaps.len() / 2;
+    let beam_step_deg = *gaps.select_nth_unstable_by(mid, f32::total_cmp).1 as f64;
+    drop(gaps);
     if !(beam_step_deg > 1e-3 && beam_step_deg <= MAX_BEAM_STEP_DEG) {
         return None;
     }
@@ -75,13 +81,13 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     // step from where it was.
     let mut lines: Vec<&[Vec3]> = Vec::new();
     let mut start = 0;
-    for (i, gap) in gaps.iter().enumerate() {
+    for i in 0..n_gaps {
         // Against the step two back: the sweep turns round through a step across to the next
         // line (at right angles to both), and a stray beam off the line, whose steps to and from
         // it lean either way, does not turn it.
         let step = |k: usize| directions[k + 1] - directions[k];
         let turns_round = i >= start + 2 && step(i).dot(&step(i - 2)) < 0.0;
-        if *gap > LINE_BREAK_STEPS * beam_step_deg || turns_round {
+        if gap(i) > LINE_BREAK_STEPS * beam_step_deg || turns_round {
             lines.push(&directions[start..=i]);
             start = i + 1;
         }
