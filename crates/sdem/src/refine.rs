@@ -942,7 +942,7 @@ fn check_plausible(
     // The turn's share is held to the configured move itself (twice it in all): a refinement
     // that went wrong in rotation must not buy itself any move by turning (5° at 15 m: 1.3 m).
     let plausible_m = || {
-        let turn_share = rotation_change * median_range(query_points);
+        let turn_share = rotation_change * crate::sdem::median_range(query_points);
         config.max_translation_m + turn_share.min(config.max_translation_m)
     };
     if rotation_change.to_degrees() > config.max_rotation_deg
@@ -962,20 +962,6 @@ fn check_plausible(
         });
     }
     Ok(())
-}
-
-/// The median distance of `points` from the origin, metres (0 for none).
-fn median_range(points: &[[f32; 3]]) -> f64 {
-    let mut ranges: Vec<f32> = points
-        .iter()
-        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
-        .filter(|r| r.is_finite())
-        .collect();
-    if ranges.is_empty() {
-        return 0.0;
-    }
-    let mid = ranges.len() / 2;
-    *ranges.select_nth_unstable_by(mid, f32::total_cmp).1 as f64
 }
 
 #[cfg(test)]

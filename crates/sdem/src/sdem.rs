@@ -67,6 +67,26 @@ impl Default for SdemConfig {
 /// make a sphere of millions of cells.
 pub const MIN_MATCHED_RESOLUTION_DEG: f64 = 0.5;
 
+/// `step_deg` shrunk to the nearest cell size of which a whole number makes a full turn (a
+/// billionth of a cell spared for rounding: 1° stays 1°, 0.517° becomes 0.5165°, 697 cells).
+pub(crate) fn whole_turn_deg(step_deg: f64) -> f64 {
+    360.0 / (360.0 / step_deg - 1e-9).ceil()
+}
+
+/// The median distance from the sensor of an S-DEM's points (levelled frame, metres; 0 for
+/// none).
+pub(crate) fn median_range(points: &[[f32; 3]]) -> f64 {
+    let mut ranges: Vec<f32> = points
+        .iter()
+        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
+        .collect();
+    if ranges.is_empty() {
+        return 0.0;
+    }
+    let middle = ranges.len() / 2;
+    *ranges.select_nth_unstable_by(middle, f32::total_cmp).1 as f64
+}
+
 /// How far [`SdemConfig::for_scan`] widens the scan's own band of elevations, degrees: two scans
 /// share one grid, and each is levelled by its own attitude reading, which may tilt it against
 /// the scan the band was measured on by a few degrees.
@@ -170,9 +190,9 @@ impl SdemConfig {
     /// assert_eq!(grid.elevation_min_deg, SdemConfig::default().elevation_min_deg);
     /// ```
     pub fn default_for_scan<P: AsPoint>(points_in_sensor: &[P]) -> Self {
-        let finest = 360.0 / (360.0 / MIN_MATCHED_RESOLUTION_DEG - 1e-9).ceil();
         Self {
-            resolution_deg: Self::for_scan(points_in_sensor).resolution_deg.max(finest),
+            resolution_deg: (Self::for_scan(points_in_sensor).resolution_deg)
+                .max(whole_turn_deg(MIN_MATCHED_RESOLUTION_DEG)),
             ..Self::default()
         }
     }
@@ -210,7 +230,7 @@ impl SdemConfig {
         let finest = (covered_deg2 / directions.len() as f64).sqrt();
         let resolution_deg = RESOLUTIONS_DEG
             .iter()
-            .map(|&r| 360.0 / (360.0 / r - 1e-9).ceil())
+            .map(|&r| whole_turn_deg(r))
             .filter(|&r| r >= 0.9 * finest)
             .find(|&r| hole_fraction(&directions, r, el_lo) <= MAX_HOLE_FRACTION)
             .unwrap_or(2.0);

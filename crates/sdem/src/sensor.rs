@@ -80,8 +80,7 @@ impl SensorConfig {
     /// of a full sphere may have ([`crate::sdem::MAX_CELLS`]): a survey scanner's 0.04° keeps
     /// the nearest of several returns a cell.
     pub fn matched_sdem_resolution_deg(&self) -> f64 {
-        let step = self.tilt_step_deg.max(self.pan_step_deg).max(0.1);
-        360.0 / (360.0 / step - 1e-9).ceil()
+        crate::sdem::whole_turn_deg(self.tilt_step_deg.max(self.pan_step_deg).max(0.1))
     }
 
     /// Checks every field for a usable value; the message names the field and the fix.

@@ -201,15 +201,7 @@ pub const REFINE_POINTS: usize = 3000;
 
 /// The side of a cell at the median range of a scan's boundary points, metres.
 pub fn scan_footprint_m(scan: &Sdem) -> f64 {
-    let mut ranges: Vec<f32> = (scan.points().iter())
-        .map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt())
-        .collect();
-    if ranges.is_empty() {
-        return 0.0;
-    }
-    let k = ranges.len() / 2;
-    let (_, median, _) = ranges.select_nth_unstable_by(k, f32::total_cmp);
-    *median as f64 * scan.grid().resolution()
+    crate::sdem::median_range(scan.points()) * scan.grid().resolution()
 }
 
 impl LocalizeOptions {
