@@ -15,8 +15,9 @@ pub struct Args {
     /// E57 survey (SURVEY.e57: every scan in its own frame).
     source: PathBuf,
     /// The dataset folder to write (scans/ and, for 3DTK, odometry.txt, attitude.csv,
-    /// poses_slam6d.txt and sensor.toml with the scanner's steps measured from the scans; for KITTI, poses_truth.txt; for a ROS 2 bag, attitude.csv, odometry.txt
-    /// and, for a tilting laser, sensor.toml; for E57, odometry.txt and attitude.csv from the
+    /// poses_slam6d.txt and sensor.toml with the scanner's steps measured from the scans; for
+    /// KITTI, poses_truth.txt; for a ROS 2 bag, attitude.csv, odometry.txt and, for a tilting
+    /// laser, sensor.toml; for E57, odometry.txt and attitude.csv from the
     /// registered poses when every scan has one).
     #[arg(long)]
     out: PathBuf,

@@ -601,10 +601,9 @@ pub fn run(args: Args) -> Result<Outcome> {
     }
     // The settings: derived from the reference scan with --match-scan, or for a LiDAR's scans
     // when no sensor model, step or resolution says otherwise (as `sdem slam` chooses them);
-    // else the sensor model's grid or the tilting SICK's defaults.
-    // The reference scan is read once here when its points decide the settings.
-    // Without a sensor model or a resolution, the grid is matched to the reference scan (with
-    // --step too); a LiDAR's search settings are derived only when no step is given either.
+    // else the sensor model's grid, a resolution given, or the tilting SICK's defaults on a grid
+    // matched to the reference scan (with --step too). The reference scan is read once here
+    // when its points decide the settings.
     let unasked_grid = args.resolution.is_none() && dataset.sensor.is_none();
     let unasked = unasked_grid && args.step.is_none();
     let reference_points = if args.match_scan || unasked_grid {

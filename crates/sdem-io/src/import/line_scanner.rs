@@ -1,5 +1,6 @@
 //! A line scanner's geometry measured from its scans: the angular step between the beams of a
-//! line and between the lines, and the farthest range it reports for "no return".
+//! line and between the lines, and the farthest range it reports for "no return"; and the
+//! sensor model an import writes from them ([`measured_sensor`]).
 //!
 //! A 3DTK `.3d` file lists a scan's points in the order the scanner took them: a 2D laser sweeps
 //! one line of beams (a plane through the sensor), then the mechanism nods or turns it to the
@@ -14,6 +15,7 @@
 
 use nalgebra::{Matrix3, SymmetricEigen};
 use sdem::geometry::Vec3;
+use sdem::sensor::SensorConfig;
 
 /// What [`measure_line_scanner`] found in one scan, degrees.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -141,6 +143,110 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
     })
 }
 
+/// The sensor model an import writes from its scans' measured steps (`min_range_m` the
+/// nearest return it kept): the median of the scans' measured steps (rounded to a
+/// thousandth of a degree; the line step as the tilt step and the beam step as the pan step, a
+/// nodding scanner's layout, also for a scanner that turns its lines about the vertical: the
+/// S-DEM's cells follow the coarser of the two), the extents of the kept returns' directions
+/// (elevation as tilt, azimuth as pan; a full turn where no azimuth is left out) and ranges, and
+/// a 1 cm range noise (not in the files; a SICK LMS's). `Err` saying why when no scan's steps
+/// were measured, or when the model they make is not valid.
+pub(super) fn measured_sensor(
+    steps: &[LineScannerSteps],
+    extents: &Extents,
+    min_range_m: f64,
+) -> Result<SensorConfig, String> {
+    let round = |v: f64| (v * 1e3).round() / 1e3;
+    let unordered = || {
+        "no scan lists its points in a line scanner's order (lines of beams at a regular step), \
+         so the scanner's steps are unknown"
+            .to_string()
+    };
+    let beam = median(steps.iter().map(|s| s.beam_step_deg).collect()).ok_or_else(unordered)?;
+    let line = median(steps.iter().map(|s| s.line_step_deg).collect()).ok_or_else(unordered)?;
+    let (pan_min_deg, pan_max_deg) = extents.azimuth_deg();
+    let sensor = SensorConfig {
+        tilt_min_deg: round(extents.elevation_deg.0).max(-90.0),
+        tilt_max_deg: round(extents.elevation_deg.1).min(90.0),
+        tilt_step_deg: round(line).max(1e-3),
+        pan_min_deg,
+        pan_max_deg,
+        pan_step_deg: round(beam).max(1e-3),
+        min_range_m,
+        // Up to the next 10 cm above the farthest return kept.
+        max_range_m: ((extents.max_range_m * 10.0).floor() + 1.0) / 10.0,
+        range_noise_m: 0.01,
+        ..SensorConfig::default()
+    };
+    sensor.validate().map_err(|e| {
+        format!("the scanner measured (beams {beam:.3}° and lines {line:.3}° apart) makes no valid sensor model: {e}")
+    })?;
+    Ok(sensor)
+}
+
+/// The directions and ranges the kept returns of every scan cover.
+pub(super) struct Extents {
+    /// Lowest and highest elevation, degrees.
+    elevation_deg: (f64, f64),
+    /// Per 1° bin of azimuth (from −180°), the least and greatest azimuth of a return in it,
+    /// degrees (`None`: no return).
+    azimuth_bins: [Option<(f64, f64)>; 360],
+    max_range_m: f64,
+}
+
+impl Extents {
+    pub(super) fn new() -> Self {
+        Self {
+            elevation_deg: (90.0, -90.0),
+            azimuth_bins: [None; 360],
+            max_range_m: 0.0,
+        }
+    }
+
+    pub(super) fn add(&mut self, points: &[Vec3]) {
+        for p in points {
+            let r = p.norm();
+            let elevation = (p.z / r).asin().to_degrees();
+            let azimuth = p.y.atan2(p.x).to_degrees();
+            self.elevation_deg.0 = self.elevation_deg.0.min(elevation);
+            self.elevation_deg.1 = self.elevation_deg.1.max(elevation);
+            let bin = &mut self.azimuth_bins[((azimuth + 180.0).floor() as usize).min(359)];
+            *bin = Some(bin.map_or((azimuth, azimuth), |(lo, hi)| {
+                (lo.min(azimuth), hi.max(azimuth))
+            }));
+            self.max_range_m = self.max_range_m.max(r);
+        }
+    }
+
+    /// The azimuth extent, degrees to a thousandth: the circle without its longest run of empty
+    /// 1° bins (−180..180 where that run is shorter than 10°, a scanner that turns all the way,
+    /// or where the returns lie across ±180°, behind the scanner).
+    fn azimuth_deg(&self) -> (f64, f64) {
+        let bins = &self.azimuth_bins;
+        let (mut gap_start, mut gap_len) = (0, 0);
+        for start in 0..360 {
+            let len = (0..360)
+                .take_while(|k| bins[(start + k) % 360].is_none())
+                .count();
+            if len > gap_len {
+                (gap_start, gap_len) = (start, len);
+            }
+        }
+        if gap_len < 10 || gap_len == 360 {
+            return (-180.0, 180.0);
+        }
+        // The returns run from the bin after the gap to the bin before it.
+        let first = bins[(gap_start + gap_len) % 360].map_or(-180.0, |b| b.0);
+        let last = bins[(gap_start + 359) % 360].map_or(180.0, |b| b.1);
+        let round = |v: f64| (v * 1e3).round() / 1e3;
+        if first < last {
+            (round(first), round(last))
+        } else {
+            (-180.0, 180.0)
+        }
+    }
+}
+
 /// The width of the band of ranges a scanner's "no return" value fills, metres: 3DTK's example
 /// scans report it as 32.759–32.767 m (a SICK's 32,767 mm, rounded through centimetres and
 /// three coordinates).
@@ -200,7 +306,7 @@ fn angle_deg(a: &Vec3, b: &Vec3) -> f64 {
 }
 
 /// The median (the upper one of an even count); `None` for no values.
-pub(super) fn median(mut values: Vec<f64>) -> Option<f64> {
+fn median(mut values: Vec<f64>) -> Option<f64> {
     if values.is_empty() {
         return None;
     }
@@ -256,13 +362,24 @@ pub(super) mod tests {
         2.0 + ((l * 7919 + b * 104_729) % 10_007) as f64 * 4.0 / 10_007.0
     }
 
+    /// The beam and line steps measured, to a millionth of a degree.
+    fn assert_steps(steps: &LineScannerSteps, beam_step_deg: f64, line_step_deg: f64) {
+        assert!(
+            (steps.beam_step_deg - beam_step_deg).abs() < 1e-6,
+            "{steps:?}"
+        );
+        assert!(
+            (steps.line_step_deg - line_step_deg).abs() < 1e-6,
+            "{steps:?}"
+        );
+    }
+
     #[test]
     fn a_nodding_scanner_shows_its_beam_and_line_steps() {
         // Nodded about the sensor's left axis (y): lines pitched −40..+40° at 0.8°, 1° beams.
         let scan = line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room);
         let steps = measure_line_scanner(&scan).expect("a nodding scanner's lines");
-        assert!((steps.beam_step_deg - 1.0).abs() < 1e-6, "{steps:?}");
-        assert!((steps.line_step_deg - 0.8).abs() < 1e-6, "{steps:?}");
+        assert_steps(&steps, 1.0, 0.8);
         assert_eq!(steps.lines, 101);
     }
 
@@ -279,8 +396,7 @@ pub(super) mod tests {
             }
         }
         let steps = measure_line_scanner(&scan).expect("a turning scanner's lines");
-        assert!((steps.beam_step_deg - 0.25).abs() < 1e-6, "{steps:?}");
-        assert!((steps.line_step_deg - 1.5).abs() < 1e-6, "{steps:?}");
+        assert_steps(&steps, 0.25, 1.5);
     }
 
     /// A stray beam in every line (a mixed return off the line's plane) and every line split
@@ -300,8 +416,7 @@ pub(super) mod tests {
             })
             .collect();
         let steps = measure_line_scanner(&kept).expect("lines with a stray beam and a gap");
-        assert!((steps.beam_step_deg - 1.0).abs() < 1e-6, "{steps:?}");
-        assert!((steps.line_step_deg - 0.8).abs() < 1e-6, "{steps:?}");
+        assert_steps(&steps, 1.0, 0.8);
         assert_eq!(steps.lines, 202, "two pieces a line");
     }
 
@@ -320,8 +435,7 @@ pub(super) mod tests {
             })
             .collect();
         let steps = measure_line_scanner(&zigzag).expect("lines swept both ways");
-        assert!((steps.beam_step_deg - 1.0).abs() < 1e-6, "{steps:?}");
-        assert!((steps.line_step_deg - 0.8).abs() < 1e-6, "{steps:?}");
+        assert_steps(&steps, 1.0, 0.8);
         assert_eq!(steps.lines, 101);
     }
 

@@ -12,7 +12,7 @@
 //!   `C` and the centimetres), and written as `scans/000000.ply`, … (binary PLY, numbered from 0
 //!   in the order of `NNN`). Returns at a scan's "no return" range (where 0.5 % of its points or
 //!   more pile up within 2 cm at the far end of its ranges: 32.76 m on 3DTK's example scans;
-//!   [`line_scanner::no_return_range`]) and beyond are no surface and are dropped, and so are returns
+//!   [`no_return_range`]) and beyond are no surface and are dropped, and so are returns
 //!   nearer than [`UOS_MIN_RANGE_M`] (0.2 m; the robot itself and invalid returns); the summary
 //!   counts both. Every other return is kept, however far.
 //! - **`scanNNN.pose`** (two lines: `x y z` in cm, then `θx θy θz` in degrees, with
@@ -21,7 +21,7 @@
 //!   `odometry.txt`, and the roll, pitch and yaw of the converted rotation (sdem's
 //!   `R = Rz·Ry·Rx`) as `attitude.csv`, since 3DTK data has no separate gyro/compass reading.
 //! - **`sensor.toml`**: the scanner's beam and line steps measured from the scans' point order
-//!   ([`line_scanner::measure_line_scanner`]; the median over the scans), the extents of the
+//!   ([`measure_line_scanner`]; the median over the scans), the extents of the
 //!   returns' directions and ranges, and an assumed 1 cm range noise ([`measured_sensor`]), so
 //!   that `sdem slam` matches its S-DEM to the scanner that took the scans. Where no scan shows
 //!   a scanner's lines (points merged or reordered), none is written and the summary says so:
@@ -36,7 +36,7 @@
 //! 3DTK's poses are in 3DTK's world frame, the frame of its scan 0, and are kept there (not
 //! re-based on the first imported scan) so that the attitude keeps its roll and pitch.
 
-use super::line_scanner::{self, measure_line_scanner, no_return_range, LineScannerSteps};
+use super::line_scanner::{measure_line_scanner, measured_sensor, no_return_range, Extents};
 use super::{
     check_out, check_source, numbered_files, scan_name, select, write_or_roll_back, ImportFormat,
     ImportOptions, ImportSummary,
@@ -50,7 +50,6 @@ use crate::{
 };
 use nalgebra::{Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
 use sdem::geometry::{attitude_of, Attitude, Pose, Vec3};
-use sdem::sensor::SensorConfig;
 use std::path::Path;
 
 /// The range (metres) within which the benches re-view 3DTK's example scans (`sdem bench
@@ -296,110 +295,6 @@ fn filter_uos_points(points: Vec<Vec3>, no_return_from: Option<f64>) -> (Vec<Vec
     (kept, far, near)
 }
 
-/// The sensor model an import writes: the median of the scans' measured steps (rounded to a
-/// thousandth of a degree; the line step as the tilt step and the beam step as the pan step, a
-/// nodding scanner's layout, also for a scanner that turns its lines about the vertical: the
-/// S-DEM's cells follow the coarser of the two), the extents of the kept returns' directions
-/// (elevation as tilt, azimuth as pan; a full turn where no azimuth is left out) and ranges, and
-/// a 1 cm range noise (not in the files; a SICK LMS's). `Err` saying why when no scan's steps
-/// were measured, or when the model they make is not valid.
-fn measured_sensor(
-    steps: &[LineScannerSteps],
-    extents: &Extents,
-) -> std::result::Result<SensorConfig, String> {
-    let round = |v: f64| (v * 1e3).round() / 1e3;
-    let unordered = || {
-        "no scan lists its points in a line scanner's order (lines of beams at a regular step), \
-         so the scanner's steps are unknown"
-            .to_string()
-    };
-    let beam = line_scanner::median(steps.iter().map(|s| s.beam_step_deg).collect())
-        .ok_or_else(unordered)?;
-    let line = line_scanner::median(steps.iter().map(|s| s.line_step_deg).collect())
-        .ok_or_else(unordered)?;
-    let (pan_min_deg, pan_max_deg) = extents.azimuth_deg();
-    let sensor = SensorConfig {
-        tilt_min_deg: round(extents.elevation_deg.0).max(-90.0),
-        tilt_max_deg: round(extents.elevation_deg.1).min(90.0),
-        tilt_step_deg: round(line).max(1e-3),
-        pan_min_deg,
-        pan_max_deg,
-        pan_step_deg: round(beam).max(1e-3),
-        min_range_m: UOS_MIN_RANGE_M,
-        // Up to the next 10 cm above the farthest return kept.
-        max_range_m: ((extents.max_range_m * 10.0).floor() + 1.0) / 10.0,
-        range_noise_m: 0.01,
-        ..SensorConfig::default()
-    };
-    sensor.validate().map_err(|e| {
-        format!("the scanner measured (beams {beam:.3}° and lines {line:.3}° apart) makes no valid sensor model: {e}")
-    })?;
-    Ok(sensor)
-}
-
-/// The directions and ranges the kept returns of every scan cover.
-struct Extents {
-    /// Lowest and highest elevation, degrees.
-    elevation_deg: (f64, f64),
-    /// Per 1° bin of azimuth (from −180°), the least and greatest azimuth of a return in it,
-    /// degrees (`None`: no return).
-    azimuth_bins: [Option<(f64, f64)>; 360],
-    max_range_m: f64,
-}
-
-impl Extents {
-    fn new() -> Self {
-        Self {
-            elevation_deg: (90.0, -90.0),
-            azimuth_bins: [None; 360],
-            max_range_m: 0.0,
-        }
-    }
-
-    fn add(&mut self, points: &[Vec3]) {
-        for p in points {
-            let r = p.norm();
-            let elevation = (p.z / r).asin().to_degrees();
-            let azimuth = p.y.atan2(p.x).to_degrees();
-            self.elevation_deg.0 = self.elevation_deg.0.min(elevation);
-            self.elevation_deg.1 = self.elevation_deg.1.max(elevation);
-            let bin = &mut self.azimuth_bins[((azimuth + 180.0).floor() as usize).min(359)];
-            *bin = Some(bin.map_or((azimuth, azimuth), |(lo, hi)| {
-                (lo.min(azimuth), hi.max(azimuth))
-            }));
-            self.max_range_m = self.max_range_m.max(r);
-        }
-    }
-
-    /// The azimuth extent, degrees to a thousandth: the circle without its longest run of empty
-    /// 1° bins (−180..180 where that run is shorter than 10°, a scanner that turns all the way,
-    /// or where the returns lie across ±180°, behind the scanner).
-    fn azimuth_deg(&self) -> (f64, f64) {
-        let bins = &self.azimuth_bins;
-        let (mut gap_start, mut gap_len) = (0, 0);
-        for start in 0..360 {
-            let len = (0..360)
-                .take_while(|k| bins[(start + k) % 360].is_none())
-                .count();
-            if len > gap_len {
-                (gap_start, gap_len) = (start, len);
-            }
-        }
-        if gap_len < 10 || gap_len == 360 {
-            return (-180.0, 180.0);
-        }
-        // The returns run from the bin after the gap to the bin before it.
-        let first = bins[(gap_start + gap_len) % 360].map_or(-180.0, |b| b.0);
-        let last = bins[(gap_start + 359) % 360].map_or(180.0, |b| b.1);
-        let round = |v: f64| (v * 1e3).round() / 1e3;
-        if first < last {
-            (round(first), round(last))
-        } else {
-            (-180.0, 180.0)
-        }
-    }
-}
-
 /// Refuses a gap in the numbers of the selected scans (`scan000`, `scan002` without `scan001`):
 /// the import numbers the dataset's scans from 0 without gaps, so a lost or deleted scan would
 /// silently join its neighbours as consecutive stops, and the user would never learn that the
@@ -540,7 +435,7 @@ pub fn import_3dtk(source: &Path, out: &Path, options: &ImportOptions) -> Result
         summary.written.push(ODOMETRY_FILE.into());
         write_attitude_csv(&out.join(ATTITUDE_FILE), &attitudes)?;
         summary.written.push(ATTITUDE_FILE.into());
-        match measured_sensor(&steps, &extents) {
+        match measured_sensor(&steps, &extents, UOS_MIN_RANGE_M) {
             Ok(sensor) => {
                 summary.notes.push(format!(
                     "{SENSOR_FILE}: beams {}° apart, lines {}° apart, measured from the point \
