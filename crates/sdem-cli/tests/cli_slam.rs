@@ -316,10 +316,15 @@ fn a_run_resumed_after_a_loop_closure_is_the_uninterrupted_run() {
         kitti(&dir.path().join("whole/poses.txt")),
         kitti(&dir.path().join("out/poses.txt")),
     );
+    // Not to the last bit: the saved map holds each node's pose as a 3 × 4 matrix, read back
+    // within 1e-16 of the quaternion the run held, and a later match's refinement (its gates,
+    // its robust weights, when it stops) may take such a difference to some nanometres (15 nm
+    // at scan 36, a loop closure). A micrometre is still 400 times less than the fault this
+    // test was written for.
     let most = (a.iter().flatten().zip(b.iter().flatten()))
         .map(|(x, y)| (x - y).abs())
         .fold(0.0, f64::max);
-    assert!(most < 1e-9, "resumed at 32: poses differ by {most}");
+    assert!(most < 1e-6, "resumed at 32: poses differ by {most}");
 }
 
 #[test]
@@ -628,7 +633,10 @@ fn slam_matches_the_sdem_to_the_sensor_step() {
 /// 3). Told that the readings are good to 1° (`--attitude-sigma-deg 1,3.5`), the three are
 /// mapped in one segment, every step trusted, each scan within 10 cm of slam6D's frame and
 /// within 3 cm after alignment. Without the odometry, the readings alone at their default σ:
-/// one segment too. Skipped, saying so, where the shared data is absent.
+/// the second scan, 1.57 m down the corridor, is matched where eq. (1) is all but flat along
+/// it (5 cm away the cost rises 4.8 % of what it rises across; 5 % is the doubt's bound), so it
+/// is flagged `flat_cost` and starts a segment, which the third joins. Skipped, saying so,
+/// where the shared data is absent.
 ///
 /// What this rests on: the corridor's far end, 31 m ahead of the third scan (96 returns), is
 /// kept by the import (only the scanner's "no return" at 32.76 m is dropped); the refinement
@@ -709,8 +717,14 @@ fn the_3dtk_stop_and_go_scans_are_mapped_in_one_segment() {
     // Without the odometry, the readings alone: one segment too.
     std::fs::remove_file(dir.path().join("data/odometry.txt")).unwrap();
     let (mapped, report) = slam("map-readings", &[]);
-    assert_eq!(mapped.code, Some(0), "{}", mapped.stderr);
-    assert_eq!(report["segments"].as_array().unwrap().len(), 1, "{report}");
+    assert_eq!(mapped.code, Some(3), "{}", mapped.stderr);
+    let second = &report["steps"][1];
+    let kinds: Vec<&str> = (second["doubts"].as_array().unwrap().iter())
+        .map(|d| d["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(kinds, ["flat_cost"], "{second}");
+    assert_eq!(statuses(&report), ["first", "new_segment", "recovered"]);
+    assert_eq!(report["doubtful_steps"], 1, "{}", mapped.stderr);
     let ate = report["compare"]["ate_rmse_m"].as_f64().unwrap();
     assert!(
         ate < 0.03,

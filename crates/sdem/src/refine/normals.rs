@@ -7,7 +7,7 @@
 //! millimetres between associations, and the last pair (or, the first time, the point in `x`'s
 //! cell) bounds `d` by about a cell's width.
 
-use super::{plane_normal, MIN_PATCH_WIDTH_M};
+use super::{plane_fit, MIN_PATCH_WIDTH_M};
 use crate::geometry::Vec3;
 use crate::sdem::{patch_moments, wrap_column, Derived, GridSpec, Sdem};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
@@ -31,6 +31,8 @@ pub struct SurfaceNormals {
     pub(super) point_of_cell: Vec<u32>,
     /// Per boundary point, its unit normal facing the sensor, or NaN where none fits.
     pub(super) normals: Vec<[f32; 3]>,
+    /// Per boundary point, its patch's variance along the normal, m² (NaN where none fits).
+    pub(super) thickness_sq: Vec<f32>,
     /// The boundary points with a normal, and the index into `Sdem::points()` of each.
     with_normal: (Vec<[f32; 3]>, Vec<u32>),
     /// Those points in a k-d tree, built on the first lookup that needs it (most pairings never
@@ -68,7 +70,7 @@ impl SurfaceNormals {
         }
         let k = radius_cells.max(1) as i64;
         let points = sdem.surface_points();
-        let normals = sdem
+        let fits = sdem
             .cells()
             .par_iter()
             .zip(points.par_iter())
@@ -85,18 +87,19 @@ impl SurfaceNormals {
                 let min_width = (0.2 * grid.resolution() * centre.norm()).max(MIN_PATCH_WIDTH_M);
                 let patch = patch_moments(grid, &point_of_cell, points, (cell, &centre), k, reach);
                 let Some(cov) = patch.covariance(6) else {
-                    return [f32::NAN; 3];
+                    return ([f32::NAN; 3], f32::NAN);
                 };
                 // Not a surface patch (a line, a corner, a blob): no normal.
-                let Some(mut n) = plane_normal(&cov, min_width) else {
-                    return [f32::NAN; 3];
+                let Some((mut n, thickness_sq)) = plane_fit(&cov, min_width) else {
+                    return ([f32::NAN; 3], f32::NAN);
                 };
                 if n.dot(&centre) > 0.0 {
                     n = -n;
                 }
-                [n.x as f32, n.y as f32, n.z as f32]
+                ([n.x as f32, n.y as f32, n.z as f32], thickness_sq as f32)
             })
-            .collect::<Vec<[f32; 3]>>();
+            .collect::<Vec<([f32; 3], f32)>>();
+        let (normals, thickness_sq): (Vec<[f32; 3]>, Vec<f32>) = fits.into_iter().unzip();
         let with_normal: Vec<u32> = (0..points.len() as u32)
             .filter(|&i| !normals[i as usize][0].is_nan())
             .collect();
@@ -119,6 +122,7 @@ impl SurfaceNormals {
         Self {
             point_of_cell,
             normals,
+            thickness_sq,
             with_normal: (coordinates, with_normal),
             neighbours: std::sync::OnceLock::new(),
             paired_of_cell,

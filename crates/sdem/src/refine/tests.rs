@@ -35,11 +35,16 @@ fn plane_normal_matches_the_iterative_eigenvectors() {
         if (l0 / l1 - 0.25).abs() < 1e-9 {
             continue;
         }
-        match plane_normal(&cov, 0.0) {
-            Some(n) => {
+        match plane_fit(&cov, 0.0) {
+            Some((n, thickness_sq)) => {
                 assert!(surface, "{l:?}: a normal where nalgebra sees no surface");
                 let expected = eigen.eigenvectors.column(order[0]);
                 assert!((n.dot(&expected).abs() - 1.0).abs() < 1e-9, "{l:?}");
+                assert!(
+                    (thickness_sq - l0).abs() <= 1e-9 * l1,
+                    "{thickness_sq} against {l0}"
+                );
+                assert_eq!(plane_normal(&cov, 0.0), Some(n));
                 flat += 1;
             }
             None => {
@@ -98,6 +103,50 @@ fn bad_settings_are_refused_by_name() {
         config.validate().unwrap();
     }
     RefineConfig::default().validate().unwrap();
+}
+
+/// A patch's thickness is the scatter of its points about their plane: about the range noise's
+/// variance on a wall seen head-on with 5 mm of noise, nothing on a noise-free one; and a
+/// residual against a patch weighs `s² / (s² + thickness²)`.
+#[test]
+fn thickness_is_the_scatter_about_the_plane_and_weighs_residuals_down() {
+    use crate::geometry::{direction, Attitude};
+    use crate::sdem::{Sdem, SdemConfig};
+    use rand::{Rng, SeedableRng};
+    let wall = |noise_m: f64| {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let points: Vec<Vec3> = (-30..30)
+            .flat_map(|i| (-20..20).map(move |j| (i, j)))
+            .map(|(i, j)| {
+                let d = direction((i as f64).to_radians(), (j as f64).to_radians());
+                let noise = noise_m * rng.sample::<f64, _>(rand_distr::StandardNormal);
+                d * (2.0 / d.x + noise)
+            })
+            .collect();
+        let sdem = Sdem::from_points(&points, &Attitude::default(), &SdemConfig::default())
+            .expect("a wall");
+        let normals = SurfaceNormals::new(&sdem, 2);
+        let mut t: Vec<f32> = (normals.thickness_sq.iter().copied())
+            .filter(|t| t.is_finite())
+            .collect();
+        assert!(t.len() > 1500, "{} patches fitted", t.len());
+        t.sort_by(f32::total_cmp);
+        t[t.len() / 2] as f64
+    };
+    let noisy = wall(0.005);
+    assert!(
+        (0.5 * 2.5e-5..=1.5 * 2.5e-5).contains(&noisy),
+        "median thickness² {noisy} against the noise's 2.5e-5 m²"
+    );
+    let clean = wall(0.0);
+    assert!(
+        clean < 1e-8,
+        "median thickness² {clean} on a noise-free wall"
+    );
+    assert_eq!(thickness_weight(0.0, 0.02), 1.0);
+    assert!((thickness_weight(4e-4, 0.02) - 0.5).abs() < 1e-12);
+    assert!(thickness_weight(1e-2, 0.02) < 0.04);
+    assert_eq!(thickness_weight(f64::NAN, 0.02), 1.0);
 }
 
 /// A refined pose that turned by Δθ from the grid's may have moved by the configured 10 cm plus
