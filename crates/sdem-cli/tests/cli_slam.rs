@@ -714,7 +714,7 @@ fn the_3dtk_stop_and_go_scans_are_mapped_in_one_segment() {
         let d = ((a[3] - b[3]).powi(2) + (a[7] - b[7]).powi(2) + (a[11] - b[11]).powi(2)).sqrt();
         assert!(d < 0.1, "scan {i}: {d} m from slam6D's frame");
     }
-    // Without the odometry, the readings alone: one segment too.
+    // Without the odometry, the readings alone: the corridor flat along its axis (above).
     std::fs::remove_file(dir.path().join("data/odometry.txt")).unwrap();
     let (mapped, report) = slam("map-readings", &[]);
     assert_eq!(mapped.code, Some(3), "{}", mapped.stderr);

@@ -5,7 +5,9 @@
 //! reference S-DEM in the same direction (the S-DEM *is* the projective association), and the
 //! point-to-plane distance to the reference surface there is minimized by robust Gauss-Newton over
 //! translation and a small rotation (the gyro's roll and pitch and the compass's yaw are
-//! measurements, not truth). The Gauss-Newton Hessian gives the information matrix of the result.
+//! measurements, not truth), each residual weighed by the robust kernel and by how thin its
+//! reference patch is (a rough patch's plane is a poorer model of its surface). The Gauss-Newton
+//! Hessian gives the information matrix of the result.
 
 use crate::cost::OffsetPrior;
 use crate::error::{Error, Result};
@@ -27,6 +29,8 @@ pub struct RefineConfig {
     /// Gauss-Newton iterations at most.
     pub max_iterations: usize,
     /// Scale of the robust (Geman-McClure) kernel, metres: residuals much larger count little.
+    /// Also the scale `s` of each residual's thickness weight `s² / (s² + λ0)`, `λ0` its
+    /// reference patch's variance along the patch's normal.
     pub kernel_scale_m: f64,
     /// Pairs farther apart than this are not associated, metres.
     pub max_correspondence_m: f64,
@@ -458,7 +462,9 @@ struct Pairing<'a> {
 impl Pairing<'_> {
     /// The normal equations of `points` (query, levelled) moved by `pose`; with `fresh` each is
     /// paired anew (`pairs[i]`: its reference point, `u32::MAX` for none), else with its last
-    /// pair. Residuals weigh by the Geman-McClure kernel at `scale`. Where the gate blends the
+    /// pair. Residuals weigh by the Geman-McClure kernel at `scale`, times their reference
+    /// patch's thickness weight ([`thickness_weight`]); a residual is an inlier (its patch's
+    /// normal counted in the support) by its robust weight alone. Where the gate blends the
     /// surface (settled), each point's blended plane (`planes[i]`: a point on it, its normal)
     /// is found with its pair and kept while the pair stays: settled, the estimate moves by
     /// less than a millimetre a step until the pairs are found again, where the reference's
@@ -575,6 +581,8 @@ impl Pairing<'_> {
                 let area = x[0] * x[0] + x[1] * x[1] + x[2] * x[2];
                 acc.normals.push((self.normals.normals[j as usize], area));
             }
+            // The paired point's patch, also where the residual is the blended surface's (whose
+            // samples lie within 1.5 cells of it, on much the same patch).
             let thickness_sq = self.normals.thickness_sq[j as usize] as f64;
             let w = w * thickness_weight(thickness_sq, self.config.kernel_scale_m);
             acc.add(w, r, jac);
