@@ -26,6 +26,11 @@ pub struct LineScannerSteps {
     pub line_step_deg: f64,
     /// The number of lines measured.
     pub lines: usize,
+    /// The lines' planes stand within 45° of the vertical (most of them): a scanner that turns
+    /// its lines about the vertical axis, whose line step is one of azimuth and beam step one
+    /// of elevation. Otherwise they lie near the horizontal, as a nodding scanner's, whose line
+    /// step is one of elevation.
+    pub lines_stand_vertical: bool,
 }
 
 /// The fewest lines a scan must show for its steps to be measured.
@@ -136,18 +141,22 @@ pub fn measure_line_scanner(points: &[Vec3]) -> Option<LineScannerSteps> {
             .filter(|&a| a > SAME_LINE_STEPS * beam_step_deg)
             .collect(),
     )?;
+    // A plane stands vertical where its normal lies within 45° of the horizontal.
+    let vertical = (normals.iter())
+        .filter(|n| n.z.abs() < std::f64::consts::FRAC_1_SQRT_2)
+        .count();
     (line_step_deg > 1e-3 && line_step_deg <= 45.0).then_some(LineScannerSteps {
         beam_step_deg,
         line_step_deg,
         lines: normals.len(),
+        lines_stand_vertical: 2 * vertical > normals.len(),
     })
 }
 
 /// The sensor model an import writes from its scans' measured steps (`min_range_m` the
 /// nearest return it kept): the median of the scans' measured steps (rounded to a
-/// thousandth of a degree; the line step as the tilt step and the beam step as the pan step, a
-/// nodding scanner's layout, also for a scanner that turns its lines about the vertical: the
-/// S-DEM's cells follow the coarser of the two), the extents of the kept returns' directions
+/// thousandth of a degree; a nodding scanner's line step as the tilt step and its beam step as
+/// the pan step, a turning scanner's the other way round, as most scans' lines stand), the extents of the kept returns' directions
 /// (elevation as tilt, azimuth as pan; a full turn where no azimuth is left out) and ranges, and
 /// a 1 cm range noise (not in the files; a SICK LMS's). `Err` saying why when no scan's steps
 /// were measured, or when the model they make is not valid.
@@ -164,14 +173,16 @@ pub(super) fn measured_sensor(
     };
     let beam = median(steps.iter().map(|s| s.beam_step_deg).collect()).ok_or_else(unordered)?;
     let line = median(steps.iter().map(|s| s.line_step_deg).collect()).ok_or_else(unordered)?;
+    let turning = 2 * steps.iter().filter(|s| s.lines_stand_vertical).count() > steps.len();
+    let (tilt_step, pan_step) = if turning { (beam, line) } else { (line, beam) };
     let (pan_min_deg, pan_max_deg) = extents.azimuth_deg();
     let sensor = SensorConfig {
         tilt_min_deg: round(extents.elevation_deg.0).max(-90.0),
         tilt_max_deg: round(extents.elevation_deg.1).min(90.0),
-        tilt_step_deg: round(line).max(1e-3),
+        tilt_step_deg: round(tilt_step).max(1e-3),
         pan_min_deg,
         pan_max_deg,
-        pan_step_deg: round(beam).max(1e-3),
+        pan_step_deg: round(pan_step).max(1e-3),
         min_range_m,
         // Up to the next 10 cm above the farthest return kept.
         max_range_m: ((extents.max_range_m * 10.0).floor() + 1.0) / 10.0,
@@ -381,6 +392,7 @@ pub(super) mod tests {
         let steps = measure_line_scanner(&scan).expect("a nodding scanner's lines");
         assert_steps(&steps, 1.0, 0.8);
         assert_eq!(steps.lines, 101);
+        assert!(!steps.lines_stand_vertical);
     }
 
     #[test]
@@ -397,6 +409,23 @@ pub(super) mod tests {
         }
         let steps = measure_line_scanner(&scan).expect("a turning scanner's lines");
         assert_steps(&steps, 0.25, 1.5);
+        assert!(steps.lines_stand_vertical);
+    }
+
+    /// The sensor model puts a nodding scanner's line step in tilt and its beam step in pan,
+    /// and a turning scanner's the other way round.
+    #[test]
+    fn the_sensor_model_steps_follow_how_the_lines_stand() {
+        let model = |scan: &[Vec3]| {
+            let steps = measure_line_scanner(scan).expect("a line scanner");
+            let mut extents = Extents::new();
+            extents.add(scan);
+            measured_sensor(&[steps], &extents, 0.1).expect("a sensor model")
+        };
+        let nodding = model(&line_scan(Vec3::y(), -40.0, 0.8, 101, 1.0, 181, room));
+        assert_eq!((nodding.tilt_step_deg, nodding.pan_step_deg), (0.8, 1.0));
+        let turning = model(&line_scan(Vec3::z(), 0.0, 1.5, 240, 0.25, 721, room));
+        assert_eq!((turning.tilt_step_deg, turning.pan_step_deg), (0.25, 1.5));
     }
 
     /// A stray beam in every line (a mixed return off the line's plane) and every line split

@@ -21,7 +21,9 @@
 //!   `odometry.txt`, and the roll, pitch and yaw of the converted rotation (sdem's
 //!   `R = Rz·Ry·Rx`) as `attitude.csv`, since 3DTK data has no separate gyro/compass reading.
 //! - **`sensor.toml`**: the scanner's beam and line steps measured from the scans' point order
-//!   ([`measure_line_scanner`]; the median over the scans), the extents of the
+//!   ([`measure_line_scanner`]; the median over the scans; the line step a tilt step where the
+//!   lines lie near the horizontal, as a nodding scanner's, a pan step where they stand, as a
+//!   turning scanner's), the extents of the
 //!   returns' directions and ranges, and an assumed 1 cm range noise ([`measured_sensor`]), so
 //!   that `sdem slam` matches its S-DEM to the scanner that took the scans. Where no scan shows
 //!   a scanner's lines (points merged or reordered), none is written and the summary says so:
