@@ -628,7 +628,7 @@ fn slam_matches_the_sdem_to_the_sensor_step() {
 /// reference, not truth.
 ///
 /// The `.pose` tilts are the robot's estimates, not a gyro's: the third scan's match tilts it
-/// 2.26° against them, beyond the 2.12° the default σ of two readings allows (0.5° each, a
+/// 2.46° against them, beyond the 2.12° the default σ of two readings allows (0.5° each, a
 /// gyro's), and with them it opens a segment of its own, flagged `attitude_corrected` (exit
 /// 3). Told that the readings are good to 1° (`--attitude-sigma-deg 1,3.5`), the three are
 /// mapped in one segment, every step trusted, each scan within 10 cm of slam6D's frame and
