@@ -57,6 +57,26 @@ pub struct Slam {
     saved: Option<(PathBuf, NodeFiles)>,
 }
 
+/// `slf` borrowed to read, or a `RuntimeError` saying that another thread is inside it.
+fn read<'py>(slf: &Bound<'py, Slam>) -> PyResult<PyRef<'py, Slam>> {
+    slf.try_borrow().map_err(|_| busy())
+}
+
+/// `slf` borrowed to change, or a `RuntimeError` saying that another thread is inside it.
+fn write<'py>(slf: &Bound<'py, Slam>) -> PyResult<PyRefMut<'py, Slam>> {
+    slf.try_borrow_mut().map_err(|_| busy())
+}
+
+/// What a `Slam` used from two threads at once says: `add`, `save` and `merged_cloud` release
+/// the GIL, so another thread can call it meanwhile, and finds it borrowed.
+fn busy() -> PyErr {
+    pyo3::exceptions::PyRuntimeError::new_err(
+        "this sdem.Slam is in use by another thread (add, save and merged_cloud run without \
+         the GIL and keep it borrowed until they return): call one Slam from one thread at a \
+         time (hold a threading.Lock around it), or give each thread its own",
+    )
+}
+
 /// Refuses a `progress` that cannot be called, before any scan is added (called only after
 /// `add` has added its scan, it would fail with the map already changed).
 fn check_progress(py: Python<'_>, progress: Option<&Py<PyAny>>) -> PyResult<()> {
@@ -140,7 +160,7 @@ impl Slam {
     ///     sdem.InvalidInputError, sdem.TooFewPointsError: bad input.
     #[pyo3(signature = (points, attitude_deg=None, odometry=None, *, roll_pitch_sigma_deg=None, yaw_sigma_deg=None))]
     fn add<'py>(
-        mut slf: PyRefMut<'py, Self>,
+        slf: &Bound<'py, Self>,
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
         attitude_deg: Option<&Bound<'py, PyAny>>,
@@ -154,15 +174,16 @@ impl Slam {
             Some(o) => Some(pose_from(o, "odometry")?),
             None => None,
         };
-        let inner = &mut slf.inner;
+        let mut this = write(slf)?;
+        let inner = &mut this.inner;
         let step = py
             .detach(|| inner.add(&points, attitude, odom_from_sensor))
             .map_err(sdem_error)?;
         let world_from_sensor = matrix4(py, &step.world_from_sensor);
         let step = Py::new(py, Step::new(&step)?)?;
-        slf.last_step = Some(step.clone_ref(py));
-        let progress = slf.progress.as_ref().map(|p| p.clone_ref(py));
-        drop(slf); // the callback may read this Slam
+        this.last_step = Some(step.clone_ref(py));
+        let progress = this.progress.as_ref().map(|p| p.clone_ref(py));
+        drop(this); // the callback may read this Slam
         if let Some(progress) = progress {
             progress.call1(py, (step,))?;
         }
@@ -171,14 +192,14 @@ impl Slam {
 
     /// The last step ``add`` made (``None`` before the first).
     #[getter]
-    fn last_step(&self, py: Python<'_>) -> Option<Py<Step>> {
-        self.last_step.as_ref().map(|s| s.clone_ref(py))
+    fn last_step(slf: &Bound<'_, Self>, py: Python<'_>) -> PyResult<Option<Py<Step>>> {
+        Ok(read(slf)?.last_step.as_ref().map(|s| s.clone_ref(py)))
     }
 
     /// ``world_from_sensor`` of every node, in the order the scans were added, as the last
     /// loop closure left them: ``(n, 4, 4)`` float64.
-    fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyAny> {
-        matrices4(py, &self.inner.poses())
+    fn poses<'py>(slf: &Bound<'py, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        Ok(matrices4(py, &read(slf)?.inner.poses()))
     }
 
     /// The merged point cloud: every node's points in the world, kept where the fused map is
@@ -186,8 +207,12 @@ impl Slam {
     /// float64. The map is settled first: the scans not fused into the voxel map yet, and
     /// those a loop closure moved, are fused now (the loop's steps leave that to a view), so
     /// a later call pays only for what is new.
-    fn merged_cloud<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let slam = &mut self.inner;
+    fn merged_cloud<'py>(
+        slf: &Bound<'py, Self>,
+        py: Python<'py>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let mut this = write(slf)?;
+        let slam = &mut this.inner;
         let cloud = py
             .detach(|| {
                 slam.settle_map()?;
@@ -199,16 +224,16 @@ impl Slam {
 
     /// Accepted loop closures as ``(from_node, to_node)`` pairs.
     #[getter]
-    fn loop_closures(&self) -> Vec<(usize, usize)> {
-        (self.inner.loop_closures.iter())
+    fn loop_closures(slf: &Bound<'_, Self>) -> PyResult<Vec<(usize, usize)>> {
+        Ok((read(slf)?.inner.loop_closures.iter())
             .map(|c| (c.from, c.to))
-            .collect()
+            .collect())
     }
 
     /// The effective options, a dict of ``SlamOptions`` fields.
     #[getter]
-    fn options<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        to_python(py, self.inner.config())
+    fn options<'py>(slf: &Bound<'py, Self>, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        to_python(py, read(slf)?.inner.config())
     }
 
     /// Saves the map into the folder ``path`` (created when missing) through sdem-io: node
@@ -225,8 +250,9 @@ impl Slam {
     ///     sdem.InvalidError: ``path`` holds another map and ``overwrite`` is False.
     ///     sdem.FileError: the file system's errors.
     #[pyo3(signature = (path, *, overwrite=false))]
-    fn save(&mut self, py: Python<'_>, path: PathBuf, overwrite: bool) -> PyResult<()> {
-        let mut node_files = match self.saved.take() {
+    fn save(slf: &Bound<'_, Self>, py: Python<'_>, path: PathBuf, overwrite: bool) -> PyResult<()> {
+        let mut this = write(slf)?;
+        let mut node_files = match this.saved.take() {
             Some((folder, files)) if folder == path => files,
             _ if path.join(MAP_MANIFEST).exists() && !overwrite => {
                 return Err(invalid(format!(
@@ -236,7 +262,7 @@ impl Slam {
             }
             _ => NodeFiles::default(),
         };
-        let slam = &self.inner;
+        let slam = &this.inner;
         let result = py.detach(|| {
             sdem_io::save_map(
                 &path,
@@ -250,22 +276,23 @@ impl Slam {
         });
         // After a failed save the folder's node files are unknown: the next save writes all.
         if result.is_ok() {
-            self.saved = Some((path, node_files));
+            this.saved = Some((path, node_files));
         }
         result.map_err(io_error)
     }
 
     /// The number of nodes (scans added).
-    fn __len__(&self) -> usize {
-        self.inner.map.nodes.len()
+    fn __len__(slf: &Bound<'_, Self>) -> PyResult<usize> {
+        Ok(read(slf)?.inner.map.nodes.len())
     }
 
-    fn __repr__(&self) -> String {
-        format!(
+    fn __repr__(slf: &Bound<'_, Self>) -> PyResult<String> {
+        let this = read(slf)?;
+        Ok(format!(
             "sdem.Slam({} nodes, {} loop closures)",
-            self.__len__(),
-            self.inner.loop_closures.len()
-        )
+            this.inner.map.nodes.len(),
+            this.inner.loop_closures.len()
+        ))
     }
 }
 

@@ -201,4 +201,5 @@ def test_add_runs_without_the_gil_and_a_second_call_meanwhile_is_refused(run):
             refused.append(str(e))
     worker.join()
     assert len(slam) == 4
-    assert refused and "borrowed" in refused[0]
+    assert refused and "in use by another thread" in refused[0]
+    assert "threading.Lock" in refused[0]
