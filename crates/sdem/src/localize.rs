@@ -750,16 +750,9 @@ struct RunnerUpSearch<'s, 'a> {
 /// 1.4 times the time of 4 with the peak radius.
 const SEEN_THROUGH_BASINS: usize = 4;
 
-/// A runner-up on the optimum's own slope is no rival out to this many peak radii; beyond, a
-/// slope that long is a wide basin, and the runner-up stands.
-const SHOULDER_RADII: f64 = 2.0;
-
 impl RunnerUpSearch<'_, '_> {
     /// The best candidate more than the peak radius from `grid_offset` costing at most the
-    /// ambiguity ratio × `cost`: its cost, offset and heading. A candidate within twice the peak
-    /// radius that is on the optimum's own slope (one step towards the optimum, at its heading,
-    /// eq. (1) costs less) is no rival: the neighbourhood left out grows past it and the search
-    /// goes on.
+    /// ambiguity ratio × `cost`: its cost, offset and heading.
     fn run(
         &self,
         grid_offset: Vec3,
@@ -768,25 +761,8 @@ impl RunnerUpSearch<'_, '_> {
     ) -> Option<(f64, Vec3, f64)> {
         // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
         // the exact search cheap.
-        let cap = config.ambiguous_cost_ratio * cost;
-        let mut outside = self.outside_peak(grid_offset, config);
-        let mut correlator = None;
-        loop {
-            let found = self.best_outside(&outside, cap, config)?;
-            let (c, at, yaw) = found;
-            let away = at - grid_offset;
-            let distance = away.norm();
-            if distance >= SHOULDER_RADII * config.peak_radius_m {
-                return Some(found);
-            }
-            let inwards = at - away * (config.step_m / distance).min(1.0);
-            let correlator = correlator.get_or_insert_with(|| self.correlator.clone());
-            let on_slope = (correlator.evaluate(&inwards, yaw)).is_some_and(|x| x.cost < c);
-            if !on_slope {
-                return Some(found);
-            }
-            outside.exclude = vec![(grid_offset, distance + 0.5 * config.step_m)];
-        }
+        let outside = self.outside_peak(grid_offset, config);
+        self.best_outside(&outside, config.ambiguous_cost_ratio * cost, config)
     }
 
     /// The grid without the peak radius around `grid_offset` (the optimum's neighbourhood).
