@@ -7,10 +7,10 @@
 //! millimetres between associations, and the last pair (or, the first time, the point in `x`'s
 //! cell) bounds `d` by about a cell's width.
 
-use super::{plane_fit, MIN_PATCH_WIDTH_M};
 use crate::geometry::Vec3;
 use crate::sdem::{patch_moments, wrap_column, Derived, GridSpec, Sdem};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use nalgebra::Matrix3;
 use rayon::prelude::*;
 
 /// A cone spanning more cells than this is left to the k-d tree.
@@ -310,6 +310,56 @@ impl Cone {
         let count = (rows.end() - rows.start() + 1) * (columns.end() - columns.start() + 1);
         (count <= MAX_CONE_CELLS && a1 - a0 < n_az).then_some(Cone { rows, columns })
     }
+}
+
+/// The least spread (standard deviation, metres) a surface patch must have across its longer
+/// direction for its normal to be fitted: well above a laser range finder's noise (5 mm for the
+/// SICK), so the noise of a cluster of returns is not taken for a surface.
+const MIN_PATCH_WIDTH_M: f64 = 0.01;
+
+/// The unit normal of a surface patch with point covariance `cov` (the eigenvector of its
+/// smallest eigenvalue `λ0`) and that eigenvalue, the patch's variance along the normal (m²: how
+/// far its points scatter about the plane fitted to them); or `None` where the patch is not a
+/// surface (`λ0 > λ1 / 4`: a corner, a blob; or `λ1 < min_width²`: a line, whose second spread
+/// is only its noise).
+///
+/// In closed form: the eigenvalues are the roots of the characteristic cubic (its trigonometric
+/// solution), the eigenvector the longest cross product of two rows of `cov − λ0 I` (of rank 2
+/// when `λ0 < λ1`). With nalgebra's iterative `symmetric_eigen` instead, the normals of a
+/// 10,000-point S-DEM took 7.6 ms on one core, 4.5 ms with this.
+pub(super) fn plane_fit(cov: &Matrix3<f64>, min_width: f64) -> Option<(Vec3, f64)> {
+    let off = cov[(0, 1)].powi(2) + cov[(0, 2)].powi(2) + cov[(1, 2)].powi(2);
+    let mean = cov.trace() / 3.0;
+    let spread = (0..3).map(|i| (cov[(i, i)] - mean).powi(2)).sum::<f64>() + 2.0 * off;
+    let p = (spread / 6.0).sqrt();
+    if p.is_nan() || p <= 0.0 {
+        // Isotropic (or not a number): no direction stands out.
+        return None;
+    }
+    let b = (cov - Matrix3::identity() * mean) / p;
+    let phi = (0.5 * b.determinant()).clamp(-1.0, 1.0).acos() / 3.0;
+    let largest = mean + 2.0 * p * phi.cos();
+    let smallest = mean + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos();
+    let middle = 3.0 * mean - largest - smallest;
+    if middle <= 0.0 || smallest > 0.25 * middle || middle < min_width * min_width {
+        return None;
+    }
+    let m = cov - Matrix3::identity() * smallest;
+    let rows = [
+        m.row(0).transpose(),
+        m.row(1).transpose(),
+        m.row(2).transpose(),
+    ];
+    let n = [
+        rows[0].cross(&rows[1]),
+        rows[0].cross(&rows[2]),
+        rows[1].cross(&rows[2]),
+    ]
+    .into_iter()
+    .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))
+    .expect("three products");
+    let length = n.norm();
+    (length > 0.0).then(|| (n / length, smallest.max(0.0)))
 }
 
 #[cfg(test)]
