@@ -252,14 +252,19 @@ impl Slam {
     #[pyo3(signature = (path, *, overwrite=false))]
     fn save(slf: &Bound<'_, Self>, py: Python<'_>, path: PathBuf, overwrite: bool) -> PyResult<()> {
         let mut this = write(slf)?;
+        let same_folder = this
+            .saved
+            .as_ref()
+            .is_some_and(|(folder, _)| *folder == path);
+        if !same_folder && path.join(MAP_MANIFEST).exists() && !overwrite {
+            // Refused before anything is taken: the record of the folder saved to stays.
+            return Err(invalid(format!(
+                "{} already holds a map; pass overwrite=True to replace it",
+                path.display()
+            )));
+        }
         let mut node_files = match this.saved.take() {
-            Some((folder, files)) if folder == path => files,
-            _ if path.join(MAP_MANIFEST).exists() && !overwrite => {
-                return Err(invalid(format!(
-                    "{} already holds a map; pass overwrite=True to replace it",
-                    path.display()
-                )));
-            }
+            Some((_, files)) if same_folder => files,
             _ => NodeFiles::default(),
         };
         let slam = &this.inner;

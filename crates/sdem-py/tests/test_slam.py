@@ -167,6 +167,12 @@ def test_saving_refuses_another_map_unless_asked_and_a_loaded_slam_goes_on(run, 
     first.save(tmp_path)  # again into its own folder: only new nodes are written
     with pytest.raises(sdem.InvalidError, match="overwrite=True"):
         sdem.Slam().save(tmp_path)
+    # Refused elsewhere, a Slam still knows its own folder and saves there again.
+    other = tmp_path / "other"
+    map_run(run, sdem.Slam(), range(2)).save(other)
+    with pytest.raises(sdem.InvalidError, match="overwrite=True"):
+        first.save(other)
+    first.save(tmp_path)
     resumed = sdem.Slam.load(tmp_path)
     assert len(resumed) == 6
     np.testing.assert_allclose(resumed.poses(), first.poses(), atol=1e-6)

@@ -920,9 +920,13 @@ fn check_plausible(
         prior.is_some_and(|p| (translation - Vec3::from(p.offset)).norm() <= 3.0 * p.sigma_m);
     // The turn's share is held to the configured move itself (twice it in all): a refinement
     // that went wrong in rotation must not buy itself any move by turning (5° at 15 m: 1.3 m).
+    // The median range is only looked up when the move is beyond the configured one, and once.
+    let plausible_m = std::cell::OnceCell::new();
     let plausible_m = || {
-        let turn_share = rotation_change * crate::sdem::median_range(query_points);
-        config.max_translation_m + turn_share.min(config.max_translation_m)
+        *plausible_m.get_or_init(|| {
+            let turn_share = rotation_change * crate::sdem::median_range(query_points);
+            config.max_translation_m + turn_share.min(config.max_translation_m)
+        })
     };
     if rotation_change.to_degrees() > config.max_rotation_deg
         || (translation_change > config.max_translation_m
