@@ -380,8 +380,9 @@ impl Localization {
         self.overlap
     }
 
-    /// The lowest cost found far from the optimum when it comes close to the best (another
-    /// place that looks almost the same), m²; ``None`` when nothing came that close.
+    /// The lowest cost found far from the optimum, off its own slopes, when it comes close to
+    /// the best (another place that looks almost the same), m²; ``None`` when nothing came that
+    /// close.
     #[getter]
     fn runner_up(&self) -> Option<f64> {
         self.runner_up
@@ -423,8 +424,8 @@ impl Localization {
 ///
 /// Kinds and figures (directions are unit vectors on the reference's levelled axes):
 ///
-/// - ``runner_up``: another candidate far away scores almost as well (``distance_m``,
-///   ``cost``, ``best_cost``).
+/// - ``runner_up``: another candidate far away, off the optimum's own slopes, scores almost as
+///   well (``distance_m``, ``cost``, ``best_cost``).
 /// - ``flat_covariance``: the pose is free along ``direction`` (``sigma_m``,
 ///   ``across_sigma_m``).
 /// - ``unconstrained``: hardly any matched surface faces along ``direction``

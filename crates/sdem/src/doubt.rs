@@ -16,8 +16,9 @@ use std::fmt;
 #[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Doubt {
-    /// Another candidate, far from the optimum, scores almost as well: the scene repeats, or
-    /// the scans share too little to tell the places apart.
+    /// Another candidate, beyond the peak radius and not on the optimum's own slope, scores
+    /// almost as well: the scene repeats, or the scans share too little to tell the places
+    /// apart.
     RunnerUp {
         /// How far the runner-up lies from the optimum, metres.
         distance_m: f64,

@@ -49,8 +49,9 @@ pub struct Localization {
     /// refinement. ([`Diagnostics::covariance`] is the same on the levelled reference's axes.)
     pub covariance: Option<Matrix6<f64>>,
     /// The lowest cost (eq. 1, m²) found more than [`LocalizeOptions::peak_radius_m`] from the
-    /// optimum, when it lies below [`LocalizeOptions::ambiguous_cost_ratio`] × [`Self::cost`]:
-    /// another place that looks almost the same. `None`: nothing came that close.
+    /// optimum and off its own slopes ([`Diagnostics::runner_up_cost`]), when it lies below
+    /// [`LocalizeOptions::ambiguous_cost_ratio`] × [`Self::cost`]: another place that looks
+    /// almost the same. `None`: nothing came that close.
     pub runner_up: Option<f64>,
     /// The estimated offset (query origin − reference origin, on the reference's levelled axes:
     /// the world's axes with the reference sensor's origin), refined when asked.
@@ -109,10 +110,14 @@ pub struct Diagnostics {
     pub refined_inlier_fraction: Option<f64>,
     /// The smallest cost outside the peak's neighbourhood, when it lies below
     /// [`LocalizeOptions::ambiguous_cost_ratio`] × the best (the runner-up search looks no
-    /// higher); `None` otherwise.
+    /// higher); `None` otherwise. With [`SearchMode::BranchAndBound`] (the default),
+    /// candidates on the optimum's own slope (within twice the peak radius, eq. (1) never rising
+    /// along the line to within a grid step of the optimum) and beside it are passed over, up to
+    /// four such slopes: they are no other place. The other modes pass none over.
     pub runner_up_cost: Option<f64>,
-    /// Every candidate outside the peak's neighbourhood costs at least this (the cap of the
-    /// runner-up search, or the runner-up's cost); `None` when not searched.
+    /// Every candidate outside the peak's neighbourhood and the slopes passed over costs at
+    /// least this (the cap of the runner-up search, or the runner-up's cost); `None` when not
+    /// searched.
     pub runner_up_cost_at_least: Option<f64>,
     /// Where that runner-up lies (offset, metres).
     pub runner_up_offset: Option<[f64; 3]>,
@@ -382,7 +387,8 @@ struct Searched {
     found: Localization,
     /// Grid offset of the first candidate, best first among the first [`SEEN_THROUGH_BASINS`]
     /// below the ambiguity ratio × the optimum's cost, each outside the peak radius of the
-    /// optimum and of the candidates before it ([`RunnerUpSearch::less_seen_through`]), whose
+    /// optimum (and the optimum's slopes the runner-up search passed over) and of the
+    /// candidates before it ([`RunnerUpSearch::less_seen_through`]), whose
     /// returns are seen through far less ([`seen_through_less`]); looked for only when
     /// `found`'s are seen through by [`SEEN_THROUGH_TO_RECHECK`] or more and the search looks
     /// for a runner-up.
@@ -463,13 +469,14 @@ fn search_below(
             reserve: reserve.as_ref(),
             full_turn,
         };
-        let runner_up = search.run(grid_offset, cost, config);
+        let (runner_up, outside) = search.run((grid_offset, grid_heading), cost, config);
         let less_seen_through = (seen_through >= SEEN_THROUGH_TO_RECHECK)
             .then(|| {
                 search.less_seen_through(
                     reference,
                     query,
-                    (grid_offset, cost, seen_through),
+                    outside,
+                    (cost, seen_through),
                     runner_up,
                     config,
                 )
@@ -750,19 +757,132 @@ struct RunnerUpSearch<'s, 'a> {
 /// 1.4 times the time of 4 with the peak radius.
 const SEEN_THROUGH_BASINS: usize = 4;
 
+/// A runner-up within this many peak radii of the optimum (and as many heading steps as that
+/// is grid steps) is looked at for lying on the optimum's own slope ([`RunnerUpSearch::slope`]);
+/// beyond, a slope that long is a wide basin, and the runner-up stands.
+const SLOPE_RADII: f64 = 2.0;
+
+/// How many of the optimum's slopes the runner-up search passes over; the candidate it finds
+/// after the last is the runner-up, on a slope or not.
+const SLOPE_PASSES: usize = 4;
+
+/// The half-width of a slope left out ([`RunnerUpSearch::slope`]), in grid steps: the grid
+/// candidates beside its line, at its headings and the next ones either side.
+const SLOPE_HALF_WIDTH_STEPS: f64 = 1.5;
+
 impl RunnerUpSearch<'_, '_> {
-    /// The best candidate more than the peak radius from `grid_offset` costing at most the
-    /// ambiguity ratio × `cost`: its cost, offset and heading.
+    /// The best candidate more than the peak radius from the optimum `(grid_offset, heading)`
+    /// costing at most the ambiguity ratio × `cost`, and not on one of the optimum's own slopes:
+    /// its cost, offset and heading; and the grid it was searched in (the peak's neighbourhood
+    /// and the slopes passed over left out).
+    ///
+    /// A candidate found within [`SLOPE_RADII`] peak radii from which eq. (1) never rises along
+    /// the straight line to within a grid step of the optimum is no other place: that line's
+    /// neighbourhood is left out ([`Self::slope`]) and the search goes on, at most
+    /// [`SLOPE_PASSES`] times. Every candidate outside the peak radius and those slopes is still
+    /// searched, exactly. Only where the exact search set aside a reserve (branch-and-bound):
+    /// the other search modes would search the whole grid again at each pass.
     fn run(
         &self,
-        grid_offset: Vec3,
+        optimum: (Vec3, f64),
         cost: f64,
         config: &LocalizeOptions,
-    ) -> Option<(f64, Vec3, f64)> {
+    ) -> (Option<(f64, Vec3, f64)>, CandidateGrid) {
         // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
         // the exact search cheap.
-        let outside = self.outside_peak(grid_offset, config);
-        self.best_outside(&outside, config.ambiguous_cost_ratio * cost, config)
+        let cap = config.ambiguous_cost_ratio * cost;
+        let mut outside = self.outside_peak(optimum.0, config);
+        let mut found = self.best_outside(&outside, cap, config);
+        if self.reserve.is_none() {
+            return (found, outside);
+        }
+        let mut correlator = None;
+        for _ in 0..SLOPE_PASSES {
+            let Some(candidate) = found else { break };
+            let correlator = correlator.get_or_insert_with(|| self.correlator.clone());
+            let Some(slope) = self.slope(correlator, optimum, candidate, config) else {
+                break;
+            };
+            outside.exclude_turned.extend(slope);
+            found = self.best_outside(&outside, cap, config);
+        }
+        (found, outside)
+    }
+
+    /// Whether `candidate` lies on the optimum's own slope: within [`SLOPE_RADII`] peak radii
+    /// (in offset, and in heading as many heading steps as that is translation steps), and eq.
+    /// (1) never rises along the straight line from it towards the optimum (offset and heading
+    /// together, scored at every grid step of either) until the line is within one step of the
+    /// optimum in both: there the continuous minimum, which lies between the grid candidates,
+    /// may be passed. If so, the neighbourhood of that line outside the peak radius to leave
+    /// out: balls of [`SLOPE_HALF_WIDTH_STEPS`] grid steps about the points scored, each at the
+    /// grid headings next to the line's there. In a heading window short of a full turn the line
+    /// turns within the window.
+    fn slope(
+        &self,
+        correlator: &mut Correlator,
+        (grid_offset, heading): (Vec3, f64),
+        (cost, at, yaw): (f64, Vec3, f64),
+        config: &LocalizeOptions,
+    ) -> Option<Vec<(Vec3, f64, [usize; 2])>> {
+        let step = self.grid.step;
+        let away = at - grid_offset;
+        let distance = away.norm();
+        let reach = SLOPE_RADII * config.peak_radius_m;
+        let turn = if self.full_turn {
+            crate::geometry::wrap_pi(yaw - heading)
+        } else {
+            yaw - heading
+        };
+        let heading_step = match self.grid.yaws.as_slice() {
+            [a, b, ..] => (b - a).abs(),
+            _ => f64::INFINITY,
+        };
+        let turn_steps = turn.abs() / heading_step;
+        if distance > reach || turn_steps > reach / step {
+            return None;
+        }
+        let steps = (distance / step).max(turn_steps).ceil().max(1.0) as usize;
+        let radius = SLOPE_HALF_WIDTH_STEPS * step;
+        let last_heading = self.grid.counts[3] - 1;
+        let mut balls = Vec::new();
+        let mut last = cost;
+        for k in 0..steps {
+            let f = 1.0 - k as f64 / steps as f64;
+            let (point, point_heading) = (grid_offset + away * f, heading + turn * f);
+            let near = f * distance <= step * (1.0 + 1e-9)
+                && (f * turn).abs() <= heading_step * (1.0 + 1e-9);
+            if near {
+                break;
+            }
+            if k > 0 {
+                // Scoring stops once the sum passes the last cost: the line rises.
+                let c = correlator
+                    .evaluate_capped(&point, point_heading, last)?
+                    .cost;
+                if c.is_nan() || c > last {
+                    return None;
+                }
+                last = c;
+            }
+            if f * distance + radius > config.peak_radius_m {
+                let h = self.nearest_heading(point_heading);
+                balls.push((
+                    point,
+                    radius,
+                    [h.saturating_sub(1), (h + 1).min(last_heading)],
+                ));
+            }
+        }
+        Some(balls)
+    }
+
+    /// The index of the grid heading nearest `heading`.
+    fn nearest_heading(&self, heading: f64) -> usize {
+        let gap = |y: f64| crate::geometry::wrap_pi(y - heading).abs();
+        (0..self.grid.yaws.len())
+            .min_by(|&a, &b| gap(self.grid.yaws[a]).total_cmp(&gap(self.grid.yaws[b])))
+            .unwrap_or(0)
     }
 
     /// The grid without the peak radius around `grid_offset` (the optimum's neighbourhood).
@@ -793,7 +913,8 @@ impl RunnerUpSearch<'_, '_> {
     }
 
     /// The first of the candidates below the ambiguity ratio × the optimum's cost, best first,
-    /// each outside the optimum's and the earlier ones' neighbourhoods, whose returns the other
+    /// each in `outside` (the grid [`Self::run`] searched last: the optimum's neighbourhood and
+    /// its slopes left out) and outside the earlier ones' neighbourhoods, whose returns the other
     /// scan saw through far less than the optimum's (`seen_through`, [`seen_through_less`]):
     /// its grid offset. The `runner_up` is the first; at most [`SEEN_THROUGH_BASINS`] are
     /// looked at. Each later one is searched from the reserve the first search set aside for
@@ -803,11 +924,11 @@ impl RunnerUpSearch<'_, '_> {
         &self,
         reference: &Sdem,
         query: &Sdem,
-        (grid_offset, cost, seen_through): (Vec3, f64, f64),
+        mut outside: CandidateGrid,
+        (cost, seen_through): (f64, f64),
         runner_up: Option<(f64, Vec3, f64)>,
         config: &LocalizeOptions,
     ) -> Option<Vec3> {
-        let mut outside = self.outside_peak(grid_offset, config);
         let cap = config.ambiguous_cost_ratio * cost;
         let mut next = runner_up;
         for looked_at in 1..=SEEN_THROUGH_BASINS {

@@ -217,6 +217,10 @@ pub struct CandidateGrid {
     /// Candidates whose translation lies within any of these balls (centre, radius in metres)
     /// are left out of every search: the runner-up search excludes the peak's neighbourhood.
     pub exclude: Vec<(Vec3, f64)>,
+    /// Candidates whose translation lies within one of these balls (centre, radius in metres)
+    /// and whose heading index lies in its inclusive range are left out too: the runner-up
+    /// search excludes the optimum's own slopes, at their headings only.
+    pub exclude_turned: Vec<(Vec3, f64, [usize; 2])>,
 }
 
 /// Integer coordinates of a candidate: x, y, z, heading.
@@ -239,28 +243,37 @@ impl CandidateGrid {
             counts,
             yaws: if yaws.is_empty() { vec![0.0] } else { yaws },
             exclude: Vec::new(),
+            exclude_turned: Vec::new(),
         })
     }
 
     /// True when the candidate is left out (see [`Self::exclude`]).
     pub fn excluded(&self, idx: Index) -> bool {
-        self.exclude
-            .iter()
-            .any(|(c, r)| (self.offset(idx) - c).norm() <= *r)
+        let offset = self.offset(idx);
+        self.exclude.iter().any(|(c, r)| (offset - c).norm() <= *r)
+            || self
+                .exclude_turned
+                .iter()
+                .any(|(c, r, [h0, h1])| (*h0..=*h1).contains(&idx[3]) && (offset - c).norm() <= *r)
     }
 
     /// True when every candidate of the box `lo..=hi` lies within one of the excluded balls
     /// (a box the balls cover only together is kept: its candidates are left out one by one).
     pub fn box_excluded(&self, lo: Index, hi: Index) -> bool {
-        self.exclude.iter().any(|(c, r)| {
+        let within = |c: &Vec3, r: f64| {
             let (a, b) = (self.offset(lo) - c, self.offset(hi) - c);
             let far = Vec3::new(
                 a.x.abs().max(b.x.abs()),
                 a.y.abs().max(b.y.abs()),
                 a.z.abs().max(b.z.abs()),
             );
-            far.norm() <= *r
-        })
+            far.norm() <= r
+        };
+        self.exclude.iter().any(|(c, r)| within(c, *r))
+            || self
+                .exclude_turned
+                .iter()
+                .any(|(c, r, [h0, h1])| *h0 <= lo[3] && hi[3] <= *h1 && within(c, *r))
     }
 
     pub fn len(&self) -> usize {

@@ -200,6 +200,15 @@ fn oracle_below(costs: &[Option<f64>], grid: &CandidateGrid, cap: f64) -> Option
         })
 }
 
+/// The pair and grid the runner-up tests search: 7 headings, 2 cm steps.
+fn runner_up_case() -> (Sdem, Sdem, CandidateGrid) {
+    let truth = Vec3::new(0.12, -0.08, 0.03);
+    let (r, q) = coarse_pair(4, truth, 2.0);
+    let window = SearchWindow::around(&truth, [0.12, 0.12, 0.04]);
+    let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
+    (r, q, CandidateGrid::new(&window, 0.02, yaws).unwrap())
+}
+
 /// The runner-up search, continued from what the first search set aside, finds the same
 /// candidate as the exhaustive search of the grid without the peak's neighbourhood, with the
 /// same cap: for several ratios (so the cap sits above a few, many or no candidates). The same
@@ -207,13 +216,8 @@ fn oracle_below(costs: &[Option<f64>], grid: &CandidateGrid, cap: f64) -> Option
 /// (the candidates of other basins): each answer is the exhaustive one outside all the balls.
 #[test]
 fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
-    let truth = Vec3::new(0.12, -0.08, 0.03);
-    let (r, q) = coarse_pair(4, truth, 2.0);
-    let cost = CostConfig::default();
-    let window = SearchWindow::around(&truth, [0.12, 0.12, 0.04]);
-    let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
-    let grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
-    let mut correlator = Correlator::new(&r, &q, &cost).unwrap();
+    let (r, q, grid) = runner_up_case();
+    let mut correlator = Correlator::new(&r, &q, &CostConfig::default()).unwrap();
     let prepared = Prepared::new(&correlator);
     let costs = costs_of(&mut correlator, &grid);
     let (mut found, mut most_balls) = (0, 0);
@@ -237,6 +241,112 @@ fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
     // Not vacuous: the higher caps do hold candidates, and several balls were left out in turn.
     assert!(found >= 2, "only {found} of the caps held a runner-up");
     assert!(most_balls >= 4, "at most {most_balls} balls left out");
+}
+
+/// Balls left out at some headings only (the runner-up search's slopes of the optimum): each
+/// answer from the reserve is the exhaustive one outside them (left out by a test of its own
+/// here, not the grid's), and a candidate inside a ball's offsets at another heading is still
+/// found.
+#[test]
+fn runner_up_leaving_balls_out_at_some_headings_equals_the_exhaustive_one() {
+    let (r, q, grid) = runner_up_case();
+    let last_heading = grid.counts[3] - 1;
+    let mut correlator = Correlator::new(&r, &q, &CostConfig::default()).unwrap();
+    let prepared = Prepared::new(&correlator);
+    let costs = costs_of(&mut correlator, &grid);
+    let mut at_another_heading = 0;
+    for ratio in [1.3, 2.0, 5.0] {
+        let (best, _, reserve) = search(&prepared, &grid, f64::INFINITY, Some(ratio));
+        let (best_cost, best_flat) = best.unwrap();
+        let reserve = reserve.unwrap();
+        let peak = (grid.offset(grid.index(best_flat)), 0.03);
+        let mut outside = grid.clone();
+        outside.exclude = vec![peak];
+        let mut balls: Vec<(Vec3, f64, [usize; 2])> = Vec::new();
+        let left_out = |f: usize, balls: &[(Vec3, f64, [usize; 2])]| {
+            let idx = grid.index(f);
+            let x = grid.offset(idx);
+            (x - peak.0).norm() <= peak.1
+                || balls
+                    .iter()
+                    .any(|(c, r, [h0, h1])| *h0 <= idx[3] && idx[3] <= *h1 && (x - c).norm() <= *r)
+        };
+        let cap = ratio * best_cost;
+        for round in 0..8 {
+            let (next, _) = runner_up(&prepared, &outside, cap, &reserve);
+            let oracle = (0..grid.len())
+                .filter(|&f| !left_out(f, &balls))
+                .filter_map(|f| costs[f].filter(|&c| c <= cap).map(|c| (c, f)))
+                .fold(None, |b: Option<Scored>, s| match b {
+                    Some(b) if !better(&s, &b) => Some(b),
+                    _ => Some(s),
+                });
+            assert_eq!(next, oracle, "ratio {ratio}, round {round}");
+            let Some((_, flat)) = next else { break };
+            let idx = grid.index(flat);
+            let offset = grid.offset(idx);
+            at_another_heading += balls.iter().any(|(c, r, _)| (offset - c).norm() <= *r) as usize;
+            // Its own heading only, or with the next ones either side.
+            let headings = if round % 2 == 0 {
+                [idx[3], idx[3]]
+            } else {
+                [idx[3].saturating_sub(1), (idx[3] + 1).min(last_heading)]
+            };
+            balls.push((offset, 0.03, headings));
+            outside.exclude_turned = balls.clone();
+        }
+    }
+    assert!(
+        at_another_heading >= 1,
+        "no answer lay in a left-out ball at another heading: the test would be vacuous"
+    );
+}
+
+/// A box is skipped as left out only when every candidate in it is: over every box of up to
+/// three candidates a side of a small grid, with balls at a single heading (the first, the
+/// last, one between) and over a range of headings.
+#[test]
+fn a_box_left_out_holds_only_left_out_candidates() {
+    let window = SearchWindow::around(&Vec3::zeros(), [0.06, 0.06, 0.02]);
+    let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
+    let mut grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
+    let last = grid.counts[3] - 1;
+    grid.exclude = vec![(Vec3::new(0.04, 0.04, 0.0), 0.025)];
+    grid.exclude_turned = vec![
+        (Vec3::new(-0.03, 0.0, 0.0), 0.035, [0, 0]),
+        (Vec3::new(0.0, -0.02, 0.0), 0.045, [last, last]),
+        (Vec3::new(0.01, 0.01, 0.01), 0.05, [2, 4]),
+    ];
+    let mut plain = grid.clone();
+    plain.exclude_turned.clear();
+    let [nx, ny, nz, nh] = grid.counts;
+    let (mut boxes, mut left_out, mut by_turned) = (0, 0, 0);
+    for lo in (0..nx * ny * nz * nh).map(|f| grid.index(f)) {
+        for size in (0..27 * 3).map(|k| [k % 3, (k / 3) % 3, (k / 9) % 3, k / 27]) {
+            let hi: [usize; 4] = std::array::from_fn(|a| lo[a] + size[a]);
+            if (0..4).any(|a| hi[a] >= grid.counts[a]) {
+                continue;
+            }
+            boxes += 1;
+            if !grid.box_excluded(lo, hi) {
+                continue;
+            }
+            left_out += 1;
+            by_turned += !plain.box_excluded(lo, hi) as usize;
+            for k in 0..(size.iter().map(|s| s + 1).product::<usize>()) {
+                let (sx, sy, sz) = (size[0] + 1, size[1] + 1, size[2] + 1);
+                let idx = [
+                    lo[0] + k % sx,
+                    lo[1] + (k / sx) % sy,
+                    lo[2] + (k / (sx * sy)) % sz,
+                    lo[3] + k / (sx * sy * sz),
+                ];
+                assert!(grid.excluded(idx), "box {lo:?}..={hi:?} holds {idx:?}");
+            }
+        }
+    }
+    assert!(left_out < boxes, "{left_out} of {boxes} boxes left out");
+    assert!(by_turned > 0, "no box left out by a ball at some headings");
 }
 
 /// The workers share one queue and finish in any order: the minimum and the runner-up are

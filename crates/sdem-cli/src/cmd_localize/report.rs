@@ -200,7 +200,8 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
             r / report.cost
         ),
         (None, Some(at_least)) => println!(
-            "  no candidate outside {:.0} cm costs less than {:.3e} m² ({:.2}× the best)",
+            "  no candidate outside {:.0} cm, off the optimum's own slopes, costs less than \
+             {:.3e} m² ({:.2}× the best)",
             config.peak_radius_m * 100.0,
             at_least,
             at_least / report.cost
