@@ -110,10 +110,9 @@ pub struct Diagnostics {
     pub refined_inlier_fraction: Option<f64>,
     /// The smallest cost outside the peak's neighbourhood, when it lies below
     /// [`LocalizeOptions::ambiguous_cost_ratio`] × the best (the runner-up search looks no
-    /// higher); `None` otherwise. With [`SearchMode::BranchAndBound`] (the default),
-    /// candidates on the optimum's own slope (within twice the peak radius, eq. (1) never rising
-    /// along the line to within a grid step of the optimum) and beside it are passed over, up to
-    /// four such slopes: they are no other place. The other modes pass none over.
+    /// higher); `None` otherwise. Candidates on the optimum's own slope (within twice the peak
+    /// radius, eq. (1) never rising along the line to within a grid step of the optimum) and
+    /// beside it are passed over, up to four such slopes: they are no other place.
     pub runner_up_cost: Option<f64>,
     /// Every candidate outside the peak's neighbourhood and the slopes passed over costs at
     /// least this (the cap of the runner-up search, or the runner-up's cost); `None` when not
@@ -780,8 +779,9 @@ impl RunnerUpSearch<'_, '_> {
     /// the straight line to within a grid step of the optimum is no other place: that line's
     /// neighbourhood is left out ([`Self::slope`]) and the search goes on, at most
     /// [`SLOPE_PASSES`] times. Every candidate outside the peak radius and those slopes is still
-    /// searched, exactly. Only where the exact search set aside a reserve (branch-and-bound):
-    /// the other search modes would search the whole grid again at each pass.
+    /// searched, exactly: branch-and-bound from the reserve its first search set aside, the
+    /// other modes by searching the grid again at each pass (so the exhaustive oracle flags and
+    /// passes over what branch-and-bound does).
     fn run(
         &self,
         optimum: (Vec3, f64),
@@ -793,9 +793,6 @@ impl RunnerUpSearch<'_, '_> {
         let cap = config.ambiguous_cost_ratio * cost;
         let mut outside = self.outside_peak(optimum.0, config);
         let mut found = self.best_outside(&outside, cap, config);
-        if self.reserve.is_none() {
-            return (found, outside);
-        }
         let mut correlator = None;
         for _ in 0..SLOPE_PASSES {
             let Some(candidate) = found else { break };

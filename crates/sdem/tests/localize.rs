@@ -641,12 +641,67 @@ fn small_problem(
     (reference, query)
 }
 
+/// The runner-up with the optimum's slopes passed over is the same from branch-and-bound's
+/// reserve as from the exhaustive oracle searching the grid again: on coarse pairs with a peak
+/// radius of 4 cm (so that runner-ups and slopes lie inside a ±10 cm window), its cost, what
+/// the search says every other candidate costs at least, and the doubts.
+#[test]
+fn the_runner_up_past_the_slopes_is_the_oracles() {
+    let (mut flagged, mut clear) = (0, 0);
+    for seed in 0..10u64 {
+        let k = seed as f64;
+        let (x, y, yaw) = (
+            0.1 * (k * 0.7).sin(),
+            0.1 * (k * 1.3).cos(),
+            8.0 * (k * 0.9).sin(),
+        );
+        let (reference, query) = small_problem(seed, x, y, 0.0, yaw, 0.5);
+        let base = LocalizeOptions {
+            window: SearchWindow::around(&Vec3::new(x, y, 0.0), [0.1, 0.1, 0.04]),
+            step_m: 0.02,
+            heading: HeadingWindow {
+                half_range_deg: 3.0,
+                step_deg: Some(1.0),
+            },
+            refine: false,
+            peak_radius_m: 0.04,
+            ambiguous_cost_ratio: 1.5,
+            ..Default::default()
+        };
+        let oracle = localize(
+            &reference,
+            &query,
+            &LocalizeOptions {
+                mode: SearchMode::Exhaustive,
+                ..base.clone()
+            },
+        )
+        .unwrap();
+        let fast = localize(&reference, &query, &base).unwrap();
+        assert_eq!(fast.grid_index, oracle.grid_index, "seed {seed}");
+        assert_eq!(fast.runner_up, oracle.runner_up, "seed {seed}");
+        assert_eq!(
+            fast.diagnostics.runner_up_cost_at_least, oracle.diagnostics.runner_up_cost_at_least,
+            "seed {seed}"
+        );
+        assert_eq!(fast.doubts, oracle.doubts, "seed {seed}");
+        match fast.runner_up {
+            Some(_) => flagged += 1,
+            None => clear += 1,
+        }
+    }
+    // Not vacuous: some pairs keep a runner-up, and some have none left once the slopes are
+    // passed over.
+    assert!(flagged > 0 && clear > 0, "{flagged} flagged, {clear} clear");
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 32, ..ProptestConfig::default() })]
 
     /// The exact search lands on the exhaustive oracle's minimum, heading included, wherever
     /// the truth lies relative to the window (inside, near an edge, or outside it), with or
-    /// without a prediction (weak or strong enough to decide, inside the window or out).
+    /// without a prediction (weak or strong enough to decide, inside the window or out), and
+    /// on its runner-up.
     #[test]
     fn branch_and_bound_finds_the_exhaustive_minimum(
         seed in 0u64..1_000_000,
@@ -681,6 +736,13 @@ proptest! {
                 prop_assert_eq!(fast.grid_index, oracle.grid_index);
                 prop_assert_eq!(fast.cost, oracle.cost);
                 prop_assert!(fast.candidates_evaluated < oracle.candidates_evaluated);
+                // The runner-up, the optimum's slopes passed over, found from the reserve is
+                // the one the oracle finds searching the grid again.
+                prop_assert_eq!(fast.runner_up, oracle.runner_up);
+                prop_assert_eq!(
+                    fast.diagnostics.runner_up_cost_at_least,
+                    oracle.diagnostics.runner_up_cost_at_least
+                );
             }
             (Err(_), Err(_)) => {}
             (o, f) => prop_assert!(false, "oracle {:?} vs fast {:?}", o.map(|l| l.cost), f.map(|l| l.cost)),
