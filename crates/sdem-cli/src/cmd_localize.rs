@@ -156,8 +156,10 @@ pub struct Args {
     /// Heading step, degrees [default: matched to the scan's extent and --step].
     #[arg(long, allow_hyphen_values = true, value_parser = positive_degrees)]
     heading_step: Option<f64>,
-    /// Skip the second search for the runner-up outside the peak (halves the time; a distant
-    /// place that scores almost as well then raises no `runner_up` doubt).
+    /// Skip the search for the runner-up outside the peak (a few per cent of the time with
+    /// branch-and-bound; with --exhaustive it scores the grid again, once more for each slope of
+    /// the optimum passed over); a distant place that scores almost as well then raises no
+    /// `runner_up` doubt.
     #[arg(long)]
     no_runner_up: bool,
     /// The least share of the query's compared cells a candidate must share with the

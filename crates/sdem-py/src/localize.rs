@@ -191,8 +191,9 @@ pub fn attitude_from(
 ///           none).
 ///         - ``refine`` (True), ``refinement``: the 6-DoF refinement's settings.
 ///         - ``coarse_step_m`` (0.08), ``keep`` (8): coarse-to-fine only.
-///         - ``runner_up`` (True): search again outside the peak for a runner-up (doubles the
-///           time); ``peak_radius_m`` (0.1).
+///         - ``runner_up`` (True): search again outside the peak for a runner-up (branch-and-bound
+///           goes on from what its first search set aside; the other modes score the grid again,
+///           once more for each slope of the optimum passed over); ``peak_radius_m`` (0.1).
 ///         - ``ambiguous_cost_ratio`` (1.1), ``ambiguous_sigma_ratio`` (10.0),
 ///           ``ambiguous_rise_ratio`` (0.05), ``min_trusted_inlier_fraction`` (0.25),
 ///           ``min_trusted_support`` (0.01): when the result is doubted.
@@ -390,7 +391,7 @@ impl Localization {
 
     /// The figures behind ``trusted``, as ``sdem localize --json`` reports them:
     /// ``overlap_fraction``, ``inlier_fraction``, ``refined_inlier_fraction``, ``runner_up_cost``,
-    /// ``runner_up_cost_at_least``, ``covariance`` (on the levelled reference's axes),
+    /// ``runner_up_cost_at_least``, ``runner_up_slopes_passed``, ``covariance`` (on the levelled reference's axes),
     /// ``weakest_direction``, ``weakest_sigma_m``, ``strongest_sigma_m``, ``flat_direction``,
     /// ``seen_through_fraction``, ``ambiguous``, and the search's ``cost``, ``rms_m``, ``overlap``, ``runner_up``,
     /// ``candidates_total``, ``candidates_evaluated``, ``nodes_bounded``, ``on_window_edge``,

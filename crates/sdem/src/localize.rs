@@ -118,6 +118,8 @@ pub struct Diagnostics {
     /// least this (the cap of the runner-up search, or the runner-up's cost); `None` when not
     /// searched.
     pub runner_up_cost_at_least: Option<f64>,
+    /// How many of the optimum's own slopes the runner-up search passed over (0 to 4).
+    pub runner_up_slopes_passed: usize,
     /// Where that runner-up lies (offset, metres).
     pub runner_up_offset: Option<[f64; 3]>,
     /// Its heading correction, degrees.
@@ -460,15 +462,20 @@ fn search_below(
         crate::free_space::free_space(reference, query, &reference_from_query).fraction();
     // The runner-up; and where the other scan saw through the optimum's returns, the first of
     // the candidates of other basins it saw through far less.
-    let (runner_up, less_seen_through) = if config.runner_up {
+    let (runner_up, less_seen_through, slopes_passed) = if config.runner_up {
         let search = RunnerUpSearch {
             grid: &grid,
             correlator: &correlator,
             prepared: prepared.as_ref(),
             reserve: reserve.as_ref(),
             full_turn,
+            extent: crate::search::horizontal_extent(query).unwrap_or(0.1),
         };
-        let (runner_up, outside) = search.run((grid_offset, grid_heading), cost, config);
+        let RunnerUp {
+            found: runner_up,
+            outside,
+            slopes_passed,
+        } = search.run((grid_offset, grid_heading), cost, config);
         let less_seen_through = (seen_through >= SEEN_THROUGH_TO_RECHECK)
             .then(|| {
                 search.less_seen_through(
@@ -481,9 +488,9 @@ fn search_below(
                 )
             })
             .flatten();
-        (runner_up, less_seen_through)
+        (runner_up, less_seen_through, slopes_passed)
     } else {
-        (None, None)
+        (None, None, 0)
     };
     // Eq. (1) about the grid optimum (`false`: at its heading, the query levelled by its
     // reading) or about the refined pose (`true`: turned by the refined rotation, its tilt as
@@ -533,6 +540,7 @@ fn search_below(
         .covariance
         .map(|c| in_query_frame(&Matrix6::from_fn(|i, j| c[i][j]), &level_from_query));
     diagnostics.seen_through_fraction = seen_through;
+    diagnostics.runner_up_slopes_passed = slopes_passed;
     if seen_through >= SEEN_THROUGH_DOUBT {
         doubts.push(Doubt::FreeSpaceConflict {
             seen_through_fraction: seen_through,
@@ -747,6 +755,17 @@ struct RunnerUpSearch<'s, 'a> {
     /// What the exact search set aside for it.
     reserve: Option<&'s bnb::Reserve>,
     full_turn: bool,
+    /// The median horizontal range of the query's points ([`crate::search::horizontal_extent`]):
+    /// how far a turn moves them, in the translation's terms.
+    extent: f64,
+}
+
+/// What [`RunnerUpSearch::run`] found: the runner-up (cost, offset and heading), the grid it
+/// was searched in last, and how many of the optimum's slopes were passed over on the way.
+struct RunnerUp {
+    found: Option<(f64, Vec3, f64)>,
+    outside: CandidateGrid,
+    slopes_passed: usize,
 }
 
 /// How many candidates [`RunnerUpSearch::less_seen_through`] looks at, the runner-up
@@ -779,21 +798,17 @@ impl RunnerUpSearch<'_, '_> {
     /// the straight line to within a grid step of the optimum is no other place: that line's
     /// neighbourhood is left out ([`Self::slope`]) and the search goes on, at most
     /// [`SLOPE_PASSES`] times. Every candidate outside the peak radius and those slopes is still
-    /// searched, exactly: branch-and-bound from the reserve its first search set aside, the
-    /// other modes by searching the grid again at each pass (so the exhaustive oracle flags and
-    /// passes over what branch-and-bound does).
-    fn run(
-        &self,
-        optimum: (Vec3, f64),
-        cost: f64,
-        config: &LocalizeOptions,
-    ) -> (Option<(f64, Vec3, f64)>, CandidateGrid) {
+    /// searched: exactly by branch-and-bound, from the reserve its first search set aside, and
+    /// by the exhaustive oracle, scoring the grid again at each pass (the two flag and pass
+    /// over alike); heuristically by coarse-to-fine, searching the grid again.
+    fn run(&self, optimum: (Vec3, f64), cost: f64, config: &LocalizeOptions) -> RunnerUp {
         // Only a runner-up within the ambiguity ratio matters; capping the search there keeps
         // the exact search cheap.
         let cap = config.ambiguous_cost_ratio * cost;
         let mut outside = self.outside_peak(optimum.0, config);
         let mut found = self.best_outside(&outside, cap, config);
         let mut correlator = None;
+        let mut slopes_passed = 0;
         for _ in 0..SLOPE_PASSES {
             let Some(candidate) = found else { break };
             let correlator = correlator.get_or_insert_with(|| self.correlator.clone());
@@ -801,9 +816,14 @@ impl RunnerUpSearch<'_, '_> {
                 break;
             };
             outside.exclude_turned.extend(slope);
+            slopes_passed += 1;
             found = self.best_outside(&outside, cap, config);
         }
-        (found, outside)
+        RunnerUp {
+            found,
+            outside,
+            slopes_passed,
+        }
     }
 
     /// Whether `candidate` lies on the optimum's own slope: within [`SLOPE_RADII`] peak radii
@@ -836,7 +856,9 @@ impl RunnerUpSearch<'_, '_> {
             _ => f64::INFINITY,
         };
         let turn_steps = turn.abs() / heading_step;
-        if distance > reach || turn_steps > reach / step {
+        // A turn reaches as far as a move: it moves the points at the query's median range by
+        // `reach` at most.
+        if distance > reach || turn.abs() * self.extent > reach {
             return None;
         }
         let steps = (distance / step).max(turn_steps).ceil().max(1.0) as usize;
@@ -850,6 +872,11 @@ impl RunnerUpSearch<'_, '_> {
             let near = f * distance <= step * (1.0 + 1e-9)
                 && (f * turn).abs() <= heading_step * (1.0 + 1e-9);
             if near {
+                // A candidate next to the optimum (a peak radius under a grid step) shows no
+                // slope: it stays the runner-up.
+                if k == 0 {
+                    return None;
+                }
                 break;
             }
             if k > 0 {
@@ -869,6 +896,11 @@ impl RunnerUpSearch<'_, '_> {
                     radius,
                     [h.saturating_sub(1), (h + 1).min(last_heading)],
                 ));
+                // On a full turn the first and the last heading are neighbours too.
+                if self.full_turn && last_heading > 0 && (h == 0 || h == last_heading) {
+                    let across = last_heading - h;
+                    balls.push((point, radius, [across, across]));
+                }
             }
         }
         Some(balls)

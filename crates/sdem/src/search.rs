@@ -189,21 +189,29 @@ pub const MAX_MATCHED_HEADING_STEP_DEG: f64 = 2.0;
 /// [`MAX_MATCHED_HEADING_STEP_DEG`]). Farther points move more; the 6-DoF refinement takes the
 /// heading below the step.
 pub fn matched_heading_step(query: &Sdem, step_m: f64) -> f64 {
+    let Some(extent) = horizontal_extent(query) else {
+        return 1f64.to_radians();
+    };
+    (step_m / extent).clamp(
+        MIN_MATCHED_HEADING_STEP_DEG.to_radians(),
+        MAX_MATCHED_HEADING_STEP_DEG.to_radians(),
+    )
+}
+
+/// The median horizontal range of a query's points, at least 10 cm: how far a turn of one
+/// radian moves a typical point. `None` without points.
+pub fn horizontal_extent(query: &Sdem) -> Option<f64> {
     let mut ranges: Vec<f32> = query
         .points()
         .iter()
         .map(|p| (p[0] * p[0] + p[1] * p[1]).sqrt())
         .collect();
     if ranges.is_empty() {
-        return 1f64.to_radians();
+        return None;
     }
     let k = ranges.len() / 2;
     let (_, r, _) = ranges.select_nth_unstable_by(k, f32::total_cmp);
-    let extent = (*r as f64).max(0.1);
-    (step_m / extent).clamp(
-        MIN_MATCHED_HEADING_STEP_DEG.to_radians(),
-        MAX_MATCHED_HEADING_STEP_DEG.to_radians(),
-    )
+    Some((*r as f64).max(0.1))
 }
 
 /// The regular grid of candidates: translation on `counts[0..3]`, heading on `yaws`.

@@ -644,10 +644,11 @@ fn small_problem(
 /// The runner-up with the optimum's slopes passed over is the same from branch-and-bound's
 /// reserve as from the exhaustive oracle searching the grid again: on coarse pairs with a peak
 /// radius of 4 cm (so that runner-ups and slopes lie inside a ±10 cm window), its cost, what
-/// the search says every other candidate costs at least, and the doubts.
+/// the search says every other candidate costs at least, the slopes passed over and the
+/// doubts.
 #[test]
 fn the_runner_up_past_the_slopes_is_the_oracles() {
-    let (mut flagged, mut clear) = (0, 0);
+    let (mut flagged, mut clear, mut slopes) = (0, 0, 0);
     for seed in 0..10u64 {
         let k = seed as f64;
         let (x, y, yaw) = (
@@ -685,14 +686,50 @@ fn the_runner_up_past_the_slopes_is_the_oracles() {
             "seed {seed}"
         );
         assert_eq!(fast.doubts, oracle.doubts, "seed {seed}");
+        let passed = fast.diagnostics.runner_up_slopes_passed;
+        assert_eq!(
+            passed, oracle.diagnostics.runner_up_slopes_passed,
+            "seed {seed}"
+        );
+        slopes += passed;
         match fast.runner_up {
             Some(_) => flagged += 1,
             None => clear += 1,
         }
     }
-    // Not vacuous: some pairs keep a runner-up, and some have none left once the slopes are
-    // passed over.
+    // Not vacuous: slopes are passed over, some pairs keep a runner-up, and some have none.
+    assert!(slopes > 0, "no slope passed over");
     assert!(flagged > 0 && clear > 0, "{flagged} flagged, {clear} clear");
+}
+
+/// With a peak radius under a grid step the runner-up can be the optimum's neighbour: no line
+/// lies between them to show a slope, so none is passed over and the neighbour, when it costs
+/// within the ratio, is the runner-up.
+#[test]
+fn a_runner_up_next_to_the_optimum_shows_no_slope() {
+    let mut flagged = 0;
+    for seed in 0..4u64 {
+        let (reference, query) = small_problem(seed, 0.05, -0.03, 0.0, 2.0, 0.5);
+        let options = LocalizeOptions {
+            window: SearchWindow::around(&Vec3::new(0.05, -0.03, 0.0), [0.06, 0.06, 0.02]),
+            step_m: 0.02,
+            heading: HeadingWindow {
+                half_range_deg: 2.0,
+                step_deg: Some(1.0),
+            },
+            refine: false,
+            peak_radius_m: 0.015,
+            ambiguous_cost_ratio: 2.0,
+            ..Default::default()
+        };
+        let found = localize(&reference, &query, &options).unwrap();
+        assert_eq!(found.diagnostics.runner_up_slopes_passed, 0, "seed {seed}");
+        flagged += found.runner_up.is_some() as usize;
+    }
+    assert!(
+        flagged > 0,
+        "no runner-up next to the optimum: the test would be vacuous"
+    );
 }
 
 proptest! {

@@ -192,16 +192,21 @@ fn print_fit(report: &Report, d: &Diagnostics, config: &LocalizeOptions) {
         d.inlier_fraction * 100.0,
         config.cost.truncation_m * 100.0
     );
+    let past_slopes = match d.runner_up_slopes_passed {
+        0 => String::new(),
+        1 => ", past one slope of the optimum".to_string(),
+        n => format!(", past {n} slopes of the optimum"),
+    };
     match (d.runner_up_cost, d.runner_up_cost_at_least) {
         (Some(r), _) => println!(
-            "  runner-up outside {:.0} cm: cost {:.3e} m² ({:.2}× the best)",
+            "  runner-up outside {:.0} cm{past_slopes}: cost {:.3e} m² ({:.2}× the best)",
             config.peak_radius_m * 100.0,
             r,
             r / report.cost
         ),
         (None, Some(at_least)) => println!(
-            "  no candidate outside {:.0} cm, off the optimum's own slopes, costs less than \
-             {:.3e} m² ({:.2}× the best)",
+            "  no candidate outside {:.0} cm{past_slopes}, off the optimum's own slopes, costs \
+             less than {:.3e} m² ({:.2}× the best)",
             config.peak_radius_m * 100.0,
             at_least,
             at_least / report.cost

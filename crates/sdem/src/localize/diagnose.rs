@@ -146,6 +146,7 @@ pub(super) fn diagnose(
         strongest_sigma_m: weakest.map(|w| w.2),
         flat_direction: flat,
         seen_through_fraction: 0.0,
+        runner_up_slopes_passed: 0,
         ambiguous: doubts.iter().any(Doubt::is_ambiguity),
     };
     (diagnostics, doubts)
