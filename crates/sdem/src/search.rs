@@ -222,13 +222,35 @@ pub struct CandidateGrid {
     pub step: f64,
     pub counts: [usize; 4],
     pub yaws: Vec<f64>,
-    /// Candidates whose translation lies within any of these balls (centre, radius in metres)
-    /// are left out of every search: the runner-up search excludes the peak's neighbourhood.
-    pub exclude: Vec<(Vec3, f64)>,
-    /// Candidates whose translation lies within one of these balls (centre, radius in metres)
-    /// and whose heading index lies in its inclusive range are left out too: the runner-up
-    /// search excludes the optimum's own slopes, at their headings only.
-    pub exclude_turned: Vec<(Vec3, f64, [usize; 2])>,
+    /// Candidates left out of every search: the runner-up search excludes the peak's
+    /// neighbourhood (at every heading) and the optimum's own slopes (at their headings only).
+    pub exclude: Vec<Exclusion>,
+}
+
+/// Candidates left out of a search: those whose translation lies within `radius` (metres) of
+/// `centre` and whose heading index lies in `headings` (inclusive).
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[doc(hidden)]
+pub struct Exclusion {
+    pub centre: Vec3,
+    pub radius: f64,
+    pub headings: [usize; 2],
+}
+
+impl Exclusion {
+    /// The candidates within `radius` of `centre`, at every heading.
+    pub fn ball(centre: Vec3, radius: f64) -> Self {
+        Self::at_headings(centre, radius, [0, usize::MAX])
+    }
+
+    /// The candidates within `radius` of `centre` at the heading indices `first..=last`.
+    pub fn at_headings(centre: Vec3, radius: f64, [first, last]: [usize; 2]) -> Self {
+        Self {
+            centre,
+            radius,
+            headings: [first, last],
+        }
+    }
 }
 
 /// Integer coordinates of a candidate: x, y, z, heading.
@@ -251,37 +273,30 @@ impl CandidateGrid {
             counts,
             yaws: if yaws.is_empty() { vec![0.0] } else { yaws },
             exclude: Vec::new(),
-            exclude_turned: Vec::new(),
         })
     }
 
     /// True when the candidate is left out (see [`Self::exclude`]).
     pub fn excluded(&self, idx: Index) -> bool {
         let offset = self.offset(idx);
-        self.exclude.iter().any(|(c, r)| (offset - c).norm() <= *r)
-            || self
-                .exclude_turned
-                .iter()
-                .any(|(c, r, [h0, h1])| (*h0..=*h1).contains(&idx[3]) && (offset - c).norm() <= *r)
+        self.exclude.iter().any(|e| {
+            let [first, last] = e.headings;
+            (first..=last).contains(&idx[3]) && (offset - e.centre).norm() <= e.radius
+        })
     }
 
     /// True when every candidate of the box `lo..=hi` lies within one of the excluded balls
     /// (a box the balls cover only together is kept: its candidates are left out one by one).
     pub fn box_excluded(&self, lo: Index, hi: Index) -> bool {
-        let within = |c: &Vec3, r: f64| {
-            let (a, b) = (self.offset(lo) - c, self.offset(hi) - c);
+        self.exclude.iter().any(|e| {
+            let (a, b) = (self.offset(lo) - e.centre, self.offset(hi) - e.centre);
             let far = Vec3::new(
                 a.x.abs().max(b.x.abs()),
                 a.y.abs().max(b.y.abs()),
                 a.z.abs().max(b.z.abs()),
             );
-            far.norm() <= r
-        };
-        self.exclude.iter().any(|(c, r)| within(c, *r))
-            || self
-                .exclude_turned
-                .iter()
-                .any(|(c, r, [h0, h1])| *h0 <= lo[3] && hi[3] <= *h1 && within(c, *r))
+            e.headings[0] <= lo[3] && hi[3] <= e.headings[1] && far.norm() <= e.radius
+        })
     }
 
     pub fn len(&self) -> usize {

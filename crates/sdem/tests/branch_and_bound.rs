@@ -6,7 +6,7 @@ use sdem::geometry::{pose_from_parts, Attitude, Pose, Vec3};
 use sdem::localize::SearchWindow;
 use sdem::sdem::Sdem;
 use sdem::sdem::SdemConfig;
-use sdem::search::{better, CandidateGrid, Scored};
+use sdem::search::{better, CandidateGrid, Exclusion, Scored};
 use sdem::sensor::SensorConfig;
 use sdem_sim::sim;
 
@@ -226,7 +226,7 @@ fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
         let (best_cost, best_flat) = best.unwrap();
         let reserve = reserve.unwrap();
         let mut outside = grid.clone();
-        outside.exclude = vec![(grid.offset(grid.index(best_flat)), 0.03)];
+        outside.exclude = vec![Exclusion::ball(grid.offset(grid.index(best_flat)), 0.03)];
         let cap = ratio * best_cost;
         for round in 0..5 {
             let (next, _) = runner_up(&prepared, &outside, cap, &reserve);
@@ -234,7 +234,9 @@ fn runner_up_from_the_reserve_equals_the_exhaustive_runner_up() {
             assert_eq!(next, oracle, "ratio {ratio}, round {round}");
             found += (round == 0 && oracle.is_some()) as usize;
             let Some((_, flat)) = next else { break };
-            outside.exclude.push((grid.offset(grid.index(flat)), 0.03));
+            outside
+                .exclude
+                .push(Exclusion::ball(grid.offset(grid.index(flat)), 0.03));
             most_balls = most_balls.max(outside.exclude.len());
         }
     }
@@ -261,7 +263,7 @@ fn runner_up_leaving_balls_out_at_some_headings_equals_the_exhaustive_one() {
         let reserve = reserve.unwrap();
         let peak = (grid.offset(grid.index(best_flat)), 0.03);
         let mut outside = grid.clone();
-        outside.exclude = vec![peak];
+        outside.exclude = vec![Exclusion::ball(peak.0, peak.1)];
         let mut balls: Vec<(Vec3, f64, [usize; 2])> = Vec::new();
         let left_out = |f: usize, balls: &[(Vec3, f64, [usize; 2])]| {
             let idx = grid.index(f);
@@ -293,7 +295,9 @@ fn runner_up_leaving_balls_out_at_some_headings_equals_the_exhaustive_one() {
                 [idx[3].saturating_sub(1), (idx[3] + 1).min(last_heading)]
             };
             balls.push((offset, 0.03, headings));
-            outside.exclude_turned = balls.clone();
+            outside
+                .exclude
+                .push(Exclusion::at_headings(offset, 0.03, headings));
         }
     }
     assert!(
@@ -311,14 +315,13 @@ fn a_box_left_out_holds_only_left_out_candidates() {
     let yaws: Vec<f64> = (-3..=3).map(|k| (k as f64).to_radians()).collect();
     let mut grid = CandidateGrid::new(&window, 0.02, yaws).unwrap();
     let last = grid.counts[3] - 1;
-    grid.exclude = vec![(Vec3::new(0.04, 0.04, 0.0), 0.025)];
-    grid.exclude_turned = vec![
-        (Vec3::new(-0.03, 0.0, 0.0), 0.035, [0, 0]),
-        (Vec3::new(0.0, -0.02, 0.0), 0.045, [last, last]),
-        (Vec3::new(0.01, 0.01, 0.01), 0.05, [2, 4]),
-    ];
-    let mut plain = grid.clone();
-    plain.exclude_turned.clear();
+    grid.exclude = vec![Exclusion::ball(Vec3::new(0.04, 0.04, 0.0), 0.025)];
+    let plain = grid.clone();
+    grid.exclude.extend([
+        Exclusion::at_headings(Vec3::new(-0.03, 0.0, 0.0), 0.035, [0, 0]),
+        Exclusion::at_headings(Vec3::new(0.0, -0.02, 0.0), 0.045, [last, last]),
+        Exclusion::at_headings(Vec3::new(0.01, 0.01, 0.01), 0.05, [2, 4]),
+    ]);
     let [nx, ny, nz, nh] = grid.counts;
     let (mut boxes, mut left_out, mut by_turned) = (0, 0, 0);
     for lo in (0..nx * ny * nz * nh).map(|f| grid.index(f)) {
@@ -365,7 +368,7 @@ fn the_answers_do_not_depend_on_the_workers() {
     let costs = costs_of(&mut correlator, &grid);
     let best = oracle_below(&costs, &grid, f64::INFINITY).unwrap();
     let mut outside = grid.clone();
-    outside.exclude = vec![(grid.offset(grid.index(best.1)), 0.03)];
+    outside.exclude = vec![Exclusion::ball(grid.offset(grid.index(best.1)), 0.03)];
     let cap = 1.5 * best.0;
     let second = oracle_below(&costs, &outside, cap);
     assert!(

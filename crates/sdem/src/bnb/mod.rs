@@ -75,10 +75,10 @@ pub fn search(
 }
 
 /// The best candidate of `grid` (which leaves out at least the first search's peak: any balls
-/// of [`CandidateGrid::exclude`]) costing at most `cap`, searched among what the first search
-/// set aside: the same answer as a search of the whole grid with that cap, since every box and
-/// candidate the first search dropped below the cap is in the reserve (`cap` must be at most
-/// the reserve's ratio × the first search's best). The reserve is only read, so one serves
+/// of [`CandidateGrid::exclude`], at some or all headings) costing at most `cap`, searched
+/// among what the first search set aside: the same answer as a search of the whole grid with
+/// that cap, since every box and candidate the first search dropped below the cap is in the
+/// reserve (`cap` must be at most the reserve's ratio × the first search's best). The reserve is only read, so one serves
 /// several searches, each leaving out more.
 #[doc(hidden)]
 pub fn runner_up(

@@ -8,7 +8,7 @@ use crate::bnb;
 use crate::cost::Correlator;
 use crate::geometry::Vec3;
 use crate::sdem::Sdem;
-use crate::search::{CandidateGrid, Evaluator};
+use crate::search::{CandidateGrid, Evaluator, Exclusion};
 use nalgebra::UnitQuaternion;
 
 /// What the search for the runner-up continues from: the best candidate's grid, cost and
@@ -86,7 +86,7 @@ impl RunnerUpSearch<'_, '_> {
             let Some(slope) = self.slope(correlator, optimum, candidate, config) else {
                 break;
             };
-            outside.exclude_turned.extend(slope);
+            outside.exclude.extend(slope);
             slopes_passed += 1;
             found = self.best_outside(&outside, cap, config);
         }
@@ -112,7 +112,7 @@ impl RunnerUpSearch<'_, '_> {
         (grid_offset, heading): (Vec3, f64),
         (cost, at, yaw): (f64, Vec3, f64),
         config: &LocalizeOptions,
-    ) -> Option<Vec<(Vec3, f64, [usize; 2])>> {
+    ) -> Option<Vec<Exclusion>> {
         let step = self.grid.step;
         let away = at - grid_offset;
         let distance = away.norm();
@@ -162,15 +162,12 @@ impl RunnerUpSearch<'_, '_> {
             }
             if f * distance + radius > config.peak_radius_m {
                 let h = self.nearest_heading(point_heading);
-                balls.push((
-                    point,
-                    radius,
-                    [h.saturating_sub(1), (h + 1).min(last_heading)],
-                ));
+                let headings = [h.saturating_sub(1), (h + 1).min(last_heading)];
+                balls.push(Exclusion::at_headings(point, radius, headings));
                 // On a full turn the first and the last heading are neighbours too.
                 if self.full_turn && last_heading > 0 && (h == 0 || h == last_heading) {
                     let across = last_heading - h;
-                    balls.push((point, radius, [across, across]));
+                    balls.push(Exclusion::at_headings(point, radius, [across, across]));
                 }
             }
         }
@@ -188,7 +185,7 @@ impl RunnerUpSearch<'_, '_> {
     /// The grid without the peak radius around `grid_offset` (the optimum's neighbourhood).
     fn outside_peak(&self, grid_offset: Vec3, config: &LocalizeOptions) -> CandidateGrid {
         let mut outside = self.grid.clone();
-        outside.exclude = vec![(grid_offset, config.peak_radius_m)];
+        outside.exclude = vec![Exclusion::ball(grid_offset, config.peak_radius_m)];
         outside
     }
 
@@ -242,7 +239,9 @@ impl RunnerUpSearch<'_, '_> {
             if looked_at == SEEN_THROUGH_BASINS {
                 break;
             }
-            outside.exclude.push((offset, config.peak_radius_m));
+            outside
+                .exclude
+                .push(Exclusion::ball(offset, config.peak_radius_m));
             next = self.best_outside(&outside, cap, config);
         }
         None
