@@ -18,7 +18,9 @@ use crate::error::{Error, Result};
 use crate::geometry::{Attitude, Pose, Vec3};
 use crate::refine::{refine, Refinement, SurfaceNormals};
 use crate::sdem::Sdem;
-use crate::search::{matched_heading_step, CandidateGrid, Evaluator, Index, Scored};
+use crate::search::{
+    heading_step_for_extent, horizontal_extent, CandidateGrid, Evaluator, Index, Scored,
+};
 use nalgebra::{Isometry3, Matrix6, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -411,9 +413,12 @@ fn search_below(
     let start = std::time::Instant::now();
     let (reference_attitude, query_attitude) = (reference.attitude(), query.attitude());
     config.validate()?;
+    // The query's extent sets the heading step, and how far a turn reaches in the runner-up
+    // search.
+    let extent = horizontal_extent(query);
     let yaws = config
         .heading
-        .samples(matched_heading_step(query, config.step_m));
+        .samples(heading_step_for_extent(extent, config.step_m));
     let full_turn = (config.heading.half_range_deg - 180.0).abs() < 1e-9;
     let grid = CandidateGrid::new(&config.window, config.step_m, yaws)?;
     if config.mode == SearchMode::Exhaustive && grid.len() > config.max_exhaustive_candidates {
@@ -471,7 +476,7 @@ fn search_below(
             prepared: prepared.as_ref(),
             reserve: reserve.as_ref(),
             full_turn,
-            extent: crate::search::horizontal_extent(query).unwrap_or(0.1),
+            extent: extent.unwrap_or(0.1),
         };
         let RunnerUp {
             found: runner_up,

@@ -189,7 +189,13 @@ pub const MAX_MATCHED_HEADING_STEP_DEG: f64 = 2.0;
 /// [`MAX_MATCHED_HEADING_STEP_DEG`]). Farther points move more; the 6-DoF refinement takes the
 /// heading below the step.
 pub fn matched_heading_step(query: &Sdem, step_m: f64) -> f64 {
-    let Some(extent) = horizontal_extent(query) else {
+    heading_step_for_extent(horizontal_extent(query), step_m)
+}
+
+/// [`matched_heading_step`] for a query of horizontal extent `extent`
+/// ([`horizontal_extent`]; 1° without one).
+pub fn heading_step_for_extent(extent: Option<f64>, step_m: f64) -> f64 {
+    let Some(extent) = extent else {
         return 1f64.to_radians();
     };
     (step_m / extent).clamp(
